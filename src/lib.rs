@@ -1,0 +1,5 @@
+//! octolinear: a bit-compatible, cache-oriented re-implementation of OctoMap.
+
+pub mod geometry;
+
+pub use geometry::Point3;
