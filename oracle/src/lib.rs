@@ -1,1 +1,3 @@
-pub fn available() -> bool { false }
+pub fn available() -> bool {
+    false
+}

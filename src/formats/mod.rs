@@ -1,0 +1,76 @@
+//! On-disk formats. Each reader takes `impl BufRead` (or `impl Read`),
+//! each writer `impl Write`; writes to a path go through [`write_atomically`]
+//! so a crash never leaves a half-written file.
+
+pub mod bt;
+mod header;
+pub mod ot;
+
+pub use header::{format_double, Header};
+
+use std::fs::File;
+use std::io::{self, BufWriter, Write};
+use std::path::Path;
+
+/// Why an `.ot` or `.bt` file could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum TreeFileError {
+    #[error("I/O error: {0}")]
+    Io(#[from] io::Error),
+    #[error("bad header at byte {offset}: {reason}")]
+    Header { offset: u64, reason: String },
+    #[error("resolution {0} is not a positive finite number")]
+    BadResolution(f64),
+    #[error("file ends at byte {offset} in the middle of {what}")]
+    Truncated { offset: u64, what: &'static str },
+    #[error("node at byte {offset} lies below depth 16 (a voxel cannot have children)")]
+    TooDeep { offset: u64 },
+    #[error("header announces {header} nodes but the data holds {read}")]
+    SizeMismatch { header: u64, read: u64 },
+    #[error("unknown tree type `{0}`")]
+    UnknownTreeType(String),
+    #[error("tree type `{0}` is recognised but not supported yet")]
+    UnsupportedTreeType(String),
+    #[error("not an OctoMap {expected} file: {reason}")]
+    WrongFormat {
+        expected: &'static str,
+        reason: String,
+    },
+}
+
+/// Writes through `write` into a temporary file next to `path`, then
+/// renames it into place; on any error the temporary file is removed and
+/// `path` is left as it was.
+pub fn write_atomically(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>,
+) -> io::Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let name = path.file_name().ok_or_else(|| {
+        io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!("{} names no file", path.display()),
+        )
+    })?;
+    let tmp = dir.join(format!(
+        ".{}.{}.tmp",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
+    let result = (|| {
+        let file = File::create(&tmp)?;
+        let mut w = BufWriter::with_capacity(1 << 16, &file);
+        write(&mut w)?;
+        w.flush()?;
+        drop(w);
+        file.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}

@@ -1,0 +1,305 @@
+//! Discrete voxel keys and OctoMap's exact coordinate/key arithmetic.
+//!
+//! A [`Key`] addresses a voxel at the finest level (depth 16) by three `u16`
+//! indices, the map centre lying between index 32767 and 32768. Every
+//! conversion reproduces OctoMap's float/double arithmetic, including the
+//! behaviour of C++'s `(int) floor(x)` on x86-64 for values out of range.
+
+use crate::geometry::Point3;
+use std::fmt;
+
+/// Maximum tree depth (number of levels below the root).
+pub const TREE_DEPTH: u8 = 16;
+/// Key of the map centre; keys run from 0 to `2 * KEY_CENTER - 1`.
+pub const KEY_CENTER: u32 = 32768;
+
+/// A voxel address: one `u16` index per axis.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct Key(pub [u16; 3]);
+
+impl Key {
+    pub const fn new(x: u16, y: u16, z: u16) -> Self {
+        Key([x, y, z])
+    }
+
+    /// The root's key, as OctoMap's iterators report it.
+    pub const ROOT: Key = Key([KEY_CENTER as u16; 3]);
+
+    /// Index (0..8, x = 1, y = 2, z = 4) of the child containing this key
+    /// below a node at `depth` (0 = root).
+    #[inline(always)]
+    pub fn child_index(self, depth: u8) -> usize {
+        let bit = 15 - depth as u32;
+        (((self.0[0] >> bit) & 1)
+            | (((self.0[1] >> bit) & 1) << 1)
+            | (((self.0[2] >> bit) & 1) << 2)) as usize
+    }
+
+    /// The key OctoMap's iterators give the child `pos` of a node with key
+    /// `self` at `parent_depth` (`computeChildKey`).
+    #[inline]
+    pub fn child_key(self, pos: usize, parent_depth: u8) -> Key {
+        let offset = (KEY_CENTER >> (parent_depth + 1)) as u16;
+        let extra = u16::from(offset == 0);
+        let mut k = self.0;
+        for (axis, item) in k.iter_mut().enumerate() {
+            if pos & (1 << axis) != 0 {
+                *item = item.wrapping_add(offset);
+            } else {
+                *item = item.wrapping_sub(offset).wrapping_sub(extra);
+            }
+        }
+        Key(k)
+    }
+}
+
+impl fmt::Display for Key {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "({}, {}, {})", self.0[0], self.0[1], self.0[2])
+    }
+}
+
+/// Why a coordinate has no key.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum KeyError {
+    #[error("coordinate {value} is not finite")]
+    NotFinite { value: f64 },
+    #[error("coordinate {value} lies outside the map (half extent {half_extent} m)")]
+    OutOfRange { value: f64, half_extent: f64 },
+    #[error("depth {depth} exceeds the tree depth 16")]
+    BadDepth { depth: u8 },
+}
+
+/// `(int) floor(x)` as compiled for x86-64: `cvttsd2si` yields `i32::MIN`
+/// for NaN and for anything outside the `i32` range.
+#[inline(always)]
+fn floor_to_int(x: f64) -> i32 {
+    let f = x.floor();
+    if f >= -2147483648.0 && f < 2147483648.0 {
+        f as i32
+    } else {
+        i32::MIN
+    }
+}
+
+/// The resolution-dependent half of OctoMap's key arithmetic.
+#[derive(Clone, Debug, PartialEq)]
+pub struct KeySpace {
+    resolution: f64,
+    resolution_factor: f64,
+    node_sizes: [f64; 17],
+}
+
+impl KeySpace {
+    /// Creates the key space for a voxel edge length in metres. The value
+    /// is not validated here; [`crate::OccupancyTree`] checks it.
+    pub fn new(resolution: f64) -> Self {
+        let mut node_sizes = [0.0; 17];
+        for (depth, size) in node_sizes.iter_mut().enumerate() {
+            *size = resolution * f64::from(1u32 << (16 - depth));
+        }
+        KeySpace {
+            resolution,
+            resolution_factor: 1.0 / resolution,
+            node_sizes,
+        }
+    }
+
+    pub fn resolution(&self) -> f64 {
+        self.resolution
+    }
+
+    /// Edge length of a node at `depth` (0 = root).
+    #[inline]
+    pub fn node_size(&self, depth: u8) -> f64 {
+        self.node_sizes[depth as usize]
+    }
+
+    /// OctoMap's `tree_center` value (a float).
+    pub fn tree_center(&self) -> f32 {
+        (f64::from(KEY_CENTER) / self.resolution_factor) as f32
+    }
+
+    /// Unchecked `coordToKey(double)`: out-of-range values wrap like OctoMap's.
+    #[inline(always)]
+    pub fn coord_to_key_unchecked(&self, coord: f64) -> u16 {
+        (floor_to_int(self.resolution_factor * coord) as u32).wrapping_add(KEY_CENTER) as u16
+    }
+
+    /// Unchecked `coordToKey(double, depth)`.
+    pub fn coord_to_key_at_depth_unchecked(&self, coord: f64, depth: u8) -> u16 {
+        let keyval = floor_to_int(self.resolution_factor * coord);
+        let diff = u32::from(TREE_DEPTH.saturating_sub(depth));
+        if diff == 0 {
+            return (keyval as u32).wrapping_add(KEY_CENTER) as u16;
+        }
+        let shifted = ((keyval >> diff) as u32).wrapping_shl(diff);
+        shifted
+            .wrapping_add(1 << (diff - 1))
+            .wrapping_add(KEY_CENTER) as u16
+    }
+
+    /// `coordToKeyChecked(double)`: the key, or why there is none.
+    #[inline(always)]
+    pub fn coord_to_key(&self, coord: f64) -> Result<u16, KeyError> {
+        let scaled =
+            i64::from(floor_to_int(self.resolution_factor * coord)) + i64::from(KEY_CENTER);
+        if (0..2 * i64::from(KEY_CENTER)).contains(&scaled) {
+            Ok(scaled as u16)
+        } else if !coord.is_finite() {
+            Err(KeyError::NotFinite { value: coord })
+        } else {
+            Err(KeyError::OutOfRange {
+                value: coord,
+                half_extent: self.node_sizes[0] / 2.0,
+            })
+        }
+    }
+
+    /// `coordToKeyChecked(double, depth)`.
+    pub fn coord_to_key_at_depth(&self, coord: f64, depth: u8) -> Result<u16, KeyError> {
+        if depth > TREE_DEPTH {
+            return Err(KeyError::BadDepth { depth });
+        }
+        Ok(adjust_to_depth(self.coord_to_key(coord)?, depth))
+    }
+
+    /// `coordToKeyChecked(point3d)`: the key of the voxel containing `p`.
+    #[inline(always)]
+    pub fn key(&self, p: Point3) -> Result<Key, KeyError> {
+        Ok(Key([
+            self.coord_to_key(f64::from(p.x))?,
+            self.coord_to_key(f64::from(p.y))?,
+            self.coord_to_key(f64::from(p.z))?,
+        ]))
+    }
+
+    /// `coordToKeyChecked(point3d, depth)`.
+    pub fn key_at_depth(&self, p: Point3, depth: u8) -> Result<Key, KeyError> {
+        Ok(Key([
+            self.coord_to_key_at_depth(f64::from(p.x), depth)?,
+            self.coord_to_key_at_depth(f64::from(p.y), depth)?,
+            self.coord_to_key_at_depth(f64::from(p.z), depth)?,
+        ]))
+    }
+
+    /// Unchecked `coordToKey(point3d)` (wraps out-of-range coordinates).
+    pub fn key_unchecked(&self, p: Point3) -> Key {
+        Key([
+            self.coord_to_key_unchecked(f64::from(p.x)),
+            self.coord_to_key_unchecked(f64::from(p.y)),
+            self.coord_to_key_unchecked(f64::from(p.z)),
+        ])
+    }
+
+    /// `keyToCoord(key)`: centre of a depth-16 voxel along one axis.
+    #[inline(always)]
+    pub fn key_to_coord(&self, key: u16) -> f64 {
+        (f64::from(i32::from(key) - KEY_CENTER as i32) + 0.5) * self.resolution
+    }
+
+    /// `keyToCoord(key, depth)`: centre of the depth-`depth` node containing `key`.
+    pub fn key_to_coord_at_depth(&self, key: u16, depth: u8) -> f64 {
+        match depth {
+            0 => 0.0,
+            TREE_DEPTH => self.key_to_coord(key),
+            _ => {
+                let cells = f64::from(1u32 << (TREE_DEPTH - depth));
+                (((f64::from(key) - f64::from(KEY_CENTER)) / cells).floor() + 0.5)
+                    * self.node_size(depth)
+            }
+        }
+    }
+
+    /// `keyToCoord(OcTreeKey)`: voxel centre as a float point.
+    pub fn key_to_point(&self, key: Key) -> Point3 {
+        Point3::new(
+            self.key_to_coord(key.0[0]) as f32,
+            self.key_to_coord(key.0[1]) as f32,
+            self.key_to_coord(key.0[2]) as f32,
+        )
+    }
+
+    /// `keyToCoord(OcTreeKey, depth)`.
+    pub fn key_to_point_at_depth(&self, key: Key, depth: u8) -> Point3 {
+        Point3::new(
+            self.key_to_coord_at_depth(key.0[0], depth) as f32,
+            self.key_to_coord_at_depth(key.0[1], depth) as f32,
+            self.key_to_coord_at_depth(key.0[2], depth) as f32,
+        )
+    }
+}
+
+/// `adjustKeyAtDepth`: the key of the centre of the depth-`depth` node
+/// containing `key` (keys of coarse nodes point at their centre).
+#[inline]
+pub fn adjust_to_depth(key: u16, depth: u8) -> u16 {
+    let diff = u32::from(TREE_DEPTH.saturating_sub(depth));
+    if diff == 0 {
+        return key;
+    }
+    let rel = u32::from(key).wrapping_sub(KEY_CENTER);
+    ((rel >> diff) << diff)
+        .wrapping_add(1 << (diff - 1))
+        .wrapping_add(KEY_CENTER) as u16
+}
+
+/// [`adjust_to_depth`] on all three axes.
+pub fn adjust_key_to_depth(key: Key, depth: u8) -> Key {
+    Key(key.0.map(|k| adjust_to_depth(k, depth)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn child_index_uses_x1_y2_z4() {
+        let k = Key::new(0x8000, 0, 0);
+        assert_eq!(k.child_index(0), 1);
+        let k = Key::new(0, 0x8000, 0x8000);
+        assert_eq!(k.child_index(0), 6);
+        let k = Key::new(1, 0, 1);
+        assert_eq!(k.child_index(15), 5);
+    }
+
+    #[test]
+    fn floor_to_int_matches_x86_cvttsd2si() {
+        assert_eq!(floor_to_int(-0.5), -1);
+        assert_eq!(floor_to_int(f64::NAN), i32::MIN);
+        assert_eq!(floor_to_int(1e300), i32::MIN);
+        assert_eq!(floor_to_int(-1e300), i32::MIN);
+        assert_eq!(floor_to_int(2147483647.5), i32::MAX);
+    }
+
+    #[test]
+    fn checked_keys_reject_non_finite_and_far_points() {
+        let ks = KeySpace::new(0.1);
+        assert!(matches!(
+            ks.coord_to_key(f64::NAN),
+            Err(KeyError::NotFinite { .. })
+        ));
+        assert!(matches!(
+            ks.coord_to_key(f64::INFINITY),
+            Err(KeyError::NotFinite { .. })
+        ));
+        assert!(matches!(
+            ks.coord_to_key(3276.8),
+            Err(KeyError::OutOfRange { .. })
+        ));
+        assert_eq!(ks.coord_to_key(-3276.8), Ok(0));
+        assert_eq!(ks.coord_to_key(0.0), Ok(32768));
+        assert_eq!(ks.coord_to_key(-0.0), Ok(32768));
+    }
+
+    #[test]
+    fn root_child_keys_step_by_quarter_extent() {
+        let c = Key::ROOT.child_key(0, 0);
+        assert_eq!(c, Key::new(16384, 16384, 16384));
+        let c = Key::ROOT.child_key(7, 0);
+        assert_eq!(c, Key::new(49152, 49152, 49152));
+        // at the last level the negative side steps one further
+        let leaf = Key::new(101, 101, 101).child_key(0, 15);
+        assert_eq!(leaf, Key::new(100, 100, 100));
+    }
+}

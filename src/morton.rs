@@ -1,0 +1,172 @@
+//! Morton (Z-order) codes of keys.
+//!
+//! Bit `3b` of a code is bit `b` of the x key, `3b + 1` of y and `3b + 2` of
+//! z, so the three bits at level `b` are exactly OctoMap's child index
+//! (x = 1, y = 2, z = 4) and sorting codes gives OctoMap's depth-first order.
+
+use crate::key::Key;
+
+/// A 48-bit interleaving of a key's three 16-bit indices.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct MortonCode(pub u64);
+
+/// Spreads the 16 bits of `v` to every third bit (bit `b` to bit `3b`).
+#[inline(always)]
+pub fn spread_bits(v: u16) -> u64 {
+    let mut x = u64::from(v);
+    x = (x | (x << 16)) & 0x0000_ff00_00ff;
+    x = (x | (x << 8)) & 0x00f0_0f00_f00f;
+    x = (x | (x << 4)) & 0x0c30_c30c_30c3;
+    x = (x | (x << 2)) & 0x2492_4924_9249;
+    x
+}
+
+/// Inverse of [`spread_bits`]: gathers every third bit.
+#[inline(always)]
+pub fn compact_bits(v: u64) -> u16 {
+    let mut x = v & 0x2492_4924_9249;
+    x = (x | (x >> 2)) & 0x0c30_c30c_30c3;
+    x = (x | (x >> 4)) & 0x00f0_0f00_f00f;
+    x = (x | (x >> 8)) & 0x0000_ff00_00ff;
+    x = (x | (x >> 16)) & 0xffff;
+    x as u16
+}
+
+/// Byte-wise spread table for the table-driven encoder.
+static SPREAD_TABLE: [u32; 256] = {
+    let mut t = [0u32; 256];
+    let mut i = 0;
+    while i < 256 {
+        let mut v = 0u32;
+        let mut b = 0;
+        while b < 8 {
+            v |= ((i as u32 >> b) & 1) << (3 * b);
+            b += 1;
+        }
+        t[i] = v;
+        i += 1;
+    }
+    t
+};
+
+impl MortonCode {
+    /// Encodes with shifts and masks (portable, branch-free).
+    #[inline(always)]
+    pub fn encode(key: Key) -> Self {
+        let [x, y, z] = key.0;
+        MortonCode(spread_bits(x) | (spread_bits(y) << 1) | (spread_bits(z) << 2))
+    }
+
+    /// Encodes with a 256-entry lookup table (one load per byte and axis).
+    #[inline]
+    pub fn encode_table(key: Key) -> Self {
+        let spread = |v: u16| -> u64 {
+            u64::from(SPREAD_TABLE[(v & 0xff) as usize])
+                | (u64::from(SPREAD_TABLE[(v >> 8) as usize]) << 24)
+        };
+        let [x, y, z] = key.0;
+        MortonCode(spread(x) | (spread(y) << 1) | (spread(z) << 2))
+    }
+
+    /// Encodes with BMI2 `pdep` where the CPU has it, else falls back.
+    #[inline]
+    pub fn encode_bmi2(key: Key) -> Self {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("bmi2") {
+                // SAFETY: the CPU supports BMI2, checked just above.
+                return unsafe { bmi2::encode(key) };
+            }
+        }
+        Self::encode(key)
+    }
+
+    /// Decodes back to a key.
+    #[inline]
+    pub fn decode(self) -> Key {
+        Key([
+            compact_bits(self.0),
+            compact_bits(self.0 >> 1),
+            compact_bits(self.0 >> 2),
+        ])
+    }
+
+    /// Decodes with BMI2 `pext` where the CPU has it, else falls back.
+    #[inline]
+    pub fn decode_bmi2(self) -> Key {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("bmi2") {
+                // SAFETY: the CPU supports BMI2, checked just above.
+                return unsafe { bmi2::decode(self) };
+            }
+        }
+        self.decode()
+    }
+
+    /// Child index (0..8) taken below a node at `depth` (0 = root).
+    #[inline]
+    pub fn child_index(self, depth: u8) -> usize {
+        ((self.0 >> (3 * (15 - u32::from(depth)))) & 7) as usize
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod bmi2 {
+    use super::MortonCode;
+    use crate::key::Key;
+    use std::arch::x86_64::{_pdep_u64, _pext_u64};
+
+    const MASK_X: u64 = 0x2492_4924_9249;
+
+    #[target_feature(enable = "bmi2")]
+    pub unsafe fn encode(key: Key) -> MortonCode {
+        let [x, y, z] = key.0;
+        MortonCode(
+            _pdep_u64(u64::from(x), MASK_X)
+                | _pdep_u64(u64::from(y), MASK_X << 1)
+                | _pdep_u64(u64::from(z), MASK_X << 2),
+        )
+    }
+
+    #[target_feature(enable = "bmi2")]
+    pub unsafe fn decode(code: MortonCode) -> Key {
+        Key([
+            _pext_u64(code.0, MASK_X) as u16,
+            _pext_u64(code.0, MASK_X << 1) as u16,
+            _pext_u64(code.0, MASK_X << 2) as u16,
+        ])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn encoders_agree_and_round_trip() {
+        let mut s = 0x1234_5678_9abc_def0u64;
+        for _ in 0..10_000 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            let key = Key([s as u16, (s >> 16) as u16, (s >> 32) as u16]);
+            let m = MortonCode::encode(key);
+            assert_eq!(MortonCode::encode_table(key), m);
+            assert_eq!(MortonCode::encode_bmi2(key), m);
+            assert_eq!(m.decode(), key);
+            assert_eq!(m.decode_bmi2(), key);
+            for depth in 0..16 {
+                assert_eq!(m.child_index(depth), key.child_index(depth));
+            }
+        }
+    }
+
+    #[test]
+    fn order_is_depth_first_children_0_to_7() {
+        // the last voxel below root child 0 precedes the first below child 1
+        let a = MortonCode::encode(Key::new(0x7fff, 0x7fff, 0x7fff));
+        let b = MortonCode::encode(Key::new(0x8000, 0, 0));
+        assert!(a < b);
+    }
+}

@@ -1,0 +1,361 @@
+//! Ray traversal: OctoMap's `computeRayKeys` and `castRay`, bit for bit.
+//!
+//! Both walk voxels with the 3D DDA of Amanatides and Woo. OctoMap mixes
+//! float and double in specific places (the ray length is a float, the
+//! initial border offset is rounded to float in `computeRayKeys` but not in
+//! `castRay`); those roundings decide which voxel a ray visits at a tie, so
+//! they are reproduced exactly here.
+
+use crate::geometry::Point3;
+use crate::key::{Key, KeyError, KeySpace, KEY_CENTER};
+use crate::tree::OccupancyTree;
+
+/// `Vector3::norm()`: float squares summed in float, square root in double.
+#[inline(always)]
+pub(crate) fn norm(v: Point3) -> f64 {
+    f64::from(v.x * v.x + v.y * v.y + v.z * v.z).sqrt()
+}
+
+#[inline(always)]
+pub(crate) fn sub(a: Point3, b: Point3) -> Point3 {
+    Point3::new(a.x - b.x, a.y - b.y, a.z - b.z)
+}
+
+/// `Vector3::normalized()`: divide by the float-rounded norm when positive.
+#[inline(always)]
+pub(crate) fn normalized(v: Point3) -> Point3 {
+    let len = norm(v);
+    if len > 0.0 {
+        let l = len as f32;
+        Point3::new(v.x / l, v.y / l, v.z / l)
+    } else {
+        v
+    }
+}
+
+/// `origin + direction * (float) range`, in float.
+#[inline(always)]
+pub(crate) fn point_along(origin: Point3, direction: Point3, range: f64) -> Point3 {
+    let r = range as f32;
+    Point3::new(
+        origin.x + direction.x * r,
+        origin.y + direction.y * r,
+        origin.z + direction.z * r,
+    )
+}
+
+/// `std::min` on doubles.
+#[inline(always)]
+fn min(a: f64, b: f64) -> f64 {
+    if b < a {
+        b
+    } else {
+        a
+    }
+}
+
+/// Index of the smallest `t_max`, ties going to the higher axis.
+#[inline(always)]
+fn min_axis(t: &[f64; 3]) -> usize {
+    if t[0] < t[1] {
+        if t[0] < t[2] {
+            0
+        } else {
+            2
+        }
+    } else if t[1] < t[2] {
+        1
+    } else {
+        2
+    }
+}
+
+/// The DDA state shared by both traversals.
+#[derive(Clone, Debug)]
+struct Dda {
+    key: Key,
+    step: [i32; 3],
+    t_max: [f64; 3],
+    t_delta: [f64; 3],
+}
+
+impl Dda {
+    fn new(
+        keys: &KeySpace,
+        origin: Point3,
+        key: Key,
+        direction: Point3,
+        round_border: bool,
+    ) -> Self {
+        let o = [origin.x, origin.y, origin.z];
+        let d = [direction.x, direction.y, direction.z];
+        let mut step = [0; 3];
+        let mut t_max = [f64::MAX; 3];
+        let mut t_delta = [f64::MAX; 3];
+        for i in 0..3 {
+            step[i] = if d[i] > 0.0 {
+                1
+            } else if d[i] < 0.0 {
+                -1
+            } else {
+                0
+            };
+            if step[i] != 0 {
+                let offset = f64::from(step[i]) * keys.resolution() * 0.5;
+                let offset = if round_border {
+                    f64::from(offset as f32)
+                } else {
+                    offset
+                };
+                let border = keys.key_to_coord(key.0[i]) + offset;
+                t_max[i] = (border - f64::from(o[i])) / f64::from(d[i]);
+                t_delta[i] = keys.resolution() / f64::from(d[i].abs());
+            }
+        }
+        Dda {
+            key,
+            step,
+            t_max,
+            t_delta,
+        }
+    }
+
+    /// Advances one voxel; returns the axis stepped along.
+    #[inline(always)]
+    fn advance(&mut self) -> usize {
+        let dim = min_axis(&self.t_max);
+        self.key.0[dim] = self.key.0[dim].wrapping_add(self.step[dim] as u16);
+        self.t_max[dim] += self.t_delta[dim];
+        dim
+    }
+}
+
+/// The keys `computeRayKeys(origin, end)` yields: every voxel the segment
+/// crosses, the origin's included, the end's excluded. No buffer is needed.
+#[derive(Clone, Debug)]
+pub struct RayKeys {
+    dda: Option<Dda>,
+    end: Key,
+    length: f32,
+    /// The origin key is yielded before the first step.
+    pending_origin: bool,
+}
+
+impl RayKeys {
+    /// Starts a traversal; fails like OctoMap when either point is outside
+    /// the map. Equal origin and end keys give an empty ray.
+    pub fn new(keys: &KeySpace, origin: Point3, end: Point3) -> Result<Self, KeyError> {
+        let key_origin = keys.key(origin)?;
+        let key_end = keys.key(end)?;
+        if key_origin == key_end {
+            return Ok(RayKeys {
+                dda: None,
+                end: key_end,
+                length: 0.0,
+                pending_origin: false,
+            });
+        }
+        let d = sub(end, origin);
+        let length = norm(d) as f32;
+        let direction = Point3::new(d.x / length, d.y / length, d.z / length);
+        let dda = Dda::new(keys, origin, key_origin, direction, true);
+        Ok(RayKeys {
+            dda: Some(dda),
+            end: key_end,
+            length,
+            pending_origin: true,
+        })
+    }
+}
+
+impl Iterator for RayKeys {
+    type Item = Key;
+
+    #[inline]
+    fn next(&mut self) -> Option<Key> {
+        let dda = self.dda.as_mut()?;
+        if self.pending_origin {
+            self.pending_origin = false;
+            return Some(dda.key);
+        }
+        dda.advance();
+        if dda.key == self.end {
+            self.dda = None;
+            return None;
+        }
+        let dist = min(min(dda.t_max[0], dda.t_max[1]), dda.t_max[2]);
+        if dist > f64::from(self.length) {
+            self.dda = None;
+            return None;
+        }
+        Some(dda.key)
+    }
+}
+
+/// How a cast ray ended. `end` is what OctoMap writes to its `end` argument.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CastOutcome {
+    /// An occupied voxel was reached (OctoMap returns `true`).
+    Occupied { end: Point3 },
+    /// The next voxel lies beyond the maximum range.
+    MaxRange { end: Point3 },
+    /// An unknown voxel was met and unknown space was not to be ignored.
+    Unknown { end: Point3 },
+    /// The ray reached the edge of the map.
+    LeftMap { end: Point3 },
+}
+
+impl CastOutcome {
+    pub fn end(&self) -> Point3 {
+        match *self {
+            CastOutcome::Occupied { end }
+            | CastOutcome::MaxRange { end }
+            | CastOutcome::Unknown { end }
+            | CastOutcome::LeftMap { end } => end,
+        }
+    }
+
+    /// OctoMap's boolean return value.
+    pub fn hit(&self) -> bool {
+        matches!(self, CastOutcome::Occupied { .. })
+    }
+}
+
+/// Why a ray could not be cast at all (OctoMap returns `false` and leaves
+/// `end` untouched).
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum CastError {
+    #[error("ray origin: {0}")]
+    Origin(#[from] KeyError),
+    #[error("ray direction is the zero vector")]
+    ZeroDirection,
+}
+
+/// Options of [`OccupancyTree::cast_ray`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CastOptions {
+    /// Continue through unknown space instead of stopping there.
+    pub ignore_unknown: bool,
+    /// Stop beyond this distance; `None` (or a value ≤ 0) for no limit.
+    pub max_range: Option<f64>,
+}
+
+impl OccupancyTree {
+    /// The voxels between `origin` and `end` ([`RayKeys`]).
+    pub fn ray_keys(&self, origin: Point3, end: Point3) -> Result<RayKeys, KeyError> {
+        RayKeys::new(self.key_space(), origin, end)
+    }
+
+    /// Follows a ray until it meets an occupied voxel, as OctoMap's `castRay`.
+    pub fn cast_ray(
+        &self,
+        origin: Point3,
+        direction: Point3,
+        opts: CastOptions,
+    ) -> Result<CastOutcome, CastError> {
+        let keys = self.key_space();
+        let start = keys.key(origin)?;
+        match self.search(start, 0) {
+            Some(n) if self.is_occupied(n.value) => {
+                return Ok(CastOutcome::Occupied {
+                    end: keys.key_to_point(start),
+                })
+            }
+            Some(_) => {}
+            None if !opts.ignore_unknown => {
+                return Ok(CastOutcome::Unknown {
+                    end: keys.key_to_point(start),
+                })
+            }
+            None => {}
+        }
+        let direction = normalized(direction);
+        let mut dda = Dda::new(keys, origin, start, direction, false);
+        if dda.step == [0; 3] {
+            return Err(CastError::ZeroDirection);
+        }
+        let max_range = opts.max_range.unwrap_or(-1.0);
+        let max_range_set = max_range > 0.0;
+        let max_range_sq = max_range * max_range;
+        let o = [origin.x, origin.y, origin.z];
+        loop {
+            let dim = min_axis(&dda.t_max);
+            let k = dda.key.0[dim];
+            if (dda.step[dim] < 0 && k == 0)
+                || (dda.step[dim] > 0 && u32::from(k) == 2 * KEY_CENTER - 1)
+            {
+                return Ok(CastOutcome::LeftMap {
+                    end: keys.key_to_point(dda.key),
+                });
+            }
+            dda.advance();
+            let end = keys.key_to_point(dda.key);
+            if max_range_set {
+                let e = [end.x, end.y, end.z];
+                let mut dist_sq = 0.0f64;
+                for j in 0..3 {
+                    let d = e[j] - o[j];
+                    dist_sq += f64::from(d * d);
+                }
+                if dist_sq > max_range_sq {
+                    return Ok(CastOutcome::MaxRange { end });
+                }
+            }
+            match self.search(dda.key, 0) {
+                Some(n) if self.is_occupied(n.value) => return Ok(CastOutcome::Occupied { end }),
+                Some(_) => {}
+                None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end }),
+                None => {}
+            }
+        }
+    }
+
+    /// Where a ray from `origin` along `direction` enters the voxel centred
+    /// at `center` (OctoMap's `getRayIntersection`), moved `delta` further.
+    pub fn ray_intersection(
+        &self,
+        origin: Point3,
+        direction: Point3,
+        center: Point3,
+        delta: f64,
+    ) -> Option<Point3> {
+        let half = (self.resolution() / 2.0) as f32;
+        let c = [center.x, center.y, center.z];
+        let o = [origin.x, origin.y, origin.z];
+        let d = [direction.x, direction.y, direction.z];
+        let mut out_d = f64::MAX;
+        let mut found = false;
+        for axis in 0..3 {
+            // `normal.dot(direction)` with a unit normal along `axis`,
+            // evaluated like Vector3::dot (float sum, zero terms included)
+            let mut n = [0.0f32; 3];
+            n[axis] = 1.0;
+            let line_dot_normal = f64::from(n[0] * d[0] + n[1] * d[1] + n[2] * d[2]);
+            if line_dot_normal == 0.0 {
+                continue;
+            }
+            for sign in [-1.0f32, 1.0] {
+                let mut plane = c;
+                plane[axis] = c[axis] + sign * half;
+                let diff = [plane[0] - o[0], plane[1] - o[1], plane[2] - o[2]];
+                let dist =
+                    f64::from(diff[0] * n[0] + diff[1] * n[1] + diff[2] * n[2]) / line_dot_normal;
+                let fd = dist as f32;
+                let hit = [d[0] * fd + o[0], d[1] * fd + o[1], d[2] * fd + o[2]];
+                let inside = (0..3).filter(|&j| j != axis).all(|j| {
+                    let lo = f64::from(c[j] - half) - 1e-6;
+                    let hi = f64::from(c[j] + half) + 1e-6;
+                    !(f64::from(hit[j]) < lo || f64::from(hit[j]) > hi)
+                });
+                if inside {
+                    out_d = min(out_d, dist);
+                    found = true;
+                }
+            }
+        }
+        found.then(|| {
+            let t = (out_d + delta) as f32;
+            Point3::new(d[0] * t + o[0], d[1] * t + o[1], d[2] * t + o[2])
+        })
+    }
+}

@@ -1,0 +1,415 @@
+//! Scan integration: OctoMap's `insertPointCloud` with per-scan key sets,
+//! parallel ray casting and updates applied in Morton order.
+//!
+//! Per scan, the free voxels of all rays and the occupied end-point voxels
+//! are collected into hash sets; a voxel that is an end point is never also
+//! freed; then each voxel is updated once, free voxels first. Because every
+//! voxel is touched once per scan, the result does not depend on the order
+//! of application, so we sort by Morton code (consecutive updates share
+//! their path from the root) and parallelise the ray casting freely: the
+//! tree is bit-identical for any thread count.
+
+use crate::geometry::Point3;
+use crate::key::{Key, KeyError};
+use crate::morton::MortonCode;
+use crate::ray::{norm, normalized, point_along, sub, RayKeys};
+use crate::tree::{InnerNodes, OccupancyTree};
+use hashbrown::HashSet;
+use rayon::prelude::*;
+use std::hash::{BuildHasherDefault, Hasher};
+
+/// A hasher for keys: the Morton code mixed by one multiplication.
+#[derive(Default, Clone, Copy)]
+pub struct KeyHasher(u64);
+
+impl Hasher for KeyHasher {
+    #[inline(always)]
+    fn finish(&self) -> u64 {
+        self.0
+    }
+
+    #[inline(always)]
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0.rotate_left(8) ^ u64::from(b)).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+        }
+    }
+
+    #[inline(always)]
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (v ^ (v >> 29)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        self.0 ^= self.0 >> 32;
+    }
+}
+
+impl std::hash::Hash for HashedKey {
+    #[inline(always)]
+    fn hash<H: Hasher>(&self, state: &mut H) {
+        state.write_u64(self.0);
+    }
+}
+
+/// A key packed into one `u64` for hashing (x | y << 16 | z << 32).
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub struct HashedKey(u64);
+
+impl From<Key> for HashedKey {
+    #[inline(always)]
+    fn from(k: Key) -> Self {
+        HashedKey(u64::from(k.0[0]) | (u64::from(k.0[1]) << 16) | (u64::from(k.0[2]) << 32))
+    }
+}
+
+impl From<HashedKey> for Key {
+    #[inline(always)]
+    fn from(h: HashedKey) -> Self {
+        Key([h.0 as u16, (h.0 >> 16) as u16, (h.0 >> 32) as u16])
+    }
+}
+
+/// A set of keys (OctoMap's `KeySet`) on hashbrown with [`KeyHasher`].
+pub type KeySet = HashSet<HashedKey, BuildHasherDefault<KeyHasher>>;
+
+/// What to do with end points outside the addressable map.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum OutOfMap {
+    /// Exactly what OctoMap does: rays whose ends have no key are skipped
+    /// (their max-range-cut part still counts), and with `discretize` the
+    /// end point's key wraps around to the other side of the map.
+    #[default]
+    OctoMap,
+    /// Drop such points before anything else, and count them.
+    Skip,
+    /// Refuse the whole scan, naming the first such point.
+    Error,
+}
+
+/// An axis-aligned box limiting which voxels a scan updates.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UpdateBox {
+    pub min: Point3,
+    pub max: Point3,
+    min_key: Key,
+    max_key: Key,
+}
+
+impl UpdateBox {
+    /// Both corners must lie inside the map of `tree`.
+    pub fn new(tree: &OccupancyTree, min: Point3, max: Point3) -> Result<Self, KeyError> {
+        Ok(UpdateBox {
+            min,
+            max,
+            min_key: tree.key(min)?,
+            max_key: tree.key(max)?,
+        })
+    }
+
+    #[inline]
+    fn contains_point(&self, p: Point3) -> bool {
+        p.x >= self.min.x
+            && p.y >= self.min.y
+            && p.z >= self.min.z
+            && p.x <= self.max.x
+            && p.y <= self.max.y
+            && p.z <= self.max.z
+    }
+
+    #[inline]
+    fn contains_key(&self, k: Key) -> bool {
+        (0..3).all(|i| k.0[i] >= self.min_key.0[i] && k.0[i] <= self.max_key.0[i])
+    }
+}
+
+/// Options of [`OccupancyTree::insert_point_cloud`], OctoMap's defaults.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ScanOptions {
+    /// Rays longer than this are cut and their end is not marked occupied.
+    pub max_range: Option<f64>,
+    /// Merge end points falling into the same voxel before casting rays
+    /// from the voxel centre (`discretize`).
+    pub discretize: bool,
+    /// Defer inner-node updates (`lazy_eval`).
+    pub inner: InnerNodes,
+    /// Only update voxels inside this box (OctoMap 1.10 semantics).
+    pub bbx: Option<UpdateBox>,
+    pub out_of_map: OutOfMap,
+    /// Threads for ray casting; `None` uses rayon's global pool.
+    pub threads: Option<usize>,
+}
+
+/// What a scan integration did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ScanReport {
+    pub points: usize,
+    /// Points with a NaN or infinite coordinate; always skipped.
+    pub non_finite: usize,
+    /// Points outside the map skipped under [`OutOfMap::Skip`].
+    pub out_of_map: usize,
+    pub free_updates: usize,
+    pub occupied_updates: usize,
+}
+
+/// Why a scan was refused; nothing was applied.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum ScanError {
+    #[error("sensor origin ({x}, {y}, {z}): {source}")]
+    Origin {
+        x: f32,
+        y: f32,
+        z: f32,
+        source: KeyError,
+    },
+    #[error("point {index} ({x}, {y}, {z}) lies outside the map: {source}")]
+    PointOutOfMap {
+        index: usize,
+        x: f32,
+        y: f32,
+        z: f32,
+        source: KeyError,
+    },
+    #[error("thread pool: {0}")]
+    ThreadPool(&'static str),
+}
+
+/// The free and occupied voxels of one scan, disjoint.
+#[derive(Default)]
+pub struct ScanUpdate {
+    pub free: KeySet,
+    pub occupied: KeySet,
+}
+
+impl ScanUpdate {
+    /// The sets as key lists sorted in Morton order.
+    pub fn sorted(&self) -> (Vec<Key>, Vec<Key>) {
+        (morton_sorted(&self.free), morton_sorted(&self.occupied))
+    }
+}
+
+fn morton_sorted(set: &KeySet) -> Vec<Key> {
+    let mut codes: Vec<MortonCode> = set.iter().map(|&h| MortonCode::encode(h.into())).collect();
+    codes.par_sort_unstable();
+    codes.into_iter().map(MortonCode::decode).collect()
+}
+
+fn is_finite(p: Point3) -> bool {
+    p.x.is_finite() && p.y.is_finite() && p.z.is_finite()
+}
+
+impl OccupancyTree {
+    /// Integrates one scan taken from `origin` (world frame points), with
+    /// OctoMap's `insertPointCloud` semantics.
+    pub fn insert_point_cloud(
+        &mut self,
+        points: &[Point3],
+        origin: Point3,
+        opts: &ScanOptions,
+    ) -> Result<ScanReport, ScanError> {
+        let (update, report) = self.compute_update(points, origin, opts)?;
+        let (free, occupied) = update.sorted();
+        self.apply_sorted(&free, &occupied, opts.inner);
+        Ok(ScanReport {
+            free_updates: free.len(),
+            occupied_updates: occupied.len(),
+            ..report
+        })
+    }
+
+    /// Applies a scan's key sets: misses, then hits, each key once, in the
+    /// given order.
+    pub fn apply_sorted(&mut self, free: &[Key], occupied: &[Key], inner: InnerNodes) {
+        for &k in free {
+            self.update_occupancy(k, false, inner);
+        }
+        for &k in occupied {
+            self.update_occupancy(k, true, inner);
+        }
+    }
+
+    /// The free and occupied key sets of a scan (`computeUpdate`, or
+    /// `computeDiscreteUpdate` with `discretize`), cast in parallel.
+    pub fn compute_update(
+        &self,
+        points: &[Point3],
+        origin: Point3,
+        opts: &ScanOptions,
+    ) -> Result<(ScanUpdate, ScanReport), ScanError> {
+        let keys = self.key_space();
+        let mut report = ScanReport {
+            points: points.len(),
+            ..Default::default()
+        };
+        let origin_key = keys.key(origin);
+        if let Err(source) = origin_key {
+            // OctoMap casts no ray then, but still marks in-map end points
+            // occupied; only a non-finite origin is refused outright.
+            if !is_finite(origin) {
+                return Err(ScanError::Origin {
+                    x: origin.x,
+                    y: origin.y,
+                    z: origin.z,
+                    source,
+                });
+            }
+        }
+        let mut cleaned: Vec<Point3> = Vec::with_capacity(points.len());
+        for (index, &p) in points.iter().enumerate() {
+            if !is_finite(p) {
+                report.non_finite += 1;
+                continue;
+            }
+            match (opts.out_of_map, keys.key(p)) {
+                (OutOfMap::Skip, Err(_)) => report.out_of_map += 1,
+                (OutOfMap::Error, Err(source)) => {
+                    return Err(ScanError::PointOutOfMap {
+                        index,
+                        x: p.x,
+                        y: p.y,
+                        z: p.z,
+                        source,
+                    })
+                }
+                _ => cleaned.push(p),
+            }
+        }
+        let points = if opts.discretize {
+            let mut seen = KeySet::default();
+            cleaned.retain(|&p| seen.insert(keys.key_unchecked(p).into()));
+            cleaned
+                .iter_mut()
+                .for_each(|p| *p = keys.key_to_point(keys.key_unchecked(*p)));
+            cleaned
+        } else {
+            cleaned
+        };
+
+        let run = || self.cast_scan(&points, origin, opts);
+        let update = match opts.threads {
+            None => run(),
+            Some(n) => rayon::ThreadPoolBuilder::new()
+                .num_threads(n.max(1))
+                .build()
+                .map_err(|_| ScanError::ThreadPool("could not start ray-casting threads"))?
+                .install(run),
+        };
+        Ok((update, report))
+    }
+
+    fn cast_scan(&self, points: &[Point3], origin: Point3, opts: &ScanOptions) -> ScanUpdate {
+        let keys = self.key_space();
+        let max_range = opts.max_range.unwrap_or(-1.0);
+        let chunk = (points.len() / (4 * rayon::current_num_threads()).max(1)).clamp(256, 16384);
+        let (mut free, occupied) = points
+            .par_chunks(chunk)
+            .map(|chunk| {
+                let mut free = KeySet::default();
+                let mut occupied = KeySet::default();
+                for &p in chunk {
+                    let dist = norm(sub(p, origin));
+                    let within = max_range < 0.0 || dist <= max_range;
+                    let end = if within {
+                        p
+                    } else {
+                        point_along(origin, normalized(sub(p, origin)), max_range)
+                    };
+                    match opts.bbx {
+                        None => {
+                            if let Ok(ray) = RayKeys::new(keys, origin, end) {
+                                free.extend(ray.map(HashedKey::from));
+                            }
+                            if within {
+                                if let Ok(k) = keys.key(p) {
+                                    occupied.insert(k.into());
+                                }
+                            }
+                        }
+                        Some(bbx) => {
+                            if within && bbx.contains_point(p) {
+                                if let Ok(k) = keys.key(p) {
+                                    occupied.insert(k.into());
+                                }
+                            }
+                            if let Ok(ray) = RayKeys::new(keys, origin, end) {
+                                free.extend(
+                                    ray.take_while(|&k| bbx.contains_key(k))
+                                        .map(HashedKey::from),
+                                );
+                            }
+                        }
+                    }
+                }
+                (free, occupied)
+            })
+            .reduce(
+                || (KeySet::default(), KeySet::default()),
+                |(mut f1, mut o1), (mut f2, mut o2)| {
+                    if f1.len() < f2.len() {
+                        std::mem::swap(&mut f1, &mut f2);
+                    }
+                    f1.extend(f2);
+                    if o1.len() < o2.len() {
+                        std::mem::swap(&mut o1, &mut o2);
+                    }
+                    o1.extend(o2);
+                    (f1, o1)
+                },
+            );
+        free.retain(|k| !occupied.contains(k));
+        ScanUpdate { free, occupied }
+    }
+
+    /// OctoMap's `insertPointCloudRays` ("simple" mode): ray by ray, each
+    /// free voxel and end point updated as it comes, duplicates included.
+    pub fn insert_point_cloud_rays(
+        &mut self,
+        points: &[Point3],
+        origin: Point3,
+        inner: InnerNodes,
+    ) -> ScanReport {
+        let mut report = ScanReport {
+            points: points.len(),
+            ..Default::default()
+        };
+        for &p in points {
+            if !is_finite(p) {
+                report.non_finite += 1;
+                continue;
+            }
+            let Ok(ray) = RayKeys::new(self.key_space(), origin, p) else {
+                continue;
+            };
+            for k in ray {
+                self.update_occupancy(k, false, inner);
+                report.free_updates += 1;
+            }
+            if self.update_point(p, true, inner).is_ok() {
+                report.occupied_updates += 1;
+            }
+        }
+        report
+    }
+
+    /// OctoMap's `insertRay`: frees the voxels up to `end` and marks `end`
+    /// occupied, or only frees up to `max_range` when the ray is longer.
+    pub fn insert_ray(
+        &mut self,
+        origin: Point3,
+        end: Point3,
+        max_range: Option<f64>,
+        inner: InnerNodes,
+    ) -> Result<(), KeyError> {
+        let max_range = max_range.unwrap_or(-1.0);
+        let d = sub(end, origin);
+        if max_range > 0.0 && norm(d) > max_range {
+            let cut = point_along(origin, normalized(d), max_range);
+            for k in self.ray_keys(origin, cut)? {
+                self.update_occupancy(k, false, inner);
+            }
+            return Ok(());
+        }
+        for k in self.ray_keys(origin, end)? {
+            self.update_occupancy(k, false, inner);
+        }
+        self.update_point(end, true, inner)?;
+        Ok(())
+    }
+}

@@ -1,0 +1,318 @@
+//! The node arena: nine bytes per node, no pointers, no per-node allocation.
+//!
+//! Nodes live in three parallel arrays indexed by a `u32` node id: the
+//! value (`f32` log-odds), a child mask (bit `i` set when child `i`
+//! exists) and the id of the first child. The existing children of a node
+//! form one contiguous *group* of exactly `popcount(mask)` slots, in child
+//! order, so child `i` sits at `first_child + popcount(mask & ((1 << i) - 1))`.
+//! A group that grows or shrinks moves to a slot run of the new size; the
+//! old run goes on a free list of its size and is reused. Nodes therefore
+//! move when their siblings change: node ids are valid only until the next
+//! structural change. [`NodeArena::compacted`] re-lays every group in
+//! depth-first (Morton) order with no free runs left.
+
+/// Id of a node in the arena.
+pub type NodeId = u32;
+
+/// Sentinel for "no first child" (leaves).
+const NO_CHILD: NodeId = 0;
+
+#[derive(Clone, Debug, Default)]
+pub struct NodeArena {
+    values: Vec<f32>,
+    masks: Vec<u8>,
+    first_child: Vec<NodeId>,
+    /// Free slot runs by length (index 1..=8).
+    free: [Vec<NodeId>; 9],
+    free_slots: usize,
+}
+
+/// Arena statistics: slots in use and held, and the bytes really reserved.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ArenaUsage {
+    pub live_slots: usize,
+    pub free_slots: usize,
+    pub bytes_reserved: usize,
+}
+
+impl NodeArena {
+    /// An arena holding only a root (id 0) with the given value.
+    pub fn with_root(value: f32) -> Self {
+        let mut a = NodeArena::default();
+        a.push_run(1);
+        a.values[0] = value;
+        a
+    }
+
+    #[inline(always)]
+    pub fn value(&self, n: NodeId) -> f32 {
+        self.values[n as usize]
+    }
+
+    #[inline(always)]
+    pub fn set_value(&mut self, n: NodeId, v: f32) {
+        self.values[n as usize] = v;
+    }
+
+    #[inline(always)]
+    pub fn mask(&self, n: NodeId) -> u8 {
+        self.masks[n as usize]
+    }
+
+    #[inline(always)]
+    pub fn has_children(&self, n: NodeId) -> bool {
+        self.masks[n as usize] != 0
+    }
+
+    #[inline(always)]
+    pub fn first_child(&self, n: NodeId) -> NodeId {
+        self.first_child[n as usize]
+    }
+
+    /// Id of child `pos` of `n`, if it exists.
+    #[inline(always)]
+    pub fn child(&self, n: NodeId, pos: usize) -> Option<NodeId> {
+        let m = self.masks[n as usize];
+        if m & (1 << pos) == 0 {
+            None
+        } else {
+            Some(self.first_child[n as usize] + (m & ((1u8 << pos) - 1)).count_ones())
+        }
+    }
+
+    /// Children of `n` as `(child index, id)` in child order.
+    #[inline]
+    pub fn children(&self, n: NodeId) -> impl Iterator<Item = (usize, NodeId)> {
+        let m = self.masks[n as usize];
+        let first = self.first_child[n as usize];
+        (0..8usize)
+            .filter(move |&i| m & (1 << i) != 0)
+            .scan(first, |next, i| {
+                let id = *next;
+                *next += 1;
+                Some((i, id))
+            })
+    }
+
+    fn push_run(&mut self, len: usize) -> NodeId {
+        let start = self.values.len();
+        assert!(
+            start + len <= u32::MAX as usize,
+            "node arena exceeds 2^32 slots"
+        );
+        self.values.resize(start + len, 0.0);
+        self.masks.resize(start + len, 0);
+        self.first_child.resize(start + len, NO_CHILD);
+        start as NodeId
+    }
+
+    fn alloc_run(&mut self, len: usize) -> NodeId {
+        match self.free[len].pop() {
+            Some(start) => {
+                self.free_slots -= len;
+                start
+            }
+            None => self.push_run(len),
+        }
+    }
+
+    fn free_run(&mut self, start: NodeId, len: usize) {
+        if len > 0 {
+            self.free[len].push(start);
+            self.free_slots += len;
+        }
+    }
+
+    #[inline(always)]
+    fn copy_slot(&mut self, from: NodeId, to: NodeId) {
+        let (f, t) = (from as usize, to as usize);
+        self.values[t] = self.values[f];
+        self.masks[t] = self.masks[f];
+        self.first_child[t] = self.first_child[f];
+    }
+
+    /// Adds child `pos` (which must not exist) as a leaf with `value`;
+    /// returns its id. Moves the other children of `n`.
+    pub fn insert_child(&mut self, n: NodeId, pos: usize, value: f32) -> NodeId {
+        let m = self.masks[n as usize];
+        debug_assert_eq!(m & (1 << pos), 0);
+        let old_len = m.count_ones() as usize;
+        let old = self.first_child[n as usize];
+        let new = self.alloc_run(old_len + 1);
+        let rank = (m & ((1u8 << pos) - 1)).count_ones();
+        for i in 0..rank {
+            self.copy_slot(old + i, new + i);
+        }
+        for i in rank..old_len as u32 {
+            self.copy_slot(old + i, new + i + 1);
+        }
+        let id = new + rank;
+        self.values[id as usize] = value;
+        self.masks[id as usize] = 0;
+        self.first_child[id as usize] = NO_CHILD;
+        self.free_run(old, old_len);
+        self.masks[n as usize] = m | (1 << pos);
+        self.first_child[n as usize] = new;
+        id
+    }
+
+    /// Gives a leaf `n` the children in `mask`, each a leaf holding
+    /// `value`; returns the id of the first.
+    pub fn add_children(&mut self, n: NodeId, mask: u8, value: f32) -> NodeId {
+        debug_assert_eq!(self.masks[n as usize], 0);
+        let len = mask.count_ones();
+        let new = if len == 0 {
+            NO_CHILD
+        } else {
+            self.alloc_run(len as usize)
+        };
+        for i in 0..len {
+            let id = (new + i) as usize;
+            self.values[id] = value;
+            self.masks[id] = 0;
+            self.first_child[id] = NO_CHILD;
+        }
+        self.masks[n as usize] = mask;
+        self.first_child[n as usize] = new;
+        new
+    }
+
+    /// Gives a leaf `n` all eight children, each holding `value`.
+    pub fn add_all_children(&mut self, n: NodeId, value: f32) {
+        self.add_children(n, 0xff, value);
+    }
+
+    /// Removes child `pos` of `n` and its whole subtree; returns the number
+    /// of nodes freed.
+    pub fn remove_child(&mut self, n: NodeId, pos: usize) -> usize {
+        let m = self.masks[n as usize];
+        debug_assert_ne!(m & (1 << pos), 0);
+        let old_len = m.count_ones() as usize;
+        let old = self.first_child[n as usize];
+        let rank = (m & ((1u8 << pos) - 1)).count_ones();
+        let freed = self.free_subtree_children(old + rank) + 1;
+        if old_len == 1 {
+            self.masks[n as usize] = 0;
+            self.first_child[n as usize] = NO_CHILD;
+        } else {
+            let new = self.alloc_run(old_len - 1);
+            for i in 0..rank {
+                self.copy_slot(old + i, new + i);
+            }
+            for i in rank + 1..old_len as u32 {
+                self.copy_slot(old + i, new + i - 1);
+            }
+            self.masks[n as usize] = m & !(1 << pos);
+            self.first_child[n as usize] = new;
+        }
+        self.free_run(old, old_len);
+        freed
+    }
+
+    /// Removes all children of `n` (and their subtrees); returns the number
+    /// of nodes freed.
+    pub fn remove_all_children(&mut self, n: NodeId) -> usize {
+        let freed = self.free_subtree_children(n);
+        self.masks[n as usize] = 0;
+        self.first_child[n as usize] = NO_CHILD;
+        freed
+    }
+
+    /// Frees every descendant run below `n` (not `n` itself).
+    fn free_subtree_children(&mut self, n: NodeId) -> usize {
+        let m = self.masks[n as usize];
+        if m == 0 {
+            return 0;
+        }
+        let len = m.count_ones() as usize;
+        let first = self.first_child[n as usize];
+        let mut freed = len;
+        for i in 0..len as u32 {
+            freed += self.free_subtree_children(first + i);
+        }
+        self.free_run(first, len);
+        freed
+    }
+
+    /// A copy laid out in depth-first order: the root first, each node's
+    /// child group allocated as the node is visited, exactly sized.
+    pub fn compacted(&self, root: NodeId) -> NodeArena {
+        let mut out = NodeArena::default();
+        let total = self.values.len() - self.free_slots;
+        out.values.reserve_exact(total);
+        out.masks.reserve_exact(total);
+        out.first_child.reserve_exact(total);
+        out.push_run(1);
+        out.values[0] = self.values[root as usize];
+        // (old id, new id) pairs whose child groups still need copying
+        let mut stack = vec![(root, 0 as NodeId)];
+        while let Some((old, new)) = stack.pop() {
+            let m = self.masks[old as usize];
+            out.masks[new as usize] = m;
+            if m == 0 {
+                continue;
+            }
+            let len = m.count_ones() as usize;
+            let first_old = self.first_child[old as usize];
+            let first_new = out.push_run(len);
+            out.first_child[new as usize] = first_new;
+            for i in 0..len as u32 {
+                out.values[(first_new + i) as usize] = self.values[(first_old + i) as usize];
+            }
+            for i in (0..len as u32).rev() {
+                stack.push((first_old + i, first_new + i));
+            }
+        }
+        out
+    }
+
+    pub fn usage(&self) -> ArenaUsage {
+        let free_list_bytes: usize = self
+            .free
+            .iter()
+            .map(|f| f.capacity() * std::mem::size_of::<NodeId>())
+            .sum();
+        ArenaUsage {
+            live_slots: self.values.len() - self.free_slots,
+            free_slots: self.free_slots,
+            bytes_reserved: self.values.capacity() * 4
+                + self.masks.capacity()
+                + self.first_child.capacity() * 4
+                + free_list_bytes,
+        }
+    }
+
+    /// Mutable access to every slot's value (free slots included).
+    pub fn values_mut(&mut self) -> &mut [f32] {
+        &mut self.values
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn children_stay_in_order_while_groups_move() {
+        let mut a = NodeArena::with_root(0.0);
+        for &pos in &[5usize, 1, 7, 0] {
+            a.insert_child(0, pos, pos as f32);
+        }
+        let kids: Vec<_> = a.children(0).map(|(i, id)| (i, a.value(id))).collect();
+        assert_eq!(kids, vec![(0, 0.0), (1, 1.0), (5, 5.0), (7, 7.0)]);
+        assert_eq!(a.child(0, 5).map(|id| a.value(id)), Some(5.0));
+        assert_eq!(a.child(0, 4), None);
+        // runs of length 1, 2 and 3 were freed along the way
+        assert_eq!(a.usage().free_slots, 6);
+        let c = a.child(0, 1).unwrap();
+        a.add_all_children(c, 9.0);
+        assert_eq!(a.remove_child(0, 1), 9);
+        let kids: Vec<_> = a.children(0).map(|(i, id)| (i, a.value(id))).collect();
+        assert_eq!(kids, vec![(0, 0.0), (5, 5.0), (7, 7.0)]);
+        let c = a.compacted(0);
+        assert_eq!(c.usage().free_slots, 0);
+        assert_eq!(c.usage().live_slots, 4);
+        let kids: Vec<_> = c.children(0).map(|(i, id)| (i, c.value(id))).collect();
+        assert_eq!(kids, vec![(0, 0.0), (5, 5.0), (7, 7.0)]);
+    }
+}

@@ -1,0 +1,633 @@
+//! The occupancy octree: OctoMap's `OcTree` semantics on a node arena.
+
+mod arena;
+mod iter;
+
+pub use arena::{ArenaUsage, NodeArena, NodeId};
+pub use iter::{KeyBox, NodeItem, NodeIter};
+
+use crate::geometry::Point3;
+use crate::key::{adjust_key_to_depth, Key, KeyError, KeySpace, TREE_DEPTH};
+use crate::sensor::SensorModel;
+use hashbrown::HashMap;
+
+const ROOT: NodeId = 0;
+
+/// Size in bytes OctoMap's x86-64 build reports for the tree object itself
+/// in `memoryUsage()` (`sizeof(OcTreeBaseImpl<OcTreeNode, ...>)`).
+const OCTOMAP_TREE_OBJECT_BYTES: usize = 320;
+
+/// When inner nodes learn of a change below them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum InnerNodes {
+    /// Update (and prune) every node on the path right away, as OctoMap
+    /// does with `lazy_eval = false`.
+    #[default]
+    Update,
+    /// Leave inner nodes stale until [`OccupancyTree::update_inner_occupancy`]
+    /// (`lazy_eval = true`).
+    Defer,
+}
+
+/// Why a tree could not be made.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum TreeError {
+    #[error("resolution {0} m is not a positive finite number")]
+    BadResolution(f64),
+}
+
+/// A node found by a search.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Found {
+    pub value: f32,
+    pub depth: u8,
+    pub is_leaf: bool,
+}
+
+/// Metric bounds of the known space.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bounds {
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+}
+
+impl Bounds {
+    pub fn size(&self) -> [f64; 3] {
+        [
+            self.max[0] - self.min[0],
+            self.max[1] - self.min[1],
+            self.max[2] - self.min[2],
+        ]
+    }
+}
+
+/// How a bound is accumulated; OctoMap's two overloads differ in the last bit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BoundsRule {
+    /// `centre ± size/2` (OctoMap's const `getMetricMin/Max`).
+    CenterHalfSize,
+    /// max = `(centre - size/2) + size` (OctoMap's non-const overloads,
+    /// used by `volume()` and `graph2tree`'s output).
+    MinPlusSize,
+}
+
+/// A probabilistic occupancy octree, bit-compatible with OctoMap's `OcTree`.
+#[derive(Clone, Debug)]
+pub struct OccupancyTree {
+    keys: KeySpace,
+    sensor: SensorModel,
+    /// `None` for an empty tree (OctoMap's `root == NULL`).
+    arena: Option<NodeArena>,
+    /// OctoMap's maintained node counter (`size()`); it only drops by one
+    /// when an inner node is deleted, exactly as OctoMap's does.
+    size: usize,
+    changes: Option<HashMap<Key, bool>>,
+}
+
+impl OccupancyTree {
+    /// An empty tree with OctoMap's default sensor model.
+    pub fn new(resolution: f64) -> Result<Self, TreeError> {
+        Self::with_sensor(resolution, SensorModel::default())
+    }
+
+    pub fn with_sensor(resolution: f64, sensor: SensorModel) -> Result<Self, TreeError> {
+        if !(resolution.is_finite() && resolution > 0.0) {
+            return Err(TreeError::BadResolution(resolution));
+        }
+        Ok(OccupancyTree {
+            keys: KeySpace::new(resolution),
+            sensor,
+            arena: None,
+            size: 0,
+            changes: None,
+        })
+    }
+
+    pub fn resolution(&self) -> f64 {
+        self.keys.resolution()
+    }
+
+    pub fn key_space(&self) -> &KeySpace {
+        &self.keys
+    }
+
+    pub fn sensor(&self) -> &SensorModel {
+        &self.sensor
+    }
+
+    pub fn set_sensor(&mut self, sensor: SensorModel) {
+        self.sensor = sensor;
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.arena.is_none()
+    }
+
+    /// The key of the voxel containing `p`.
+    pub fn key(&self, p: Point3) -> Result<Key, KeyError> {
+        self.keys.key(p)
+    }
+
+    /// OctoMap's `size()`: the maintained node counter.
+    pub fn size(&self) -> usize {
+        self.size
+    }
+
+    pub(crate) fn arena(&self) -> Option<&NodeArena> {
+        self.arena.as_ref()
+    }
+
+    /// Replaces the content with `arena` (root at id 0) and recounts the
+    /// nodes, as OctoMap's readers do.
+    pub(crate) fn set_arena(&mut self, arena: Option<NodeArena>) {
+        self.arena = arena;
+        self.size = self.calc_num_nodes();
+    }
+
+    /// Removes every node.
+    pub fn clear(&mut self) {
+        self.arena = None;
+        self.size = 0;
+    }
+
+    // ----- updates -------------------------------------------------------
+
+    /// Adds a log-odds `delta` to the voxel at `key` (`updateNode(key, float)`),
+    /// clamping the result. Returns the value of the node holding the voxel
+    /// afterwards (a coarser node when the update pruned it).
+    pub fn update(&mut self, key: Key, delta: f32, inner: InnerNodes) -> f32 {
+        if let Some(found) = self.search(key, 0) {
+            if self.sensor.is_saturated(found.value, delta) {
+                return found.value;
+            }
+        }
+        let sensor = self.sensor;
+        self.modify(key, inner, |v| sensor.apply(v, delta))
+    }
+
+    /// Integrates a hit (`occupied`) or a miss at `key`.
+    pub fn update_occupancy(&mut self, key: Key, occupied: bool, inner: InnerNodes) -> f32 {
+        let delta = if occupied {
+            self.sensor.hit
+        } else {
+            self.sensor.miss
+        };
+        self.update(key, delta, inner)
+    }
+
+    /// [`Self::update_occupancy`] at the voxel containing `p`.
+    pub fn update_point(
+        &mut self,
+        p: Point3,
+        occupied: bool,
+        inner: InnerNodes,
+    ) -> Result<f32, KeyError> {
+        let key = self.keys.key(p)?;
+        Ok(self.update_occupancy(key, occupied, inner))
+    }
+
+    /// Sets the voxel's log-odds (clamped), as `setNodeValue` does.
+    pub fn set_value(&mut self, key: Key, value: f32, inner: InnerNodes) -> f32 {
+        let v = self.sensor.clamp(value);
+        self.modify(key, inner, |_| v)
+    }
+
+    /// Descends to `key` creating (or expanding) nodes as OctoMap's
+    /// `updateNodeRecurs` does, applies `f` to the voxel, then updates and
+    /// prunes the path bottom-up unless deferred.
+    fn modify(&mut self, key: Key, inner: InnerNodes, f: impl FnOnce(f32) -> f32) -> f32 {
+        let mut created = false;
+        if self.arena.is_none() {
+            self.arena = Some(NodeArena::with_root(0.0));
+            self.size += 1;
+            created = true;
+        }
+        let arena = self.arena.as_mut().expect("root exists");
+        let mut path = [ROOT; TREE_DEPTH as usize];
+        let mut node = ROOT;
+        for depth in 0..TREE_DEPTH {
+            let pos = key.child_index(depth);
+            path[depth as usize] = node;
+            node = match arena.child(node, pos) {
+                Some(c) => {
+                    created = false;
+                    c
+                }
+                None if !arena.has_children(node) && !created => {
+                    let v = arena.value(node);
+                    arena.add_all_children(node, v);
+                    self.size += 8;
+                    created = false;
+                    arena.child(node, pos).expect("just expanded")
+                }
+                None => {
+                    self.size += 1;
+                    created = true;
+                    arena.insert_child(node, pos, 0.0)
+                }
+            };
+        }
+        let before = arena.value(node);
+        let after = f(before);
+        arena.set_value(node, after);
+        if let Some(changes) = self.changes.as_mut() {
+            if created {
+                changes.insert(key, true);
+            } else if self.sensor.is_occupied(before) != self.sensor.is_occupied(after) {
+                match changes.get(&key) {
+                    None => {
+                        changes.insert(key, false);
+                    }
+                    Some(false) => {
+                        changes.remove(&key);
+                    }
+                    Some(true) => {}
+                }
+            }
+        }
+        if inner == InnerNodes::Defer {
+            return after;
+        }
+        let mut result = after;
+        for &n in path.iter().rev() {
+            if let Some(v) = prune_node(arena, n) {
+                self.size -= 8;
+                result = v;
+            } else {
+                arena.set_value(n, max_child_value(arena, n));
+            }
+        }
+        result
+    }
+
+    /// Recomputes every inner node as the maximum of its children
+    /// (`updateInnerOccupancy`), after deferred updates.
+    pub fn update_inner_occupancy(&mut self) {
+        fn recurse(a: &mut NodeArena, n: NodeId) {
+            if !a.has_children(n) {
+                return;
+            }
+            let first = a.first_child(n);
+            for i in 0..a.mask(n).count_ones() {
+                recurse(a, first + i);
+            }
+            let v = max_child_value(a, n);
+            a.set_value(n, v);
+        }
+        if let Some(a) = self.arena.as_mut() {
+            recurse(a, ROOT);
+        }
+    }
+
+    /// Sets every node to the clamping bound on its side of the occupancy
+    /// threshold (`toMaxLikelihood`).
+    pub fn to_max_likelihood(&mut self) {
+        let sensor = self.sensor;
+        if let Some(a) = self.arena.as_mut() {
+            // free slots are rewritten too; their values are never read
+            for v in a.values_mut() {
+                *v = sensor.max_likelihood(*v);
+            }
+        }
+    }
+
+    /// Merges complete groups of eight equal leaf children into their
+    /// parent, level by level from depth 15 up, stopping at the first level
+    /// where nothing merged (OctoMap's `prune`, including that early stop).
+    pub fn prune(&mut self) {
+        fn at_depth(a: &mut NodeArena, n: NodeId, depth: u8, target: u8, pruned: &mut usize) {
+            if depth < target {
+                let first = a.first_child(n);
+                for i in 0..a.mask(n).count_ones() {
+                    at_depth(a, first + i, depth + 1, target, pruned);
+                }
+            } else if prune_node(a, n).is_some() {
+                *pruned += 1;
+            }
+        }
+        let Some(a) = self.arena.as_mut() else { return };
+        for depth in (1..TREE_DEPTH).rev() {
+            let mut pruned = 0;
+            at_depth(a, ROOT, 0, depth, &mut pruned);
+            self.size -= 8 * pruned;
+            if pruned == 0 {
+                break;
+            }
+        }
+    }
+
+    /// Gives every leaf above depth 16 eight children holding its value
+    /// (`expand`).
+    pub fn expand(&mut self) {
+        fn recurse(a: &mut NodeArena, n: NodeId, depth: u8, added: &mut usize) {
+            if depth >= TREE_DEPTH {
+                return;
+            }
+            if !a.has_children(n) {
+                let v = a.value(n);
+                a.add_all_children(n, v);
+                *added += 8;
+            }
+            let first = a.first_child(n);
+            for i in 0..a.mask(n).count_ones() {
+                recurse(a, first + i, depth + 1, added);
+            }
+        }
+        let mut added = 0;
+        if let Some(a) = self.arena.as_mut() {
+            recurse(a, ROOT, 0, &mut added);
+        }
+        self.size += added;
+    }
+
+    /// Deletes the node at `depth` (0 or 16 = a voxel) containing `key`,
+    /// with OctoMap's `deleteNode` semantics: pruned nodes on the way are
+    /// expanded, a parent losing its last child is deleted too, and the
+    /// return value is `true` only when the root is left without children
+    /// (or the tree was empty).
+    pub fn delete(&mut self, key: Key, depth: u8) -> bool {
+        fn recurse(t: &mut OccupancyTree, n: NodeId, depth: u8, max_depth: u8, key: Key) -> bool {
+            if depth >= max_depth {
+                return true;
+            }
+            let a = t.arena.as_mut().expect("root exists");
+            let pos = key.child_index(depth);
+            if a.child(n, pos).is_none() {
+                if !a.has_children(n) && n != ROOT {
+                    let v = a.value(n);
+                    a.add_all_children(n, v);
+                    t.size += 8;
+                } else {
+                    return false;
+                }
+            }
+            let child = a.child(n, pos).expect("exists or expanded");
+            if recurse(t, child, depth + 1, max_depth, key) {
+                let a = t.arena.as_mut().expect("root exists");
+                a.remove_child(n, pos);
+                t.size -= 1;
+                if !a.has_children(n) {
+                    return true;
+                }
+                let v = max_child_value(a, n);
+                a.set_value(n, v);
+            }
+            false
+        }
+        if self.arena.is_none() {
+            return true;
+        }
+        let max_depth = if depth == 0 || depth > TREE_DEPTH {
+            TREE_DEPTH
+        } else {
+            depth
+        };
+        recurse(self, ROOT, 0, max_depth, key)
+    }
+
+    /// [`Self::delete`] at the voxel containing `p`.
+    pub fn delete_point(&mut self, p: Point3, depth: u8) -> Result<bool, KeyError> {
+        let key = self.keys.key(p)?;
+        Ok(self.delete(key, depth))
+    }
+
+    // ----- queries -------------------------------------------------------
+
+    /// OctoMap's `search(key, depth)`: the node at `depth` (0 means 16)
+    /// containing `key`, or the deepest existing leaf above it. `None`
+    /// when the path ends at an inner node lacking the needed child.
+    #[inline]
+    pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
+        let a = self.arena.as_ref()?;
+        let depth = if depth == 0 || depth > TREE_DEPTH {
+            TREE_DEPTH
+        } else {
+            depth
+        };
+        let key = if depth == TREE_DEPTH {
+            key
+        } else {
+            adjust_key_to_depth(key, depth)
+        };
+        let mut node = ROOT;
+        for d in 0..depth {
+            match a.child(node, key.child_index(d)) {
+                Some(c) => node = c,
+                None if a.has_children(node) => return None,
+                None => {
+                    return Some(Found {
+                        value: a.value(node),
+                        depth: d,
+                        is_leaf: true,
+                    })
+                }
+            }
+        }
+        Some(Found {
+            value: a.value(node),
+            depth,
+            is_leaf: !a.has_children(node),
+        })
+    }
+
+    /// [`Self::search`] at the voxel containing `p`.
+    pub fn search_point(&self, p: Point3, depth: u8) -> Result<Option<Found>, KeyError> {
+        Ok(self.search(self.keys.key(p)?, depth))
+    }
+
+    /// The value of the root (OctoMap keeps it as the max of everything).
+    pub fn root_value(&self) -> Option<f32> {
+        self.arena.as_ref().map(|a| a.value(ROOT))
+    }
+
+    pub fn is_occupied(&self, value: f32) -> bool {
+        self.sensor.is_occupied(value)
+    }
+
+    /// Every node, depth first with children 0..7 (`begin_tree(max_depth)`);
+    /// `max_depth` 0 means 16.
+    pub fn nodes(&self, max_depth: u8) -> NodeIter<'_> {
+        NodeIter::new(self, max_depth, false, None)
+    }
+
+    /// Every leaf (and every node at `max_depth`), in OctoMap's order.
+    pub fn leaves(&self, max_depth: u8) -> NodeIter<'_> {
+        NodeIter::new(self, max_depth, true, None)
+    }
+
+    /// Leaves overlapping the key box, as OctoMap's `leaf_bbx_iterator`.
+    pub fn leaves_in_box(&self, bbx: KeyBox, max_depth: u8) -> NodeIter<'_> {
+        NodeIter::new(self, max_depth, true, Some(bbx))
+    }
+
+    /// Number of leaves (`getNumLeafNodes`).
+    pub fn num_leaves(&self) -> usize {
+        self.arena.as_ref().map_or(0, |a| count_leaves(a, ROOT))
+    }
+
+    /// Number of nodes reachable from the root (`calcNumNodes`).
+    pub fn calc_num_nodes(&self) -> usize {
+        fn count(a: &NodeArena, n: NodeId) -> usize {
+            let first = a.first_child(n);
+            1 + (0..a.mask(n).count_ones())
+                .map(|i| count(a, first + i))
+                .sum::<usize>()
+        }
+        self.arena.as_ref().map_or(0, |a| count(a, ROOT))
+    }
+
+    /// Metric bounds of all leaves (zero for an empty tree).
+    pub fn bounds(&self, rule: BoundsRule) -> Bounds {
+        if self.arena.is_none() {
+            return Bounds {
+                min: [0.0; 3],
+                max: [0.0; 3],
+            };
+        }
+        let mut b = Bounds {
+            min: [f64::MAX; 3],
+            max: [-f64::MAX; 3],
+        };
+        for leaf in self.leaves(0) {
+            let size = self.keys.node_size(leaf.depth);
+            let half = size / 2.0;
+            for axis in 0..3 {
+                let c = self
+                    .keys
+                    .key_to_coord_at_depth(leaf.key.0[axis], leaf.depth);
+                let lo = c - half;
+                let hi = match rule {
+                    BoundsRule::CenterHalfSize => c + half,
+                    BoundsRule::MinPlusSize => lo + size,
+                };
+                if lo < b.min[axis] {
+                    b.min[axis] = lo;
+                }
+                if hi > b.max[axis] {
+                    b.max[axis] = hi;
+                }
+            }
+        }
+        b
+    }
+
+    /// OctoMap's `volume()`: product of the (non-const) metric sizes.
+    pub fn volume(&self) -> f64 {
+        let s = self.bounds(BoundsRule::MinPlusSize).size();
+        s[0] * s[1] * s[2]
+    }
+
+    /// OctoMap's `memoryFullGrid()`: bytes of a dense float grid over the
+    /// bounds (OctoMap uses its const bounds, [`BoundsRule::CenterHalfSize`],
+    /// unless its extent cache is filled).
+    pub fn memory_full_grid(&self, rule: BoundsRule) -> u64 {
+        if self.arena.is_none() {
+            return 0;
+        }
+        let s = self.bounds(rule).size();
+        let r = self.resolution();
+        ((s[0] / r) * (s[1] / r) * (s[2] / r) * 4.0) as u64
+    }
+
+    /// What OctoMap's `memoryUsage()` reports for this tree on x86-64.
+    pub fn octomap_memory_usage(&self) -> usize {
+        let leaves = self.num_leaves();
+        let inner = self.size.saturating_sub(leaves);
+        OCTOMAP_TREE_OBJECT_BYTES + 16 * self.size + 64 * inner
+    }
+
+    /// Bytes this tree really holds: the arena's reserved capacity plus
+    /// the tree object and change-detection map.
+    pub fn memory_usage(&self) -> usize {
+        let arena = self.arena.as_ref().map_or(0, |a| a.usage().bytes_reserved);
+        let changes = self.changes.as_ref().map_or(0, |c| {
+            c.capacity() * (std::mem::size_of::<(Key, bool)>() + 1)
+        });
+        std::mem::size_of::<Self>() + arena + changes
+    }
+
+    /// Slot statistics of the arena.
+    pub fn arena_usage(&self) -> Option<ArenaUsage> {
+        self.arena.as_ref().map(|a| a.usage())
+    }
+
+    /// Re-lays the arena in depth-first (Morton) order with no free slots,
+    /// so traversals walk memory forwards and no capacity is wasted.
+    pub fn compact(&mut self) {
+        if let Some(a) = self.arena.as_ref() {
+            self.arena = Some(a.compacted(ROOT));
+        }
+    }
+
+    // ----- change detection ----------------------------------------------
+
+    /// Starts (or stops) recording which voxels changed occupancy.
+    pub fn set_change_detection(&mut self, enabled: bool) {
+        if enabled {
+            self.changes.get_or_insert_with(HashMap::new);
+        } else {
+            self.changes = None;
+        }
+    }
+
+    /// Keys changed since the last reset: `true` for newly created voxels,
+    /// `false` for existing voxels whose occupancy state flipped. Sorted.
+    pub fn changed_keys(&self) -> Vec<(Key, bool)> {
+        let mut v: Vec<_> = self
+            .changes
+            .iter()
+            .flat_map(|c| c.iter().map(|(k, b)| (*k, *b)))
+            .collect();
+        v.sort_unstable();
+        v
+    }
+
+    pub fn reset_change_detection(&mut self) {
+        if let Some(c) = self.changes.as_mut() {
+            c.clear();
+        }
+    }
+}
+
+/// `getMaxChildLogOdds`.
+#[inline]
+fn max_child_value(a: &NodeArena, n: NodeId) -> f32 {
+    let first = a.first_child(n);
+    let mut max = -f32::MAX;
+    for i in 0..a.mask(n).count_ones() {
+        let v = a.value(first + i);
+        if v > max {
+            max = v;
+        }
+    }
+    max
+}
+
+/// `pruneNode`: merges eight equal childless children; returns the value.
+#[inline]
+fn prune_node(a: &mut NodeArena, n: NodeId) -> Option<f32> {
+    if a.mask(n) != 0xff {
+        return None;
+    }
+    let first = a.first_child(n);
+    let v = a.value(first);
+    for i in 0..8 {
+        let c = first + i;
+        if a.has_children(c) || a.value(c) != v {
+            return None;
+        }
+    }
+    a.remove_all_children(n);
+    a.set_value(n, v);
+    Some(v)
+}
+
+fn count_leaves(a: &NodeArena, n: NodeId) -> usize {
+    if !a.has_children(n) {
+        return 1;
+    }
+    let first = a.first_child(n);
+    (0..a.mask(n).count_ones())
+        .map(|i| count_leaves(a, first + i))
+        .sum()
+}
