@@ -1,0 +1,3 @@
+pub mod graph;
+pub mod log;
+pub mod xyz;
