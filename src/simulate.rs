@@ -542,7 +542,7 @@ impl Scene {
         prims.push(wall(len, len + wt, y_out[1] - wt, y_out[0] + wt));
         let door_x: Vec<f64> = (0..rooms).map(|i| (xs[i] + xs[i + 1]) / 2.0).collect();
         let mut path = vec![[0.8, 0.0]];
-        for side in 0..2 {
+        for (side, &room_depth) in depth.iter().enumerate() {
             let sign = if side == 0 { 1.0 } else { -1.0 };
             // Corridor wall on this side, y in [inner, inner + wt] (mirrored), with doors.
             let (y0, y1) = if side == 0 {
@@ -566,7 +566,7 @@ impl Scene {
                 prims.push(wall(xp - wt / 2.0, xp + wt / 2.0, py0, py1));
             }
             // Furniture, kept off the walk from the door to the room centre.
-            let yc = sign * (half_corridor + depth[side] / 2.0);
+            let yc = sign * (half_corridor + room_depth / 2.0);
             for i in 0..rooms {
                 let (rx0, rx1) = (xs[i] + wt, xs[i + 1] - wt);
                 let (ry0, ry1) = (py0.min(py1) + 0.05, py0.max(py1) - 0.05);
@@ -625,10 +625,9 @@ impl Scene {
             }
         }
         for &dx in &door_x {
-            for side in 0..2 {
-                let sign = if side == 0 { 1.0 } else { -1.0 };
+            for (sign, room_depth) in [(1.0, depth[0]), (-1.0, depth[1])] {
                 path.push([dx, 0.0]);
-                path.push([dx, sign * (half_corridor + depth[side] / 2.0)]);
+                path.push([dx, sign * (half_corridor + room_depth / 2.0)]);
             }
             path.push([dx, 0.0]);
         }
