@@ -11,9 +11,11 @@ pub mod morton;
 pub mod ray;
 pub mod scan;
 pub mod sensor;
+pub mod simulate;
 pub mod tree;
 
-pub use geometry::Point3;
+pub use formats::graph::{ScanEdge, ScanGraph, ScanNode};
+pub use geometry::{Point3, PointCloud, Pose6D, Quaternion};
 pub use key::{Key, KeyError, KeySpace};
 pub use morton::MortonCode;
 pub use ray::{CastOptions, CastOutcome, RayKeys};

@@ -10,29 +10,6 @@ use crate::geometry::Point3;
 use crate::key::{Key, KeyError, KeySpace, KEY_CENTER};
 use crate::tree::OccupancyTree;
 
-/// `Vector3::norm()`: float squares summed in float, square root in double.
-#[inline(always)]
-pub(crate) fn norm(v: Point3) -> f64 {
-    f64::from(v.x * v.x + v.y * v.y + v.z * v.z).sqrt()
-}
-
-#[inline(always)]
-pub(crate) fn sub(a: Point3, b: Point3) -> Point3 {
-    Point3::new(a.x - b.x, a.y - b.y, a.z - b.z)
-}
-
-/// `Vector3::normalized()`: divide by the float-rounded norm when positive.
-#[inline(always)]
-pub(crate) fn normalized(v: Point3) -> Point3 {
-    let len = norm(v);
-    if len > 0.0 {
-        let l = len as f32;
-        Point3::new(v.x / l, v.y / l, v.z / l)
-    } else {
-        v
-    }
-}
-
 /// `origin + direction * (float) range`, in float.
 #[inline(always)]
 pub(crate) fn point_along(origin: Point3, direction: Point3, range: f64) -> Point3 {
@@ -155,8 +132,8 @@ impl RayKeys {
                 pending_origin: false,
             });
         }
-        let d = sub(end, origin);
-        let length = norm(d) as f32;
+        let d = end - origin;
+        let length = d.norm() as f32;
         let direction = Point3::new(d.x / length, d.y / length, d.z / length);
         let dda = Dda::new(keys, origin, key_origin, direction, true);
         Ok(RayKeys {
@@ -269,7 +246,7 @@ impl OccupancyTree {
             }
             None => {}
         }
-        let direction = normalized(direction);
+        let direction = direction.normalized();
         let mut dda = Dda::new(keys, origin, start, direction, false);
         if dda.step == [0; 3] {
             return Err(CastError::ZeroDirection);

@@ -12,7 +12,7 @@
 use crate::geometry::Point3;
 use crate::key::{Key, KeyError};
 use crate::morton::MortonCode;
-use crate::ray::{norm, normalized, point_along, sub, RayKeys};
+use crate::ray::{point_along, RayKeys};
 use crate::tree::{InnerNodes, OccupancyTree};
 use hashbrown::HashSet;
 use rayon::prelude::*;
@@ -191,10 +191,6 @@ fn morton_sorted(set: &KeySet) -> Vec<Key> {
     codes.into_iter().map(MortonCode::decode).collect()
 }
 
-fn is_finite(p: Point3) -> bool {
-    p.x.is_finite() && p.y.is_finite() && p.z.is_finite()
-}
-
 impl OccupancyTree {
     /// Integrates one scan taken from `origin` (world frame points), with
     /// OctoMap's `insertPointCloud` semantics.
@@ -242,7 +238,7 @@ impl OccupancyTree {
         if let Err(source) = origin_key {
             // OctoMap casts no ray then, but still marks in-map end points
             // occupied; only a non-finite origin is refused outright.
-            if !is_finite(origin) {
+            if !origin.is_finite() {
                 return Err(ScanError::Origin {
                     x: origin.x,
                     y: origin.y,
@@ -253,7 +249,7 @@ impl OccupancyTree {
         }
         let mut cleaned: Vec<Point3> = Vec::with_capacity(points.len());
         for (index, &p) in points.iter().enumerate() {
-            if !is_finite(p) {
+            if !p.is_finite() {
                 report.non_finite += 1;
                 continue;
             }
@@ -304,12 +300,12 @@ impl OccupancyTree {
                 let mut free = KeySet::default();
                 let mut occupied = KeySet::default();
                 for &p in chunk {
-                    let dist = norm(sub(p, origin));
+                    let dist = (p - origin).norm();
                     let within = max_range < 0.0 || dist <= max_range;
                     let end = if within {
                         p
                     } else {
-                        point_along(origin, normalized(sub(p, origin)), max_range)
+                        point_along(origin, (p - origin).normalized(), max_range)
                     };
                     match opts.bbx {
                         None => {
@@ -370,7 +366,7 @@ impl OccupancyTree {
             ..Default::default()
         };
         for &p in points {
-            if !is_finite(p) {
+            if !p.is_finite() {
                 report.non_finite += 1;
                 continue;
             }
@@ -398,9 +394,9 @@ impl OccupancyTree {
         inner: InnerNodes,
     ) -> Result<(), KeyError> {
         let max_range = max_range.unwrap_or(-1.0);
-        let d = sub(end, origin);
-        if max_range > 0.0 && norm(d) > max_range {
-            let cut = point_along(origin, normalized(d), max_range);
+        let d = end - origin;
+        if max_range > 0.0 && d.norm() > max_range {
+            let cut = point_along(origin, d.normalized(), max_range);
             for k in self.ray_keys(origin, cut)? {
                 self.update_occupancy(k, false, inner);
             }

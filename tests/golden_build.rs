@@ -15,7 +15,8 @@ use std::io::Read;
 /// A scan: world-frame points and the sensor origin.
 pub type Scan = (Vec<Point3>, Point3);
 
-/// The scans of a case, from the plain-text companions of its input.
+/// The scans of a case: its `.graph` input transformed as graph2tree does,
+/// or its plain-text points.
 fn case_scans(g: &Golden, case: &Value) -> Option<Vec<Scan>> {
     let input = case["input"].as_str()?;
     if input.starts_with("inputs/scan.dat.bz2") {
@@ -25,6 +26,16 @@ fn case_scans(g: &Golden, case: &Value) -> Option<Vec<Scan>> {
             .read_to_string(&mut text)
             .unwrap();
         return Some(vec![(read_xyz(&text), Point3::new(0.0, 0.0, 0.0))]);
+    }
+    if input.ends_with(".graph") {
+        // exactly as graph2tree: each scan transformed by its pose
+        let graph = octolinear::formats::graph::read_file(g.input(input)).unwrap();
+        let scans = graph
+            .nodes
+            .iter()
+            .map(|n| n.graph2tree())
+            .map(|(c, o)| (c.points, o));
+        return Some(scans.collect());
     }
     let stem = input
         .trim_start_matches("inputs/")

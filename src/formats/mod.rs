@@ -3,14 +3,17 @@
 //! so a crash never leaves a half-written file.
 
 pub mod bt;
+pub mod graph;
 mod header;
+pub mod log;
 pub mod ot;
+pub mod xyz;
 
 pub use header::{format_double, Header};
 
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Why an `.ot` or `.bt` file could not be read.
 #[derive(Debug, thiserror::Error)]
@@ -38,9 +41,9 @@ pub enum TreeFileError {
     },
 }
 
-/// Writes through `write` into a temporary file next to `path`, then
-/// renames it into place; on any error the temporary file is removed and
-/// `path` is left as it was.
+/// Writes through `write` into a fresh temporary file next to `path`,
+/// syncs it, then renames it into place; on any error the temporary file is
+/// removed and `path` is left as it was.
 pub fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>,
@@ -55,13 +58,8 @@ pub fn write_atomically(
             format!("{} names no file", path.display()),
         )
     })?;
-    let tmp = dir.join(format!(
-        ".{}.{}.tmp",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
+    let (tmp, file) = create_temp(dir, &name.to_string_lossy())?;
     let result = (|| {
-        let file = File::create(&tmp)?;
         let mut w = BufWriter::with_capacity(1 << 16, &file);
         write(&mut w)?;
         w.flush()?;
@@ -73,4 +71,25 @@ pub fn write_atomically(
         let _ = std::fs::remove_file(&tmp);
     }
     result
+}
+
+/// Creates a fresh `.<name>.<pid>.<n>.tmp` next to the target.
+fn create_temp(dir: &Path, name: &str) -> io::Result<(PathBuf, File)> {
+    let pid = std::process::id();
+    for n in 0..1000u32 {
+        let tmp = dir.join(format!(".{name}.{pid}.{n}.tmp"));
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&tmp)
+        {
+            Ok(f) => return Ok((tmp, f)),
+            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(e),
+        }
+    }
+    Err(io::Error::new(
+        io::ErrorKind::AlreadyExists,
+        format!("no free temporary name in {}", dir.display()),
+    ))
 }
