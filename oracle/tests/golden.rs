@@ -282,56 +282,56 @@ impl Checker<'_> {
             .iter()
             .filter(|n| n.logodds >= sensor.occupancy_thres_log)
             .count();
-        let mut got: HashMap<&str, String> = HashMap::new();
-        got.insert("tree_type", "OcTree".into());
-        got.insert("resolution", h64(s.resolution));
-        got.insert("tree_depth", s.tree_depth.to_string());
-        got.insert("size", s.size.to_string());
-        got.insert("num_leaf_nodes", s.num_leaf_nodes.to_string());
-        got.insert("calc_num_nodes", s.calc_num_nodes.to_string());
+        let mut got: HashMap<String, String> = HashMap::new();
+        got.insert("tree_type".into(), "OcTree".into());
+        got.insert("resolution".into(), h64(s.resolution));
+        got.insert("tree_depth".into(), s.tree_depth.to_string());
+        got.insert("size".into(), s.size.to_string());
+        got.insert("num_leaf_nodes".into(), s.num_leaf_nodes.to_string());
+        got.insert("calc_num_nodes".into(), s.calc_num_nodes.to_string());
         got.insert(
-            "num_inner_nodes_iter",
+            "num_inner_nodes_iter".into(),
             nodes.iter().filter(|n| !n.is_leaf).count().to_string(),
         );
-        got.insert("memory_usage", s.memory_usage.to_string());
-        got.insert("memory_usage_node", s.memory_usage_node.to_string());
-        got.insert("memory_full_grid", s.memory_full_grid.to_string());
+        got.insert("memory_usage".into(), s.memory_usage.to_string());
+        got.insert("memory_usage_node".into(), s.memory_usage_node.to_string());
+        got.insert("memory_full_grid".into(), s.memory_full_grid.to_string());
         for (i, ax) in ["x", "y", "z"].iter().enumerate() {
-            got.insert(leak(format!("metric_min_{ax}")), h64(s.metric_min[i]));
-            got.insert(leak(format!("metric_max_{ax}")), h64(s.metric_max[i]));
-            got.insert(leak(format!("metric_size_{ax}")), h64(s.metric_size[i]));
-            got.insert(
-                leak(format!("const_metric_min_{ax}")),
-                h64(s.const_metric_min[i]),
-            );
-            got.insert(
-                leak(format!("const_metric_max_{ax}")),
-                h64(s.const_metric_max[i]),
-            );
+            got.insert(format!("metric_min_{ax}"), h64(s.metric_min[i]));
+            got.insert(format!("metric_max_{ax}"), h64(s.metric_max[i]));
+            got.insert(format!("metric_size_{ax}"), h64(s.metric_size[i]));
+            got.insert(format!("const_metric_min_{ax}"), h64(s.const_metric_min[i]));
+            got.insert(format!("const_metric_max_{ax}"), h64(s.const_metric_max[i]));
         }
-        got.insert("volume", h64(s.volume));
-        got.insert("leaves_occupied", occupied.to_string());
-        got.insert("leaves_free", (leaves.len() - occupied).to_string());
+        got.insert("volume".into(), h64(s.volume));
+        got.insert("leaves_occupied".into(), occupied.to_string());
+        got.insert("leaves_free".into(), (leaves.len() - occupied).to_string());
         got.insert(
-            "leaves_at_threshold",
+            "leaves_at_threshold".into(),
             leaves.iter().filter(|n| at_thr(n)).count().to_string(),
         );
         got.insert(
-            "nodes_at_threshold",
+            "nodes_at_threshold".into(),
             nodes.iter().filter(|n| at_thr(n)).count().to_string(),
         );
-        got.insert("clamping_thres_min_log", h32(sensor.clamp_min_log));
-        got.insert("clamping_thres_max_log", h32(sensor.clamp_max_log));
-        got.insert("prob_hit_log", h32(sensor.prob_hit_log));
-        got.insert("prob_miss_log", h32(sensor.prob_miss_log));
-        got.insert("occupancy_thres_log", h32(sensor.occupancy_thres_log));
+        got.insert("clamping_thres_min_log".into(), h32(sensor.clamp_min_log));
+        got.insert("clamping_thres_max_log".into(), h32(sensor.clamp_max_log));
+        got.insert("prob_hit_log".into(), h32(sensor.prob_hit_log));
+        got.insert("prob_miss_log".into(), h32(sensor.prob_miss_log));
+        got.insert(
+            "occupancy_thres_log".into(),
+            h32(sensor.occupancy_thres_log),
+        );
         if let Some(r) = s.root_logodds {
-            got.insert("root_logodds", h32(r));
+            got.insert("root_logodds".into(), h32(r));
         }
-        got.insert("num_changes_detected", s.num_changes_detected.to_string());
+        got.insert(
+            "num_changes_detected".into(),
+            s.num_changes_detected.to_string(),
+        );
         let mut compared = 0;
         for (name, value) in &got {
-            if let Some((v, hex)) = want.get(*name) {
+            if let Some((v, hex)) = want.get(name) {
                 let w = if hex.is_empty() { v } else { hex };
                 assert_eq!(value, w, "{}: stats {stage}/{name}", self.id);
                 compared += 1;
@@ -434,10 +434,6 @@ impl Checker<'_> {
             self.checked.push("query_raykeys.csv".into());
         }
     }
-}
-
-fn leak(s: String) -> &'static str {
-    Box::leak(s.into_boxed_str())
 }
 
 /// Runs the `build` procedure of the golden README for one case and checks
