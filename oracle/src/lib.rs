@@ -1005,7 +1005,11 @@ impl OracleTree {
     // -------------------------------------------------------------- statistics
 
     /// All statistics. Takes `&mut self` because OctoMap's non-const extent
-    /// functions and `volume()` update cached values.
+    /// functions and `volume()` update cached values. Beware: once the non-const
+    /// `getMetricMin/Max` have run, the const overloads return that cached
+    /// (`(center - size/2) + size`) maximum until the tree's size changes, so a
+    /// later [`Self::metric_min_max`] or `stats()` may differ in the last bit from
+    /// a fresh const computation (the const values here are taken first).
     pub fn stats(&mut self) -> TreeStats {
         let mut s = ffi::OloStats::default();
         // SAFETY: valid handle; `s` is a valid out-pointer with the C layout.
@@ -1067,7 +1071,9 @@ impl OracleTree {
         unsafe { ffi::olo_memory_full_grid(self.h()) }
     }
 
-    /// Const `getMetricMin` and `getMetricMax`: (min, max).
+    /// Const `getMetricMin` and `getMetricMax`: (min, max). They recompute
+    /// `center ± size/2` only while the tree is "size changed"; otherwise they
+    /// return the values cached by the last non-const call (see [`Self::stats`]).
     pub fn metric_min_max(&self) -> ([f64; 3], [f64; 3]) {
         let (mut min, mut max) = ([0f64; 3], [0f64; 3]);
         // SAFETY: valid handle; two 3-double out arrays.
