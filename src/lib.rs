@@ -3,6 +3,19 @@
 //! The in-memory engine ([`OccupancyTree`]) keeps nodes in a pointer-free
 //! arena; keys ([`Key`], [`KeySpace`]), the sensor model ([`SensorModel`])
 //! and every update rule reproduce OctoMap's arithmetic bit for bit.
+//!
+//! ```
+//! use octolinear::{formats::bt, OccupancyTree, Point3, ScanOptions};
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let mut tree = OccupancyTree::new(0.1)?; // 10 cm voxels, OctoMap's sensor model
+//! let scan = vec![Point3::new(2.0, 0.5, 0.3), Point3::new(2.0, 0.6, 0.3)];
+//! tree.insert_point_cloud(&scan, Point3::new(0.0, 0.0, 0.0), &ScanOptions::default())?;
+//! let hit = tree.search_point(Point3::new(2.0, 0.5, 0.3), 0)?;
+//! assert!(tree.is_occupied(hit.unwrap().value));
+//! let mut file = Vec::new();
+//! bt::write(&tree, &mut file)?; // the bytes OctoMap's writeBinary writes
+//! # Ok(()) }
+//! ```
 
 pub mod formats;
 pub mod geometry;

@@ -1,1 +1,7 @@
-fn main() {}
+//! The `octolinear` command-line tool.
+
+mod cli;
+
+fn main() {
+    std::process::exit(cli::main());
+}

@@ -1,0 +1,212 @@
+//! `octolinear build`: OctoMap's `graph2tree` — integrate the scans of a
+//! `.graph` file into a map.
+
+use super::common::{progress, save_map, MapFormat};
+use anyhow::{bail, Context, Result};
+use octolinear::formats::graph;
+use octolinear::scan::OutOfMap;
+use octolinear::sensor::{SensorModel, SensorProbabilities};
+use octolinear::{BoundsRule, InnerNodes, OccupancyTree, ScanOptions};
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Build a map from the scans of a `.graph` file (like OctoMap's graph2tree).
+///
+/// `.ot` output is the full probabilistic tree, `.bt` the compact
+/// maximum-likelihood tree; both are byte-identical to what OctoMap writes.
+///
+/// Example: octolinear build scans.graph -o map.bt --res 0.05 --max-range 20
+#[derive(clap::Args)]
+pub struct Args {
+    /// Input `.graph` file (OctoMap ScanGraph).
+    input: PathBuf,
+    /// Output map, `.bt` or `.ot`.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Voxel edge length in metres.
+    #[arg(long, default_value_t = 0.1)]
+    res: f64,
+    /// Cut rays at this range (metres); their end points are not marked occupied.
+    #[arg(long)]
+    max_range: Option<f64>,
+    /// Merge end points per voxel before casting rays.
+    #[arg(long)]
+    discretize: bool,
+    /// Update ray by ray (OctoMap's insertPointCloudRays) instead of per-scan key sets.
+    #[arg(long)]
+    simple: bool,
+    /// Only insert the first N scans.
+    #[arg(long, value_name = "N")]
+    scans: Option<usize>,
+    /// Miss and hit probabilities.
+    #[arg(long, num_args = 2, value_names = ["MISS", "HIT"])]
+    sensor: Option<Vec<f64>>,
+    /// Clamping probabilities.
+    #[arg(long, num_args = 2, value_names = ["MIN", "MAX"])]
+    clamping: Option<Vec<f64>>,
+    /// Convert to maximum likelihood and prune after each scan.
+    #[arg(long)]
+    compress_ml: bool,
+    /// Threads for ray casting (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Print the statistics as one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Sensor model as graph2tree sets it: OctoMap's defaults read back from a
+/// fresh tree, overridden by the flags, then set again.
+fn sensor_model(a: &Args) -> Result<SensorModel> {
+    let mut p = SensorModel::default().probabilities();
+    p.occupancy_threshold = 0.5;
+    if let Some(c) = &a.clamping {
+        (p.clamping_min, p.clamping_max) = (c[0], c[1]);
+        if !(0.0..=1.0).contains(&c[0]) || !(0.0..=1.0).contains(&c[1]) || c[0] >= c[1] {
+            bail!(
+                "clamping values must satisfy 0 <= MIN < MAX <= 1, got {} {}",
+                c[0],
+                c[1]
+            );
+        }
+    }
+    if let Some(s) = &a.sensor {
+        (p.miss, p.hit) = (s[0], s[1]);
+        if !(0.0..=1.0).contains(&s[0]) || !(0.0..=1.0).contains(&s[1]) || s[0] >= s[1] {
+            bail!(
+                "sensor model must satisfy 0 <= MISS < HIT <= 1, got {} {}",
+                s[0],
+                s[1]
+            );
+        }
+    }
+    Ok(SensorModel::from_probabilities(&SensorProbabilities {
+        ..p
+    })?)
+}
+
+/// graph2tree's `outputStatistics`, as numbers.
+fn statistics(tree: &OccupancyTree) -> serde_json::Value {
+    let sensor = tree.sensor();
+    let thresholded = tree
+        .nodes(0)
+        .filter(|n| sensor.is_at_threshold(n.value))
+        .count();
+    let size = tree.bounds(BoundsRule::CenterHalfSize).size();
+    serde_json::json!({
+        "nodes": tree.size(),
+        "leaves": tree.num_leaves(),
+        "nodes_thresholded": thresholded,
+        "nodes_other": tree.size() - thresholded,
+        "octomap_memory_bytes": tree.octomap_memory_usage(),
+        "memory_bytes": tree.memory_usage(),
+        "full_grid_bytes": tree.memory_full_grid(BoundsRule::CenterHalfSize),
+        "metric_size": size,
+    })
+}
+
+fn print_statistics(title: &str, s: &serde_json::Value) {
+    let mb = |b: &serde_json::Value| b.as_f64().unwrap_or(0.0) / (1024.0 * 1024.0);
+    println!("{title}\n===========================");
+    println!(
+        "Tree size: {} nodes ({} leafs). {} nodes thresholded, {} other",
+        s["nodes"], s["leaves"], s["nodes_thresholded"], s["nodes_other"]
+    );
+    println!(
+        "Memory: {} byte ({:.6} MB) as OctoMap counts it; octolinear holds {} byte ({:.6} MB)",
+        s["octomap_memory_bytes"],
+        mb(&s["octomap_memory_bytes"]),
+        s["memory_bytes"],
+        mb(&s["memory_bytes"])
+    );
+    println!(
+        "Full grid: {} byte ({:.6} MB)",
+        s["full_grid_bytes"],
+        mb(&s["full_grid_bytes"])
+    );
+    let m = &s["metric_size"];
+    println!("Size: {} x {} x {} m^3\n", m[0], m[1], m[2]);
+}
+
+pub fn run(a: Args) -> Result<()> {
+    let format = MapFormat::of(&a.output)?;
+    let sensor = sensor_model(&a)?;
+    let mut tree = OccupancyTree::with_sensor(a.res, sensor)?;
+    if a.threads == Some(0) {
+        bail!("--threads must be at least 1");
+    }
+    if let Some(r) = a.max_range {
+        if !r.is_finite() {
+            bail!("--max-range must be a finite number, got {r}");
+        }
+    }
+    let g =
+        graph::read_file(&a.input).with_context(|| format!("cannot read {}", a.input.display()))?;
+    let n = a.scans.unwrap_or(g.nodes.len()).min(g.nodes.len());
+    let points: usize = g.nodes[..n].iter().map(|s| s.scan.points.len()).sum();
+    let opts = ScanOptions {
+        max_range: a.max_range,
+        discretize: a.discretize,
+        inner: InnerNodes::Update,
+        bbx: None,
+        out_of_map: OutOfMap::OctoMap,
+        threads: a.threads,
+    };
+    let bar = progress(n as u64, "inserting scans");
+    let (mut non_finite, start) = (0, Instant::now());
+    for node in &g.nodes[..n] {
+        let (cloud, origin) = node.graph2tree();
+        let report = if a.simple {
+            tree.insert_point_cloud_rays(&cloud.points, origin, InnerNodes::Update)
+        } else {
+            tree.insert_point_cloud(&cloud.points, origin, &opts)
+                .with_context(|| format!("scan {}", node.id))?
+        };
+        non_finite += report.non_finite;
+        if a.compress_ml {
+            tree.to_max_likelihood();
+            tree.prune();
+        }
+        bar.inc(1);
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    bar.finish_and_clear();
+    drop(g);
+    tree.compact();
+
+    let full = statistics(&tree);
+    let mut ml = tree.clone();
+    ml.to_max_likelihood();
+    ml.prune();
+    ml.compact();
+    let ml_stats = statistics(&ml);
+    let written = match format {
+        MapFormat::Ot => &tree,
+        MapFormat::Bt => &ml,
+    };
+    save_map(written, &a.output)?;
+    if a.json {
+        let out = serde_json::json!({
+            "input": a.input, "output": a.output, "scans": n, "points": points,
+            "non_finite_points_skipped": non_finite,
+            "insert_seconds": seconds,
+            "points_per_second": points as f64 / seconds.max(1e-12),
+            "tree": full, "max_likelihood_tree": ml_stats,
+        });
+        println!("{out}");
+    } else {
+        println!("Data points in graph: {points} ({n} scans)");
+        if non_finite > 0 {
+            println!("Skipped {non_finite} points with NaN or infinite coordinates");
+        }
+        println!("time to insert scans: {seconds} sec");
+        println!(
+            "time to insert 100.000 points took: {} sec (avg)\n",
+            seconds / (points as f64 / 100000.0)
+        );
+        print_statistics("Pruned tree (lossless compression)", &full);
+        print_statistics("Pruned max-likelihood tree (lossy compression)", &ml_stats);
+        println!("Map written to {}", a.output.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,140 @@
+//! `octolinear info`, `convert` and `query`: inspect, convert and query maps.
+
+use super::common::{load_map, save_map};
+use anyhow::{bail, Context, Result};
+use octolinear::formats::xyz;
+use octolinear::{BoundsRule, OccupancyTree};
+use std::path::PathBuf;
+
+/// Print the kind, resolution and statistics of a map (.bt or .ot).
+///
+/// Example: octolinear info map.ot --json
+#[derive(clap::Args)]
+pub struct Args {
+    map: PathBuf,
+    /// One JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+fn summary(tree: &OccupancyTree, kind: &str) -> serde_json::Value {
+    let sensor = tree.sensor();
+    let b = tree.bounds(BoundsRule::CenterHalfSize);
+    let mut depth_histogram = [0usize; 17];
+    let (mut occupied, mut free, mut occupied_volume, mut free_volume) = (0usize, 0usize, 0.0, 0.0);
+    for leaf in tree.leaves(0) {
+        depth_histogram[leaf.depth as usize] += 1;
+        let v = leaf.size().powi(3);
+        if sensor.is_occupied(leaf.value) {
+            occupied += 1;
+            occupied_volume += v;
+        } else {
+            free += 1;
+            free_volume += v;
+        }
+    }
+    serde_json::json!({
+        "kind": kind,
+        "resolution": tree.resolution(),
+        "nodes": tree.size(),
+        "leaves": tree.num_leaves(),
+        "occupied_leaves": occupied,
+        "free_leaves": free,
+        "occupied_volume_m3": occupied_volume,
+        "free_volume_m3": free_volume,
+        "bounds_min": if tree.is_empty() { None } else { Some(b.min) },
+        "bounds_max": if tree.is_empty() { None } else { Some(b.max) },
+        "memory_bytes": tree.memory_usage(),
+        "octomap_memory_bytes": tree.octomap_memory_usage(),
+        "leaves_per_depth": depth_histogram,
+    })
+}
+
+pub fn run(a: Args) -> Result<()> {
+    let m = load_map(&a.map)?;
+    let s = summary(&m.tree, m.kind);
+    if a.json {
+        println!("{s}");
+        return Ok(());
+    }
+    println!("{}: {}", a.map.display(), s["kind"].as_str().unwrap_or(""));
+    println!("resolution:  {} m", s["resolution"]);
+    println!(
+        "nodes:       {} ({} leaves: {} occupied, {} free)",
+        s["nodes"], s["leaves"], s["occupied_leaves"], s["free_leaves"]
+    );
+    println!(
+        "volume:      {:.3} m^3 occupied, {:.3} m^3 free",
+        s["occupied_volume_m3"].as_f64().unwrap_or(0.0),
+        s["free_volume_m3"].as_f64().unwrap_or(0.0)
+    );
+    if !m.tree.is_empty() {
+        println!("bounds:      {} .. {}", s["bounds_min"], s["bounds_max"]);
+    }
+    println!(
+        "memory:      {} bytes here, {} bytes in OctoMap",
+        s["memory_bytes"], s["octomap_memory_bytes"]
+    );
+    let hist: Vec<String> = s["leaves_per_depth"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .enumerate()
+        .filter(|(_, v)| v.as_u64() != Some(0))
+        .map(|(d, v)| format!("{d}:{v}"))
+        .collect();
+    println!("leaves by depth: {}", hist.join(" "));
+    Ok(())
+}
+
+/// Convert a map between formats, chosen by extension (.bt, .ot).
+///
+/// Example: octolinear convert map.ot map.bt
+#[derive(clap::Args)]
+pub struct ConvertArgs {
+    input: PathBuf,
+    output: PathBuf,
+}
+
+pub fn convert(a: ConvertArgs) -> Result<()> {
+    let m = load_map(&a.input)?;
+    save_map(&m.tree, &a.output)
+}
+
+/// Look up points in a map: prints `x,y,z,state,logodds_bits` per point.
+///
+/// `state` is occupied, free or unknown; `logodds_bits` the f32 bits in hex
+/// (empty when unknown).
+///
+/// Example: octolinear query map.bt --points points.xyz
+#[derive(clap::Args)]
+pub struct QueryArgs {
+    map: PathBuf,
+    /// Text file with one `x y z` per line.
+    #[arg(long)]
+    points: PathBuf,
+}
+
+pub fn query(a: QueryArgs) -> Result<()> {
+    use std::io::Write;
+    let m = load_map(&a.map)?;
+    let pts =
+        xyz::read_file(&a.points).with_context(|| format!("cannot read {}", a.points.display()))?;
+    let stdout = std::io::stdout();
+    let mut out = std::io::BufWriter::new(stdout.lock());
+    for p in &pts.points {
+        let (state, bits) = match m.tree.search_point(*p, 0) {
+            Ok(Some(f)) if m.tree.is_occupied(f.value) => {
+                ("occupied", format!("{:08x}", f.value.to_bits()))
+            }
+            Ok(Some(f)) => ("free", format!("{:08x}", f.value.to_bits())),
+            Ok(None) | Err(_) => ("unknown", String::new()),
+        };
+        writeln!(out, "{},{},{},{state},{bits}", p.x, p.y, p.z)?;
+    }
+    out.flush()?;
+    if pts.points.is_empty() {
+        bail!("{}: no points", a.points.display());
+    }
+    Ok(())
+}
