@@ -8,6 +8,7 @@
 
 use crate::geometry::Point3;
 use crate::key::{Key, KeyError, KeySpace, KEY_CENTER};
+use crate::morton::MortonCode;
 use crate::tree::OccupancyTree;
 
 /// `origin + direction * (float) range`, in float.
@@ -142,6 +143,44 @@ impl RayKeys {
             length,
             pending_origin: true,
         })
+    }
+}
+
+impl RayKeys {
+    /// Calls `f` with the Morton code of every key the iterator would yield,
+    /// in a tight loop that steps the interleaved code directly (adding one
+    /// to a dilated coordinate carries through the other axes' bits when
+    /// those are set to one).
+    #[inline]
+    pub fn for_each_code(self, mut f: impl FnMut(u64)) {
+        let Some(mut dda) = self.dda else { return };
+        const MX: u64 = 0x2492_4924_9249;
+        let masks = [MX, MX << 1, MX << 2];
+        let start = MortonCode::encode(dda.key).0;
+        let mut dil = [start & masks[0], start & masks[1], start & masks[2]];
+        let end_code = MortonCode::encode(self.end).0;
+        if self.pending_origin {
+            f(start);
+        }
+        let length = f64::from(self.length);
+        loop {
+            let dim = min_axis(&dda.t_max);
+            let m = masks[dim];
+            dil[dim] = match dda.step[dim] {
+                1 => ((dil[dim] | !m).wrapping_add(1 << dim)) & m,
+                -1 => dil[dim].wrapping_sub(1 << dim) & m,
+                _ => dil[dim],
+            };
+            dda.t_max[dim] += dda.t_delta[dim];
+            let code = dil[0] | dil[1] | dil[2];
+            if code == end_code {
+                return;
+            }
+            if min(min(dda.t_max[0], dda.t_max[1]), dda.t_max[2]) > length {
+                return;
+            }
+            f(code);
+        }
     }
 }
 

@@ -42,33 +42,18 @@ impl Hasher for KeyHasher {
     }
 }
 
-impl std::hash::Hash for HashedKey {
-    #[inline(always)]
-    fn hash<H: Hasher>(&self, state: &mut H) {
-        state.write_u64(self.0);
-    }
+/// A set of keys (OctoMap's `KeySet`) as Morton codes, on hashbrown with
+/// [`KeyHasher`].
+pub type KeySet = HashSet<MortonCode, BuildHasherDefault<KeyHasher>>;
+
+/// Size of the direct-mapped filter of recently inserted ray keys; rays of
+/// one scan share most voxels near the sensor.
+const RECENT_SLOTS: usize = 1 << 12;
+
+#[inline(always)]
+fn recent_slot(code: u64) -> usize {
+    ((code ^ (code >> 21)).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> (64 - 12)) as usize
 }
-
-/// A key packed into one `u64` for hashing (x | y << 16 | z << 32).
-#[derive(Clone, Copy, PartialEq, Eq)]
-pub struct HashedKey(u64);
-
-impl From<Key> for HashedKey {
-    #[inline(always)]
-    fn from(k: Key) -> Self {
-        HashedKey(u64::from(k.0[0]) | (u64::from(k.0[1]) << 16) | (u64::from(k.0[2]) << 32))
-    }
-}
-
-impl From<HashedKey> for Key {
-    #[inline(always)]
-    fn from(h: HashedKey) -> Self {
-        Key([h.0 as u16, (h.0 >> 16) as u16, (h.0 >> 32) as u16])
-    }
-}
-
-/// A set of keys (OctoMap's `KeySet`) on hashbrown with [`KeyHasher`].
-pub type KeySet = HashSet<HashedKey, BuildHasherDefault<KeyHasher>>;
 
 /// What to do with end points outside the addressable map.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -181,14 +166,21 @@ pub struct ScanUpdate {
 impl ScanUpdate {
     /// The sets as key lists sorted in Morton order.
     pub fn sorted(&self) -> (Vec<Key>, Vec<Key>) {
-        (morton_sorted(&self.free), morton_sorted(&self.occupied))
+        let keys = |codes: Vec<u64>| codes.into_iter().map(|c| MortonCode(c).decode()).collect();
+        let (free, occupied) = self.sorted_codes();
+        (keys(free), keys(occupied))
+    }
+
+    /// The sets as sorted Morton codes.
+    pub fn sorted_codes(&self) -> (Vec<u64>, Vec<u64>) {
+        (sorted_codes(&self.free), sorted_codes(&self.occupied))
     }
 }
 
-fn morton_sorted(set: &KeySet) -> Vec<Key> {
-    let mut codes: Vec<MortonCode> = set.iter().map(|&h| MortonCode::encode(h.into())).collect();
+fn sorted_codes(set: &KeySet) -> Vec<u64> {
+    let mut codes: Vec<u64> = set.iter().map(|c| c.0).collect();
     codes.par_sort_unstable();
-    codes.into_iter().map(MortonCode::decode).collect()
+    codes
 }
 
 impl OccupancyTree {
@@ -201,8 +193,10 @@ impl OccupancyTree {
         opts: &ScanOptions,
     ) -> Result<ScanReport, ScanError> {
         let (update, report) = self.compute_update(points, origin, opts)?;
-        let (free, occupied) = update.sorted();
-        self.apply_sorted(&free, &occupied, opts.inner);
+        let (free, occupied) = update.sorted_codes();
+        let sensor = *self.sensor();
+        self.update_batch(&free, sensor.miss, opts.inner);
+        self.update_batch(&occupied, sensor.hit, opts.inner);
         Ok(ScanReport {
             free_updates: free.len(),
             occupied_updates: occupied.len(),
@@ -210,8 +204,9 @@ impl OccupancyTree {
         })
     }
 
-    /// Applies a scan's key sets: misses, then hits, each key once, in the
-    /// given order.
+    /// Applies a scan's key sets key by key: misses, then hits, each key
+    /// once, in the given order. The result is the same for any order;
+    /// [`Self::insert_point_cloud`] uses the faster [`Self::update_batch`].
     pub fn apply_sorted(&mut self, free: &[Key], occupied: &[Key], inner: InnerNodes) {
         for &k in free {
             self.update_occupancy(k, false, inner);
@@ -269,7 +264,7 @@ impl OccupancyTree {
         }
         let points = if opts.discretize {
             let mut seen = KeySet::default();
-            cleaned.retain(|&p| seen.insert(keys.key_unchecked(p).into()));
+            cleaned.retain(|&p| seen.insert(MortonCode::encode(keys.key_unchecked(p))));
             cleaned
                 .iter_mut()
                 .for_each(|p| *p = keys.key_to_point(keys.key_unchecked(*p)));
@@ -299,6 +294,7 @@ impl OccupancyTree {
             .map(|chunk| {
                 let mut free = KeySet::default();
                 let mut occupied = KeySet::default();
+                let mut recent = vec![u64::MAX; RECENT_SLOTS];
                 for &p in chunk {
                     let dist = (p - origin).norm();
                     let within = max_range < 0.0 || dist <= max_range;
@@ -310,24 +306,31 @@ impl OccupancyTree {
                     match opts.bbx {
                         None => {
                             if let Ok(ray) = RayKeys::new(keys, origin, end) {
-                                free.extend(ray.map(HashedKey::from));
+                                ray.for_each_code(|c| {
+                                    // skip the set for keys a recent ray already gave
+                                    let slot = &mut recent[recent_slot(c)];
+                                    if *slot != c {
+                                        *slot = c;
+                                        free.insert(MortonCode(c));
+                                    }
+                                });
                             }
                             if within {
                                 if let Ok(k) = keys.key(p) {
-                                    occupied.insert(k.into());
+                                    occupied.insert(MortonCode::encode(k));
                                 }
                             }
                         }
                         Some(bbx) => {
                             if within && bbx.contains_point(p) {
                                 if let Ok(k) = keys.key(p) {
-                                    occupied.insert(k.into());
+                                    occupied.insert(MortonCode::encode(k));
                                 }
                             }
                             if let Ok(ray) = RayKeys::new(keys, origin, end) {
                                 free.extend(
                                     ray.take_while(|&k| bbx.contains_key(k))
-                                        .map(HashedKey::from),
+                                        .map(MortonCode::encode),
                                 );
                             }
                         }

@@ -177,6 +177,40 @@ impl NodeArena {
         new
     }
 
+    /// Adds the children in `add` (none of which exists yet) to `n` as
+    /// leaves holding `value`, moving its group once; returns the first id.
+    pub fn add_missing_children(&mut self, n: NodeId, add: u8, value: f32) -> NodeId {
+        let m = self.masks[n as usize];
+        debug_assert_eq!(m & add, 0);
+        if m == 0 {
+            return self.add_children(n, add, value);
+        }
+        if add == 0 {
+            return self.first_child[n as usize];
+        }
+        let old = self.first_child[n as usize];
+        let new_mask = m | add;
+        let new = self.alloc_run(new_mask.count_ones() as usize);
+        let (mut from, mut to) = (old, new);
+        for i in 0..8 {
+            if m & (1 << i) != 0 {
+                self.copy_slot(from, to);
+                from += 1;
+                to += 1;
+            } else if add & (1 << i) != 0 {
+                let id = to as usize;
+                self.values[id] = value;
+                self.masks[id] = 0;
+                self.first_child[id] = NO_CHILD;
+                to += 1;
+            }
+        }
+        self.free_run(old, m.count_ones() as usize);
+        self.masks[n as usize] = new_mask;
+        self.first_child[n as usize] = new;
+        new
+    }
+
     /// Gives a leaf `n` all eight children, each holding `value`.
     pub fn add_all_children(&mut self, n: NodeId, value: f32) {
         self.add_children(n, 0xff, value);

@@ -260,6 +260,35 @@ impl OccupancyTree {
         result
     }
 
+    /// Adds `delta` to every voxel in `codes` (Morton codes, strictly
+    /// increasing), with the result of calling [`Self::update`] on each in
+    /// that order, but walking the tree once: keys sharing a path from the
+    /// root share its traversal, and each touched inner node is updated and
+    /// pruned once, after its whole subtree. This is equivalent because each
+    /// voxel appears once, so leaf values do not depend on the order, and a
+    /// node's final pruning only depends on its children's final state.
+    pub fn update_batch(&mut self, codes: &[u64], delta: f32, inner: InnerNodes) {
+        if codes.is_empty() {
+            return;
+        }
+        let mut created = false;
+        if self.arena.is_none() {
+            self.arena = Some(NodeArena::with_root(0.0));
+            self.size += 1;
+            created = true;
+        }
+        let mut batch = Batch {
+            arena: self.arena.as_mut().expect("root exists"),
+            sensor: self.sensor,
+            delta,
+            lazy: inner == InnerNodes::Defer,
+            size: self.size as isize,
+            changes: self.changes.as_mut(),
+        };
+        batch.apply(ROOT, 0, codes, created);
+        self.size = batch.size as usize;
+    }
+
     /// Recomputes every inner node as the maximum of its children
     /// (`updateInnerOccupancy`), after deferred updates.
     pub fn update_inner_occupancy(&mut self) {
@@ -585,6 +614,100 @@ impl OccupancyTree {
     pub fn reset_change_detection(&mut self) {
         if let Some(c) = self.changes.as_mut() {
             c.clear();
+        }
+    }
+}
+
+/// State of one [`OccupancyTree::update_batch`] walk.
+struct Batch<'a> {
+    arena: &'a mut NodeArena,
+    sensor: SensorModel,
+    delta: f32,
+    lazy: bool,
+    size: isize,
+    changes: Option<&'a mut HashMap<Key, bool>>,
+}
+
+impl Batch<'_> {
+    /// Applies `codes` (all below `n`, which sits at `depth`) to the subtree.
+    fn apply(&mut self, n: NodeId, depth: u8, codes: &[u64], created: bool) {
+        if depth == TREE_DEPTH {
+            self.apply_leaf(n, codes[0], created);
+            return;
+        }
+        let shift = 3 * (15 - u32::from(depth));
+        let child_of = |c: u64| ((c >> shift) & 7) as u8;
+        let a = &mut *self.arena;
+        let mut needed = 0u8;
+        for &c in codes {
+            needed |= 1 << child_of(c);
+        }
+        let mask = a.mask(n);
+        let mut new_children = 0u8;
+        if mask == 0 && !created {
+            // a pruned leaf: unchanged when the update saturates, else expanded
+            let v = a.value(n);
+            if self.sensor.is_saturated(v, self.delta) {
+                return;
+            }
+            a.add_all_children(n, v);
+            self.size += 8;
+        } else {
+            new_children = needed & !mask;
+            if new_children != 0 {
+                a.add_missing_children(n, new_children, 0.0);
+                self.size += new_children.count_ones() as isize;
+            }
+        }
+        let (first, mask) = (a.first_child(n), a.mask(n));
+        let mut start = 0;
+        while start < codes.len() {
+            let pos = child_of(codes[start]);
+            let mut end = start + 1;
+            while end < codes.len() && child_of(codes[end]) == pos {
+                end += 1;
+            }
+            let child = first + (mask & ((1u8 << pos) - 1)).count_ones();
+            self.apply(
+                child,
+                depth + 1,
+                &codes[start..end],
+                new_children & (1 << pos) != 0,
+            );
+            start = end;
+        }
+        if !self.lazy {
+            if prune_node(self.arena, n).is_some() {
+                self.size -= 8;
+            } else {
+                let v = max_child_value(self.arena, n);
+                self.arena.set_value(n, v);
+            }
+        }
+    }
+
+    fn apply_leaf(&mut self, n: NodeId, code: u64, created: bool) {
+        let before = self.arena.value(n);
+        if !created && self.sensor.is_saturated(before, self.delta) {
+            return;
+        }
+        let after = self.sensor.apply(before, self.delta);
+        self.arena.set_value(n, after);
+        if let Some(changes) = self.changes.as_deref_mut() {
+            let key = crate::morton::MortonCode(code).decode();
+            if created {
+                changes.insert(key, true);
+            } else if self.sensor.is_occupied(before) != self.sensor.is_occupied(after) {
+                match changes.get(&key) {
+                    None => {
+                        changes.insert(key, false);
+                    }
+                    Some(false) => {
+                        changes.remove(&key);
+                    }
+                    Some(true) => {}
+                }
+            }
         }
     }
 }
