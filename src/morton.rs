@@ -111,6 +111,45 @@ impl MortonCode {
     }
 }
 
+/// Sorts 48-bit Morton codes: a least-significant-digit radix sort on
+/// bytes, skipping bytes that are equal in every code (the high bytes of
+/// codes from one region usually are).
+pub fn sort_codes(codes: &mut Vec<u64>) {
+    if codes.len() < 256 {
+        codes.sort_unstable();
+        return;
+    }
+    let (mut or, mut and) = (0u64, u64::MAX);
+    for &c in codes.iter() {
+        or |= c;
+        and &= c;
+    }
+    let varying = or ^ and;
+    let mut buf = vec![0u64; codes.len()];
+    for byte in 0..8 {
+        let shift = 8 * byte;
+        if (varying >> shift) & 0xff == 0 {
+            continue;
+        }
+        let mut count = [0usize; 256];
+        for &c in codes.iter() {
+            count[((c >> shift) & 0xff) as usize] += 1;
+        }
+        let mut sum = 0;
+        for slot in count.iter_mut() {
+            let n = *slot;
+            *slot = sum;
+            sum += n;
+        }
+        for &c in codes.iter() {
+            let d = ((c >> shift) & 0xff) as usize;
+            buf[count[d]] = c;
+            count[d] += 1;
+        }
+        std::mem::swap(codes, &mut buf);
+    }
+}
+
 #[cfg(target_arch = "x86_64")]
 mod bmi2 {
     use super::MortonCode;
@@ -160,6 +199,23 @@ mod tests {
                 assert_eq!(m.child_index(depth), key.child_index(depth));
             }
         }
+    }
+
+    #[test]
+    fn radix_sort_sorts() {
+        let mut s = 7u64;
+        let mut v: Vec<u64> = (0..5000)
+            .map(|_| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (s >> 16) & 0xffff_ffff_ffff
+            })
+            .collect();
+        let mut expected = v.clone();
+        expected.sort_unstable();
+        sort_codes(&mut v);
+        assert_eq!(v, expected);
     }
 
     #[test]

@@ -163,14 +163,19 @@ impl RayKeys {
             f(start);
         }
         let length = f64::from(self.length);
+        // per axis: dil' = ((dil | fill) + add) & mask, branch-free
+        let mut fill = [0u64; 3];
+        let mut add = [0u64; 3];
+        for i in 0..3 {
+            (fill[i], add[i]) = match dda.step[i] {
+                1 => (!masks[i], 1 << i),
+                -1 => (0, (1u64 << i).wrapping_neg()),
+                _ => (0, 0),
+            };
+        }
         loop {
             let dim = min_axis(&dda.t_max);
-            let m = masks[dim];
-            dil[dim] = match dda.step[dim] {
-                1 => ((dil[dim] | !m).wrapping_add(1 << dim)) & m,
-                -1 => dil[dim].wrapping_sub(1 << dim) & m,
-                _ => dil[dim],
-            };
+            dil[dim] = (dil[dim] | fill[dim]).wrapping_add(add[dim]) & masks[dim];
             dda.t_max[dim] += dda.t_delta[dim];
             let code = dil[0] | dil[1] | dil[2];
             if code == end_code {

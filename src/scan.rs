@@ -10,7 +10,7 @@
 //! tree is bit-identical for any thread count.
 
 use crate::geometry::Point3;
-use crate::key::{Key, KeyError};
+use crate::key::{Key, KeyError, KeySpace};
 use crate::morton::MortonCode;
 use crate::ray::{point_along, RayKeys};
 use crate::tree::{InnerNodes, OccupancyTree};
@@ -48,11 +48,78 @@ pub type KeySet = HashSet<MortonCode, BuildHasherDefault<KeyHasher>>;
 
 /// Size of the direct-mapped filter of recently inserted ray keys; rays of
 /// one scan share most voxels near the sensor.
-const RECENT_SLOTS: usize = 1 << 12;
+const RECENT_SLOTS: usize = 1 << RECENT_BITS;
+const RECENT_BITS: u32 = 14;
 
 #[inline(always)]
 fn recent_slot(code: u64) -> usize {
-    ((code ^ (code >> 21)).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> (64 - 12)) as usize
+    ((code ^ (code >> 21)).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> (64 - RECENT_BITS)) as usize
+}
+
+/// The key sets one worker collects, with its filter of recent keys.
+struct Casting {
+    free: KeySet,
+    occupied: KeySet,
+    recent: Vec<u64>,
+}
+
+impl Casting {
+    fn new() -> Self {
+        Casting {
+            free: KeySet::default(),
+            occupied: KeySet::default(),
+            recent: vec![u64::MAX; RECENT_SLOTS],
+        }
+    }
+
+    /// `computeUpdate`'s work for one end point.
+    #[inline]
+    fn cast(&mut self, keys: &KeySpace, p: Point3, origin: Point3, opts: &ScanOptions) {
+        let max_range = opts.max_range.unwrap_or(-1.0);
+        let within = max_range < 0.0 || (p - origin).norm() <= max_range;
+        let end = if within {
+            p
+        } else {
+            point_along(origin, (p - origin).normalized(), max_range)
+        };
+        let Some(bbx) = opts.bbx else {
+            if let Ok(ray) = RayKeys::new(keys, origin, end) {
+                let (free, recent) = (&mut self.free, &mut self.recent);
+                ray.for_each_code(|c| {
+                    // skip the set for keys a recent ray already gave
+                    let slot = &mut recent[recent_slot(c)];
+                    if *slot != c {
+                        *slot = c;
+                        free.insert(MortonCode(c));
+                    }
+                });
+            }
+            if within {
+                if let Ok(k) = keys.key(p) {
+                    self.occupied.insert(MortonCode::encode(k));
+                }
+            }
+            return;
+        };
+        if within && bbx.contains_point(p) {
+            if let Ok(k) = keys.key(p) {
+                self.occupied.insert(MortonCode::encode(k));
+            }
+        }
+        if let Ok(ray) = RayKeys::new(keys, origin, end) {
+            self.free.extend(
+                ray.take_while(|&k| bbx.contains_key(k))
+                    .map(MortonCode::encode),
+            );
+        }
+    }
+}
+
+/// Merges two sets, inserting the smaller into the larger.
+fn union(a: KeySet, b: KeySet) -> KeySet {
+    let (mut big, small) = if a.len() >= b.len() { (a, b) } else { (b, a) };
+    big.extend(small);
+    big
 }
 
 /// What to do with end points outside the addressable map.
@@ -179,7 +246,7 @@ impl ScanUpdate {
 
 fn sorted_codes(set: &KeySet) -> Vec<u64> {
     let mut codes: Vec<u64> = set.iter().map(|c| c.0).collect();
-    codes.par_sort_unstable();
+    crate::morton::sort_codes(&mut codes);
     codes
 }
 
@@ -286,71 +353,20 @@ impl OccupancyTree {
     }
 
     fn cast_scan(&self, points: &[Point3], origin: Point3, opts: &ScanOptions) -> ScanUpdate {
-        let keys = self.key_space();
-        let max_range = opts.max_range.unwrap_or(-1.0);
-        let chunk = (points.len() / (4 * rayon::current_num_threads()).max(1)).clamp(256, 16384);
+        let threads = rayon::current_num_threads();
+        let chunk = points.len().div_ceil(2 * threads).max(512);
         let (mut free, occupied) = points
             .par_chunks(chunk)
-            .map(|chunk| {
-                let mut free = KeySet::default();
-                let mut occupied = KeySet::default();
-                let mut recent = vec![u64::MAX; RECENT_SLOTS];
+            .fold(Casting::new, |mut acc, chunk| {
                 for &p in chunk {
-                    let dist = (p - origin).norm();
-                    let within = max_range < 0.0 || dist <= max_range;
-                    let end = if within {
-                        p
-                    } else {
-                        point_along(origin, (p - origin).normalized(), max_range)
-                    };
-                    match opts.bbx {
-                        None => {
-                            if let Ok(ray) = RayKeys::new(keys, origin, end) {
-                                ray.for_each_code(|c| {
-                                    // skip the set for keys a recent ray already gave
-                                    let slot = &mut recent[recent_slot(c)];
-                                    if *slot != c {
-                                        *slot = c;
-                                        free.insert(MortonCode(c));
-                                    }
-                                });
-                            }
-                            if within {
-                                if let Ok(k) = keys.key(p) {
-                                    occupied.insert(MortonCode::encode(k));
-                                }
-                            }
-                        }
-                        Some(bbx) => {
-                            if within && bbx.contains_point(p) {
-                                if let Ok(k) = keys.key(p) {
-                                    occupied.insert(MortonCode::encode(k));
-                                }
-                            }
-                            if let Ok(ray) = RayKeys::new(keys, origin, end) {
-                                free.extend(
-                                    ray.take_while(|&k| bbx.contains_key(k))
-                                        .map(MortonCode::encode),
-                                );
-                            }
-                        }
-                    }
+                    acc.cast(self.key_space(), p, origin, opts);
                 }
-                (free, occupied)
+                acc
             })
+            .map(|c| (c.free, c.occupied))
             .reduce(
                 || (KeySet::default(), KeySet::default()),
-                |(mut f1, mut o1), (mut f2, mut o2)| {
-                    if f1.len() < f2.len() {
-                        std::mem::swap(&mut f1, &mut f2);
-                    }
-                    f1.extend(f2);
-                    if o1.len() < o2.len() {
-                        std::mem::swap(&mut o1, &mut o2);
-                    }
-                    o1.extend(o2);
-                    (f1, o1)
-                },
+                |(f1, o1), (f2, o2)| (union(f1, f2), union(o1, o2)),
             );
         free.retain(|k| !occupied.contains(k));
         ScanUpdate { free, occupied }

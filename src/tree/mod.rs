@@ -635,13 +635,30 @@ impl Batch<'_> {
             self.apply_leaf(n, codes[0], created);
             return;
         }
+        // where each child's codes start: codes are sorted and share the
+        // prefix above this node, so the child index is monotone in them
         let shift = 3 * (15 - u32::from(depth));
-        let child_of = |c: u64| ((c >> shift) & 7) as u8;
-        let a = &mut *self.arena;
-        let mut needed = 0u8;
-        for &c in codes {
-            needed |= 1 << child_of(c);
+        let child_of = |c: u64| ((c >> shift) & 7) as usize;
+        let mut bounds = [codes.len(); 9];
+        if codes.len() <= 16 {
+            for (i, &c) in codes.iter().enumerate().rev() {
+                bounds[child_of(c)] = i;
+            }
+            for pos in (0..8).rev() {
+                bounds[pos] = bounds[pos].min(bounds[pos + 1]);
+            }
+        } else {
+            for (pos, b) in bounds.iter_mut().enumerate().take(8) {
+                *b = codes.partition_point(|&c| child_of(c) < pos);
+            }
         }
+        let mut needed = 0u8;
+        for pos in 0..8 {
+            if bounds[pos] < bounds[pos + 1] {
+                needed |= 1 << pos;
+            }
+        }
+        let a = &mut *self.arena;
         let mask = a.mask(n);
         let mut new_children = 0u8;
         if mask == 0 && !created {
@@ -660,21 +677,13 @@ impl Batch<'_> {
             }
         }
         let (first, mask) = (a.first_child(n), a.mask(n));
-        let mut start = 0;
-        while start < codes.len() {
-            let pos = child_of(codes[start]);
-            let mut end = start + 1;
-            while end < codes.len() && child_of(codes[end]) == pos {
-                end += 1;
+        for pos in 0..8 {
+            if needed & (1 << pos) == 0 {
+                continue;
             }
             let child = first + (mask & ((1u8 << pos) - 1)).count_ones();
-            self.apply(
-                child,
-                depth + 1,
-                &codes[start..end],
-                new_children & (1 << pos) != 0,
-            );
-            start = end;
+            let range = &codes[bounds[pos]..bounds[pos + 1]];
+            self.apply(child, depth + 1, range, new_children & (1 << pos) != 0);
         }
         if !self.lazy {
             if prune_node(self.arena, n).is_some() {
