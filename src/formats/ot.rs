@@ -9,7 +9,8 @@ use super::header::{
     read_first_line, read_header, write_header, CountingReader, FirstLine, OT_FIRST_LINE,
 };
 use super::TreeFileError;
-use crate::tree::{NodeArena, OccupancyTree};
+use crate::sensor::SensorModel;
+use crate::tree::{OccupancyTree, PreorderBuilder};
 use std::io::{self, BufRead, Write};
 
 /// The tree kinds an `.ot` file may hold, by their header id.
@@ -94,51 +95,44 @@ pub fn read(r: impl BufRead) -> Result<AnyTree, TreeFileError> {
     let header = read_header(&mut r)?;
     let kind = TreeKind::from_id(&header.id)
         .ok_or_else(|| TreeFileError::UnknownTreeType(header.id.clone()))?;
-    let mut tree = OccupancyTree::new(header.resolution)
-        .map_err(|_| TreeFileError::BadResolution(header.resolution))?;
     match kind {
         TreeKind::OcTree | TreeKind::OcTreeStamped => {}
         _ => return Err(TreeFileError::UnsupportedTreeType(header.id)),
     }
-    if header.size > 0 {
-        tree.set_arena(Some(read_nodes(&mut r)?));
-    }
+    let tree = if header.size > 0 {
+        read_nodes(&mut r, header.resolution)?
+    } else {
+        OccupancyTree::new(header.resolution)
+            .map_err(|_| TreeFileError::BadResolution(header.resolution))?
+    };
     Ok(match kind {
         TreeKind::OcTreeStamped => AnyTree::Stamped(tree),
         _ => AnyTree::Occupancy(tree),
     })
 }
 
-/// Reads the pre-order node stream into an arena laid out depth first.
-fn read_nodes<R: BufRead>(r: &mut CountingReader<R>) -> Result<NodeArena, TreeFileError> {
+/// Reads the pre-order node stream (value, child byte) into a tree.
+fn read_nodes<R: BufRead>(
+    r: &mut CountingReader<R>,
+    resolution: f64,
+) -> Result<OccupancyTree, TreeFileError> {
+    let mut b = PreorderBuilder::new();
     let mut buf = [0u8; 5];
-    r.read_exact(&mut buf, "the root node")?;
-    let mut arena = NodeArena::with_root(f32::from_le_bytes([buf[0], buf[1], buf[2], buf[3]]));
-    // (node id, depth) still to read, the next one on top
-    let mut stack: Vec<(u32, u8)> = Vec::with_capacity(128);
-    push_children(&mut arena, &mut stack, 0, 0, buf[4]);
-    while let Some((id, depth)) = stack.pop() {
+    let mut index = 0;
+    while !b.is_complete() {
         let offset = r.offset;
         r.read_exact(&mut buf, "a node")?;
-        arena.set_value(id, f32::from_le_bytes([buf[0], buf[1], buf[2], buf[3]]));
-        if buf[4] != 0 {
-            if depth >= 16 {
-                return Err(TreeFileError::TooDeep { offset });
-            }
-            push_children(&mut arena, &mut stack, id, depth, buf[4]);
-        }
+        let value = f32::from_le_bytes([buf[0], buf[1], buf[2], buf[3]]);
+        b.push(value, buf[4], index)
+            .map_err(|_| TreeFileError::TooDeep { offset })?;
+        index += 1;
     }
-    Ok(arena)
-}
-
-fn push_children(arena: &mut NodeArena, stack: &mut Vec<(u32, u8)>, id: u32, depth: u8, mask: u8) {
-    if mask == 0 {
-        return;
-    }
-    let first = arena.add_children(id, mask, 0.0);
-    for i in (0..mask.count_ones()).rev() {
-        stack.push((first + i, depth + 1));
-    }
+    b.finish(resolution, SensorModel::default())
+        .map_err(|_| TreeFileError::BadResolution(resolution))?
+        .ok_or(TreeFileError::Truncated {
+            offset: r.offset,
+            what: "the node stream",
+        })
 }
 
 /// Writes `tree` as OctoMap's `OcTree::write` does.

@@ -300,6 +300,13 @@ impl NodeArena {
         out
     }
 
+    /// Releases spare capacity (after building).
+    pub fn shrink_to_fit(&mut self) {
+        self.values.shrink_to_fit();
+        self.masks.shrink_to_fit();
+        self.first_child.shrink_to_fit();
+    }
+
     pub fn usage(&self) -> ArenaUsage {
         let free_list_bytes: usize = self
             .free

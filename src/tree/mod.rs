@@ -464,6 +464,11 @@ impl OccupancyTree {
         Ok(self.search(self.keys.key(p)?, depth))
     }
 
+    /// A cursor on the root, `None` for an empty tree.
+    pub fn root(&self) -> Option<NodeRef<'_>> {
+        self.arena.as_ref().map(|arena| NodeRef { arena, id: ROOT })
+    }
+
     /// The value of the root (OctoMap keeps it as the max of everything).
     pub fn root_value(&self) -> Option<f32> {
         self.arena.as_ref().map(|a| a.value(ROOT))
@@ -718,6 +723,139 @@ impl Batch<'_> {
                 }
             }
         }
+    }
+}
+
+/// A read-only cursor on a node, for structural walks (writers of other
+/// formats, comparisons). Valid while the tree is borrowed.
+#[derive(Clone, Copy)]
+pub struct NodeRef<'a> {
+    arena: &'a NodeArena,
+    id: NodeId,
+}
+
+impl<'a> NodeRef<'a> {
+    /// The log-odds value.
+    #[inline]
+    pub fn value(&self) -> f32 {
+        self.arena.value(self.id)
+    }
+
+    /// Bit `i` set when child `i` exists.
+    #[inline]
+    pub fn child_mask(&self) -> u8 {
+        self.arena.mask(self.id)
+    }
+
+    #[inline]
+    pub fn has_children(&self) -> bool {
+        self.arena.has_children(self.id)
+    }
+
+    #[inline]
+    pub fn child(&self, pos: usize) -> Option<NodeRef<'a>> {
+        self.arena.child(self.id, pos).map(|id| NodeRef {
+            arena: self.arena,
+            id,
+        })
+    }
+
+    /// Existing children with their index, in child order.
+    pub fn children(&self) -> impl Iterator<Item = (usize, NodeRef<'a>)> + 'a {
+        let arena = self.arena;
+        arena
+            .children(self.id)
+            .map(move |(i, id)| (i, NodeRef { arena, id }))
+    }
+}
+
+/// Builds a tree from nodes given in depth-first pre-order (children
+/// 0..7), each as its value and child mask: how `.ot`-like streams and the
+/// mapped format are turned back into a tree. The arena comes out in
+/// depth-first order with no free slots.
+pub struct PreorderBuilder {
+    arena: Option<NodeArena>,
+    /// Nodes announced by a parent's mask and not given yet, next on top.
+    pending: Vec<(NodeId, u8)>,
+}
+
+/// A node below depth 16 was announced.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("node {index} in pre-order lies below depth 16")]
+pub struct TooDeep {
+    pub index: u64,
+}
+
+impl PreorderBuilder {
+    pub fn new() -> Self {
+        PreorderBuilder {
+            arena: None,
+            pending: Vec::with_capacity(128),
+        }
+    }
+
+    /// True once the root and every announced node have been given.
+    pub fn is_complete(&self) -> bool {
+        self.arena.is_some() && self.pending.is_empty()
+    }
+
+    /// Depth of the next node to give (0 for the root); `None` when complete.
+    pub fn next_depth(&self) -> Option<u8> {
+        match &self.arena {
+            None => Some(0),
+            Some(_) => self.pending.last().map(|&(_, d)| d),
+        }
+    }
+
+    /// Gives the next node. `index` only labels errors.
+    pub fn push(&mut self, value: f32, mask: u8, index: u64) -> Result<(), TooDeep> {
+        let (id, depth) = match self.arena.as_mut() {
+            None => {
+                self.arena = Some(NodeArena::with_root(value));
+                (ROOT, 0)
+            }
+            Some(a) => {
+                let Some((id, depth)) = self.pending.pop() else {
+                    return Err(TooDeep { index });
+                };
+                a.set_value(id, value);
+                (id, depth)
+            }
+        };
+        if mask != 0 {
+            if depth >= TREE_DEPTH {
+                return Err(TooDeep { index });
+            }
+            let a = self.arena.as_mut().expect("root exists");
+            let first = a.add_children(id, mask, 0.0);
+            for i in (0..mask.count_ones()).rev() {
+                self.pending.push((first + i, depth + 1));
+            }
+        }
+        Ok(())
+    }
+
+    /// The finished tree; `None` when nodes are still missing.
+    pub fn finish(
+        self,
+        resolution: f64,
+        sensor: SensorModel,
+    ) -> Result<Option<OccupancyTree>, TreeError> {
+        let mut tree = OccupancyTree::with_sensor(resolution, sensor)?;
+        if !self.pending.is_empty() {
+            return Ok(None);
+        }
+        if let Some(mut a) = self.arena {
+            a.shrink_to_fit();
+            tree.set_arena(Some(a));
+        }
+        Ok(Some(tree))
+    }
+}
+
+impl Default for PreorderBuilder {
+    fn default() -> Self {
+        Self::new()
     }
 }
 
