@@ -24,11 +24,7 @@ fn main() {
     println!("cargo::rustc-check-cfg=cfg(octomap_available)");
     println!("cargo::rerun-if-changed=build.rs");
     println!("cargo::rerun-if-changed={SHIM}");
-    for var in [
-        "OCTOLINEAR_ORACLE_DISABLE",
-        "PKG_CONFIG_PATH",
-        "OCTOMAP_DIR",
-    ] {
+    for var in ["OCTOLINEAR_ORACLE_DISABLE", "PKG_CONFIG_PATH", "OCTOMAP_DIR"] {
         println!("cargo::rerun-if-env-changed={var}");
     }
 
@@ -37,24 +33,16 @@ fn main() {
         return;
     }
     let Some(found) = probe_pkg_config().or_else(probe_paths) else {
-        unavailable(
-            "liboctomap not found (no pkg-config `octomap`, no octomap/octomap.h + liboctomap.so)",
-        );
+        unavailable("liboctomap not found (no pkg-config `octomap`, no octomap/octomap.h + liboctomap.so)");
         return;
     };
     match build_shim(&found) {
         Ok(()) => {
             println!("cargo::rustc-cfg=octomap_available");
-            println!(
-                "cargo::rustc-env=OCTOLINEAR_ORACLE_OCTOMAP_VERSION={}",
-                found.version
-            );
+            println!("cargo::rustc-env=OCTOLINEAR_ORACLE_OCTOMAP_VERSION={}", found.version);
             println!("cargo::rustc-env=OCTOLINEAR_ORACLE_PROBE={}", found.how);
         }
-        Err(e) => unavailable(&format!(
-            "OctoMap found via {} but the shim did not build/link: {e}",
-            found.how
-        )),
+        Err(e) => unavailable(&format!("OctoMap found via {} but the shim did not build/link: {e}", found.how)),
     }
 }
 
@@ -68,39 +56,23 @@ fn unavailable(why: &str) {
 fn probe_pkg_config() -> Option<Found> {
     let run = |args: &[&str]| -> Option<String> {
         let out = Command::new("pkg-config").args(args).output().ok()?;
-        out.status
-            .success()
-            .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+        out.status.success().then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
     };
     let version = run(&["--modversion", "octomap"])?;
     let cflags = run(&["--cflags", "octomap"])?;
     let libs = run(&["--libs-only-L", "octomap"])?;
-    let mut include_dirs: Vec<PathBuf> = cflags
-        .split_whitespace()
-        .filter_map(|f| f.strip_prefix("-I"))
-        .map(PathBuf::from)
-        .collect();
-    let lib_dirs: Vec<PathBuf> = libs
-        .split_whitespace()
-        .filter_map(|f| f.strip_prefix("-L"))
-        .map(PathBuf::from)
-        .collect();
+    let mut include_dirs: Vec<PathBuf> =
+        cflags.split_whitespace().filter_map(|f| f.strip_prefix("-I")).map(PathBuf::from).collect();
+    let lib_dirs: Vec<PathBuf> =
+        libs.split_whitespace().filter_map(|f| f.strip_prefix("-L")).map(PathBuf::from).collect();
     if include_dirs.is_empty() {
         include_dirs.push(PathBuf::from("/usr/include"));
     }
     // pkg-config may list an include dir that does not hold the headers; insist on them.
-    if !include_dirs
-        .iter()
-        .any(|d| d.join("octomap/octomap.h").is_file())
-    {
+    if !include_dirs.iter().any(|d| d.join("octomap/octomap.h").is_file()) {
         return None;
     }
-    Some(Found {
-        include_dirs,
-        lib_dirs,
-        version,
-        how: "pkg-config",
-    })
+    Some(Found { include_dirs, lib_dirs, version, how: "pkg-config" })
 }
 
 fn probe_paths() -> Option<Found> {
@@ -114,10 +86,7 @@ fn probe_paths() -> Option<Found> {
         if !inc.join("octomap/octomap.h").is_file() {
             continue;
         }
-        let multiarch = format!(
-            "lib/{}-linux-gnu",
-            env::var("CARGO_CFG_TARGET_ARCH").unwrap_or_default()
-        );
+        let multiarch = format!("lib/{}-linux-gnu", env::var("CARGO_CFG_TARGET_ARCH").unwrap_or_default());
         for sub in [multiarch.as_str(), "lib64", "lib"] {
             let lib = prefix.join(sub);
             if lib.join("liboctomap.so").exists() && lib.join("liboctomath.so").exists() {
@@ -136,20 +105,11 @@ fn probe_paths() -> Option<Found> {
 fn build_shim(found: &Found) -> Result<(), String> {
     let out_dir = PathBuf::from(env::var("OUT_DIR").map_err(|e| e.to_string())?);
     let mut build = cc::Build::new();
-    build
-        .cpp(true)
-        .file(SHIM)
-        .std("c++14")
-        .opt_level(2)
-        .debug(false)
-        .warnings(true)
-        .cargo_metadata(false);
+    build.cpp(true).file(SHIM).std("c++14").opt_level(2).debug(false).warnings(true).cargo_metadata(false);
     for dir in &found.include_dirs {
         build.include(dir);
     }
-    build
-        .try_compile("octolinear_oracle_shim")
-        .map_err(|e| e.to_string())?;
+    build.try_compile("octolinear_oracle_shim").map_err(|e| e.to_string())?;
 
     // Final check: link a tiny C++ program against the shim and the libraries,
     // so a broken installation degrades to "unavailable" instead of a link error.
@@ -163,22 +123,14 @@ fn build_shim(found: &Found) -> Result<(), String> {
     )
     .map_err(|e| e.to_string())?;
     let mut cmd = compiler.to_command();
-    cmd.arg(&test_src)
-        .arg("-o")
-        .arg(out_dir.join("olo_link_check"))
-        .arg(out_dir.join("liboctolinear_oracle_shim.a"));
+    cmd.arg(&test_src).arg("-o").arg(out_dir.join("olo_link_check")).arg(out_dir.join("liboctolinear_oracle_shim.a"));
     for dir in &found.lib_dirs {
         cmd.arg(format!("-L{}", dir.display()));
     }
     cmd.args(["-loctomap", "-loctomath"]);
-    let out = cmd
-        .output()
-        .map_err(|e| format!("running the C++ compiler: {e}"))?;
+    let out = cmd.output().map_err(|e| format!("running the C++ compiler: {e}"))?;
     if !out.status.success() {
-        return Err(format!(
-            "link check failed: {}",
-            String::from_utf8_lossy(&out.stderr).trim()
-        ));
+        return Err(format!("link check failed: {}", String::from_utf8_lossy(&out.stderr).trim()));
     }
 
     // Link order: the static shim first, then OctoMap, then the C++ runtime.

@@ -34,11 +34,7 @@ impl Point3 {
 
     /// `Vector3::cross`, float arithmetic.
     pub fn cross(self, o: Self) -> Self {
-        Self::new(
-            self.y * o.z - self.z * o.y,
-            self.z * o.x - self.x * o.z,
-            self.x * o.y - self.y * o.x,
-        )
+        Self::new(self.y * o.z - self.z * o.y, self.z * o.x - self.x * o.z, self.x * o.y - self.y * o.x)
     }
 
     /// `Vector3::dot`: summed in float, returned widened to double.
@@ -250,12 +246,7 @@ impl Quaternion {
         let y = (max0(1.0 - m00 + m11 - m22).sqrt() / 2.0) as f32;
         let z = (max0(1.0 - m00 - m11 + m22).sqrt() / 2.0) as f32;
         let signed = |v: f32, d: f64| if d >= 0.0 { v.abs() } else { -v.abs() };
-        Self::new(
-            u,
-            signed(x, m21 - m12),
-            signed(y, m02 - m20),
-            signed(z, m10 - m01),
-        )
+        Self::new(u, signed(x, m21 - m12), signed(y, m02 - m20), signed(z, m10 - m01))
     }
 
     /// `Quaternion(const Vector3&)`: the vector's float components as roll, pitch, yaw.
@@ -267,12 +258,7 @@ impl Quaternion {
     pub fn from_axis_angle(axis: Point3, angle: f64) -> Self {
         let sa = (angle / 2.0).sin();
         let ca = (angle / 2.0).cos();
-        Self::new(
-            ca as f32,
-            (axis.x as f64 * sa) as f32,
-            (axis.y as f64 * sa) as f32,
-            (axis.z as f64 * sa) as f32,
-        )
+        Self::new(ca as f32, (axis.x as f64 * sa) as f32, (axis.y as f64 * sa) as f32, (axis.z as f64 * sa) as f32)
     }
 
     /// `Quaternion::norm`: float squares summed in double, sqrt rounded to float.
@@ -330,11 +316,7 @@ impl Quaternion {
         let (ux, uy, uz) = (u * xs, u * ys, u * zs);
         let (xx, xy, xz) = (x * xs, x * ys, x * zs);
         let (yy, yz, zz) = (y * ys, y * zs, z * zs);
-        [
-            [1.0 - (yy + zz), xy - uz, xz + uy],
-            [xy + uz, 1.0 - (xx + zz), yz - ux],
-            [xz - uy, yz + ux, 1.0 - (xx + yy)],
-        ]
+        [[1.0 - (yy + zz), xy - uz, xz + uy], [xy + uz, 1.0 - (xx + zz), yz - ux], [xz - uy, yz + ux, 1.0 - (xx + yy)]]
     }
 
     /// `Quaternion::toRotMatrix`, row major.
@@ -387,24 +369,15 @@ pub struct Pose6D {
 }
 
 impl Pose6D {
-    pub const IDENTITY: Self = Self {
-        translation: Point3::new(0.0, 0.0, 0.0),
-        rotation: Quaternion::IDENTITY,
-    };
+    pub const IDENTITY: Self = Self { translation: Point3::new(0.0, 0.0, 0.0), rotation: Quaternion::IDENTITY };
 
     pub const fn new(translation: Point3, rotation: Quaternion) -> Self {
-        Self {
-            translation,
-            rotation,
-        }
+        Self { translation, rotation }
     }
 
     /// `Pose6D(float x, y, z, double roll, pitch, yaw)`.
     pub fn from_euler(x: f32, y: f32, z: f32, roll: f64, pitch: f64, yaw: f64) -> Self {
-        Self::new(
-            Point3::new(x, y, z),
-            Quaternion::from_euler(roll, pitch, yaw),
-        )
+        Self::new(Point3::new(x, y, z), Quaternion::from_euler(roll, pitch, yaw))
     }
 
     pub fn trans(&self) -> Point3 {
@@ -487,9 +460,7 @@ impl PointCloud {
     }
 
     pub fn with_capacity(n: usize) -> Self {
-        Self {
-            points: Vec::with_capacity(n),
-        }
+        Self { points: Vec::with_capacity(n) }
     }
 
     pub fn len(&self) -> usize {
@@ -569,12 +540,7 @@ impl PointCloud {
     /// `Pointcloud::crop`: keeps points with `lower <= p <= upper` (inclusive; NaN dropped).
     pub fn crop(&mut self, lower: Point3, upper: Point3) {
         self.points.retain(|p| {
-            p.x >= lower.x
-                && p.y >= lower.y
-                && p.z >= lower.z
-                && p.x <= upper.x
-                && p.y <= upper.y
-                && p.z <= upper.z
+            p.x >= lower.x && p.y >= lower.y && p.z >= lower.z && p.x <= upper.x && p.y <= upper.y && p.z <= upper.z
         });
     }
 
@@ -582,8 +548,7 @@ impl PointCloud {
     /// origin. `sqrt` of a float argument picks C++'s float overload, so the
     /// distance is a float sqrt widened (checked against liboctomap).
     pub fn min_dist(&mut self, thres: f64) {
-        self.points
-            .retain(|p| (p.x * p.x + p.y * p.y + p.z * p.z).sqrt() as f64 > thres);
+        self.points.retain(|p| (p.x * p.x + p.y * p.y + p.z * p.z).sqrt() as f64 > thres);
     }
 }
 
@@ -595,9 +560,7 @@ impl From<Vec<Point3>> for PointCloud {
 
 impl FromIterator<Point3> for PointCloud {
     fn from_iter<I: IntoIterator<Item = Point3>>(iter: I) -> Self {
-        Self {
-            points: iter.into_iter().collect(),
-        }
+        Self { points: iter.into_iter().collect() }
     }
 }
 

@@ -30,9 +30,7 @@ impl Key {
     #[inline(always)]
     pub fn child_index(self, depth: u8) -> usize {
         let bit = 15 - depth as u32;
-        (((self.0[0] >> bit) & 1)
-            | (((self.0[1] >> bit) & 1) << 1)
-            | (((self.0[2] >> bit) & 1) << 2)) as usize
+        (((self.0[0] >> bit) & 1) | (((self.0[1] >> bit) & 1) << 1) | (((self.0[2] >> bit) & 1) << 2)) as usize
     }
 
     /// The key OctoMap's iterators give the child `pos` of a node with key
@@ -75,7 +73,7 @@ pub enum KeyError {
 #[inline(always)]
 fn floor_to_int(x: f64) -> i32 {
     let f = x.floor();
-    if f >= -2147483648.0 && f < 2147483648.0 {
+    if (-2147483648.0..2147483648.0).contains(&f) {
         f as i32
     } else {
         i32::MIN
@@ -98,11 +96,7 @@ impl KeySpace {
         for (depth, size) in node_sizes.iter_mut().enumerate() {
             *size = resolution * f64::from(1u32 << (16 - depth));
         }
-        KeySpace {
-            resolution,
-            resolution_factor: 1.0 / resolution,
-            node_sizes,
-        }
+        KeySpace { resolution, resolution_factor: 1.0 / resolution, node_sizes }
     }
 
     pub fn resolution(&self) -> f64 {
@@ -134,25 +128,19 @@ impl KeySpace {
             return (keyval as u32).wrapping_add(KEY_CENTER) as u16;
         }
         let shifted = ((keyval >> diff) as u32).wrapping_shl(diff);
-        shifted
-            .wrapping_add(1 << (diff - 1))
-            .wrapping_add(KEY_CENTER) as u16
+        shifted.wrapping_add(1 << (diff - 1)).wrapping_add(KEY_CENTER) as u16
     }
 
     /// `coordToKeyChecked(double)`: the key, or why there is none.
     #[inline(always)]
     pub fn coord_to_key(&self, coord: f64) -> Result<u16, KeyError> {
-        let scaled =
-            i64::from(floor_to_int(self.resolution_factor * coord)) + i64::from(KEY_CENTER);
+        let scaled = i64::from(floor_to_int(self.resolution_factor * coord)) + i64::from(KEY_CENTER);
         if (0..2 * i64::from(KEY_CENTER)).contains(&scaled) {
             Ok(scaled as u16)
         } else if !coord.is_finite() {
             Err(KeyError::NotFinite { value: coord })
         } else {
-            Err(KeyError::OutOfRange {
-                value: coord,
-                half_extent: self.node_sizes[0] / 2.0,
-            })
+            Err(KeyError::OutOfRange { value: coord, half_extent: self.node_sizes[0] / 2.0 })
         }
     }
 
@@ -205,8 +193,7 @@ impl KeySpace {
             TREE_DEPTH => self.key_to_coord(key),
             _ => {
                 let cells = f64::from(1u32 << (TREE_DEPTH - depth));
-                (((f64::from(key) - f64::from(KEY_CENTER)) / cells).floor() + 0.5)
-                    * self.node_size(depth)
+                (((f64::from(key) - f64::from(KEY_CENTER)) / cells).floor() + 0.5) * self.node_size(depth)
             }
         }
     }
@@ -239,9 +226,7 @@ pub fn adjust_to_depth(key: u16, depth: u8) -> u16 {
         return key;
     }
     let rel = u32::from(key).wrapping_sub(KEY_CENTER);
-    ((rel >> diff) << diff)
-        .wrapping_add(1 << (diff - 1))
-        .wrapping_add(KEY_CENTER) as u16
+    ((rel >> diff) << diff).wrapping_add(1 << (diff - 1)).wrapping_add(KEY_CENTER) as u16
 }
 
 /// [`adjust_to_depth`] on all three axes.
@@ -275,18 +260,9 @@ mod tests {
     #[test]
     fn checked_keys_reject_non_finite_and_far_points() {
         let ks = KeySpace::new(0.1);
-        assert!(matches!(
-            ks.coord_to_key(f64::NAN),
-            Err(KeyError::NotFinite { .. })
-        ));
-        assert!(matches!(
-            ks.coord_to_key(f64::INFINITY),
-            Err(KeyError::NotFinite { .. })
-        ));
-        assert!(matches!(
-            ks.coord_to_key(3276.8),
-            Err(KeyError::OutOfRange { .. })
-        ));
+        assert!(matches!(ks.coord_to_key(f64::NAN), Err(KeyError::NotFinite { .. })));
+        assert!(matches!(ks.coord_to_key(f64::INFINITY), Err(KeyError::NotFinite { .. })));
+        assert!(matches!(ks.coord_to_key(3276.8), Err(KeyError::OutOfRange { .. })));
         assert_eq!(ks.coord_to_key(-3276.8), Ok(0));
         assert_eq!(ks.coord_to_key(0.0), Ok(32768));
         assert_eq!(ks.coord_to_key(-0.0), Ok(32768));

@@ -34,4 +34,6 @@ pub use morton::MortonCode;
 pub use ray::{CastOptions, CastOutcome, RayKeys};
 pub use scan::{OutOfMap, ScanOptions, ScanReport, UpdateBox};
 pub use sensor::{SensorModel, SensorProbabilities};
-pub use tree::{Bounds, BoundsRule, Found, InnerNodes, KeyBox, OccupancyTree, TreeError};
+pub use tree::{
+    Bounds, BoundsRule, Clock, CountingTree, Found, InnerNodes, KeyBox, NodeKind, OccupancyTree, TreeError,
+};

@@ -61,8 +61,7 @@ impl MortonCode {
     #[inline]
     pub fn encode_table(key: Key) -> Self {
         let spread = |v: u16| -> u64 {
-            u64::from(SPREAD_TABLE[(v & 0xff) as usize])
-                | (u64::from(SPREAD_TABLE[(v >> 8) as usize]) << 24)
+            u64::from(SPREAD_TABLE[(v & 0xff) as usize]) | (u64::from(SPREAD_TABLE[(v >> 8) as usize]) << 24)
         };
         let [x, y, z] = key.0;
         MortonCode(spread(x) | (spread(y) << 1) | (spread(z) << 2))
@@ -84,11 +83,7 @@ impl MortonCode {
     /// Decodes back to a key.
     #[inline]
     pub fn decode(self) -> Key {
-        Key([
-            compact_bits(self.0),
-            compact_bits(self.0 >> 1),
-            compact_bits(self.0 >> 2),
-        ])
+        Key([compact_bits(self.0), compact_bits(self.0 >> 1), compact_bits(self.0 >> 2)])
     }
 
     /// Decodes with BMI2 `pext` where the CPU has it, else falls back.
@@ -206,9 +201,7 @@ mod tests {
         let mut s = 7u64;
         let mut v: Vec<u64> = (0..5000)
             .map(|_| {
-                s = s
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
+                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
                 (s >> 16) & 0xffff_ffff_ffff
             })
             .collect();

@@ -15,11 +15,7 @@ use crate::tree::OccupancyTree;
 #[inline(always)]
 pub(crate) fn point_along(origin: Point3, direction: Point3, range: f64) -> Point3 {
     let r = range as f32;
-    Point3::new(
-        origin.x + direction.x * r,
-        origin.y + direction.y * r,
-        origin.z + direction.z * r,
-    )
+    Point3::new(origin.x + direction.x * r, origin.y + direction.y * r, origin.z + direction.z * r)
 }
 
 /// `std::min` on doubles.
@@ -58,13 +54,7 @@ struct Dda {
 }
 
 impl Dda {
-    fn new(
-        keys: &KeySpace,
-        origin: Point3,
-        key: Key,
-        direction: Point3,
-        round_border: bool,
-    ) -> Self {
+    fn new(keys: &KeySpace, origin: Point3, key: Key, direction: Point3, round_border: bool) -> Self {
         let o = [origin.x, origin.y, origin.z];
         let d = [direction.x, direction.y, direction.z];
         let mut step = [0; 3];
@@ -80,22 +70,13 @@ impl Dda {
             };
             if step[i] != 0 {
                 let offset = f64::from(step[i]) * keys.resolution() * 0.5;
-                let offset = if round_border {
-                    f64::from(offset as f32)
-                } else {
-                    offset
-                };
+                let offset = if round_border { f64::from(offset as f32) } else { offset };
                 let border = keys.key_to_coord(key.0[i]) + offset;
                 t_max[i] = (border - f64::from(o[i])) / f64::from(d[i]);
                 t_delta[i] = keys.resolution() / f64::from(d[i].abs());
             }
         }
-        Dda {
-            key,
-            step,
-            t_max,
-            t_delta,
-        }
+        Dda { key, step, t_max, t_delta }
     }
 
     /// Advances one voxel; returns the axis stepped along.
@@ -126,23 +107,13 @@ impl RayKeys {
         let key_origin = keys.key(origin)?;
         let key_end = keys.key(end)?;
         if key_origin == key_end {
-            return Ok(RayKeys {
-                dda: None,
-                end: key_end,
-                length: 0.0,
-                pending_origin: false,
-            });
+            return Ok(RayKeys { dda: None, end: key_end, length: 0.0, pending_origin: false });
         }
         let d = end - origin;
         let length = d.norm() as f32;
         let direction = Point3::new(d.x / length, d.y / length, d.z / length);
         let dda = Dda::new(keys, origin, key_origin, direction, true);
-        Ok(RayKeys {
-            dda: Some(dda),
-            end: key_end,
-            length,
-            pending_origin: true,
-        })
+        Ok(RayKeys { dda: Some(dda), end: key_end, length, pending_origin: true })
     }
 }
 
@@ -268,26 +239,13 @@ impl OccupancyTree {
     }
 
     /// Follows a ray until it meets an occupied voxel, as OctoMap's `castRay`.
-    pub fn cast_ray(
-        &self,
-        origin: Point3,
-        direction: Point3,
-        opts: CastOptions,
-    ) -> Result<CastOutcome, CastError> {
+    pub fn cast_ray(&self, origin: Point3, direction: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
         let keys = self.key_space();
         let start = keys.key(origin)?;
         match self.search(start, 0) {
-            Some(n) if self.is_occupied(n.value) => {
-                return Ok(CastOutcome::Occupied {
-                    end: keys.key_to_point(start),
-                })
-            }
+            Some(n) if self.is_occupied(n.value) => return Ok(CastOutcome::Occupied { end: keys.key_to_point(start) }),
             Some(_) => {}
-            None if !opts.ignore_unknown => {
-                return Ok(CastOutcome::Unknown {
-                    end: keys.key_to_point(start),
-                })
-            }
+            None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end: keys.key_to_point(start) }),
             None => {}
         }
         let direction = direction.normalized();
@@ -302,12 +260,8 @@ impl OccupancyTree {
         loop {
             let dim = min_axis(&dda.t_max);
             let k = dda.key.0[dim];
-            if (dda.step[dim] < 0 && k == 0)
-                || (dda.step[dim] > 0 && u32::from(k) == 2 * KEY_CENTER - 1)
-            {
-                return Ok(CastOutcome::LeftMap {
-                    end: keys.key_to_point(dda.key),
-                });
+            if (dda.step[dim] < 0 && k == 0) || (dda.step[dim] > 0 && u32::from(k) == 2 * KEY_CENTER - 1) {
+                return Ok(CastOutcome::LeftMap { end: keys.key_to_point(dda.key) });
             }
             dda.advance();
             let end = keys.key_to_point(dda.key);
@@ -333,13 +287,7 @@ impl OccupancyTree {
 
     /// Where a ray from `origin` along `direction` enters the voxel centred
     /// at `center` (OctoMap's `getRayIntersection`), moved `delta` further.
-    pub fn ray_intersection(
-        &self,
-        origin: Point3,
-        direction: Point3,
-        center: Point3,
-        delta: f64,
-    ) -> Option<Point3> {
+    pub fn ray_intersection(&self, origin: Point3, direction: Point3, center: Point3, delta: f64) -> Option<Point3> {
         let half = (self.resolution() / 2.0) as f32;
         let c = [center.x, center.y, center.z];
         let o = [origin.x, origin.y, origin.z];
@@ -359,8 +307,7 @@ impl OccupancyTree {
                 let mut plane = c;
                 plane[axis] = c[axis] + sign * half;
                 let diff = [plane[0] - o[0], plane[1] - o[1], plane[2] - o[2]];
-                let dist =
-                    f64::from(diff[0] * n[0] + diff[1] * n[1] + diff[2] * n[2]) / line_dot_normal;
+                let dist = f64::from(diff[0] * n[0] + diff[1] * n[1] + diff[2] * n[2]) / line_dot_normal;
                 let fd = dist as f32;
                 let hit = [d[0] * fd + o[0], d[1] * fd + o[1], d[2] * fd + o[2]];
                 let inside = (0..3).filter(|&j| j != axis).all(|j| {

@@ -65,11 +65,7 @@ struct Casting {
 
 impl Casting {
     fn new() -> Self {
-        Casting {
-            free: KeySet::default(),
-            occupied: KeySet::default(),
-            recent: vec![u64::MAX; RECENT_SLOTS],
-        }
+        Casting { free: KeySet::default(), occupied: KeySet::default(), recent: vec![u64::MAX; RECENT_SLOTS] }
     }
 
     /// `computeUpdate`'s work for one end point.
@@ -77,11 +73,7 @@ impl Casting {
     fn cast(&mut self, keys: &KeySpace, p: Point3, origin: Point3, opts: &ScanOptions) {
         let max_range = opts.max_range.unwrap_or(-1.0);
         let within = max_range < 0.0 || (p - origin).norm() <= max_range;
-        let end = if within {
-            p
-        } else {
-            point_along(origin, (p - origin).normalized(), max_range)
-        };
+        let end = if within { p } else { point_along(origin, (p - origin).normalized(), max_range) };
         let Some(bbx) = opts.bbx else {
             if let Ok(ray) = RayKeys::new(keys, origin, end) {
                 let (free, recent) = (&mut self.free, &mut self.recent);
@@ -107,10 +99,7 @@ impl Casting {
             }
         }
         if let Ok(ray) = RayKeys::new(keys, origin, end) {
-            self.free.extend(
-                ray.take_while(|&k| bbx.contains_key(k))
-                    .map(MortonCode::encode),
-            );
+            self.free.extend(ray.take_while(|&k| bbx.contains_key(k)).map(MortonCode::encode));
         }
     }
 }
@@ -148,12 +137,7 @@ pub struct UpdateBox {
 impl UpdateBox {
     /// Both corners must lie inside the map of `tree`.
     pub fn new(tree: &OccupancyTree, min: Point3, max: Point3) -> Result<Self, KeyError> {
-        Ok(UpdateBox {
-            min,
-            max,
-            min_key: tree.key(min)?,
-            max_key: tree.key(max)?,
-        })
+        Ok(UpdateBox { min, max, min_key: tree.key(min)?, max_key: tree.key(max)? })
     }
 
     #[inline]
@@ -205,20 +189,9 @@ pub struct ScanReport {
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
 pub enum ScanError {
     #[error("sensor origin ({x}, {y}, {z}): {source}")]
-    Origin {
-        x: f32,
-        y: f32,
-        z: f32,
-        source: KeyError,
-    },
+    Origin { x: f32, y: f32, z: f32, source: KeyError },
     #[error("point {index} ({x}, {y}, {z}) lies outside the map: {source}")]
-    PointOutOfMap {
-        index: usize,
-        x: f32,
-        y: f32,
-        z: f32,
-        source: KeyError,
-    },
+    PointOutOfMap { index: usize, x: f32, y: f32, z: f32, source: KeyError },
     #[error("thread pool: {0}")]
     ThreadPool(&'static str),
 }
@@ -264,11 +237,7 @@ impl OccupancyTree {
         let sensor = *self.sensor();
         self.update_batch(&free, sensor.miss, opts.inner);
         self.update_batch(&occupied, sensor.hit, opts.inner);
-        Ok(ScanReport {
-            free_updates: free.len(),
-            occupied_updates: occupied.len(),
-            ..report
-        })
+        Ok(ScanReport { free_updates: free.len(), occupied_updates: occupied.len(), ..report })
     }
 
     /// Applies a scan's key sets key by key: misses, then hits, each key
@@ -292,21 +261,13 @@ impl OccupancyTree {
         opts: &ScanOptions,
     ) -> Result<(ScanUpdate, ScanReport), ScanError> {
         let keys = self.key_space();
-        let mut report = ScanReport {
-            points: points.len(),
-            ..Default::default()
-        };
+        let mut report = ScanReport { points: points.len(), ..Default::default() };
         let origin_key = keys.key(origin);
         if let Err(source) = origin_key {
             // OctoMap casts no ray then, but still marks in-map end points
             // occupied; only a non-finite origin is refused outright.
             if !origin.is_finite() {
-                return Err(ScanError::Origin {
-                    x: origin.x,
-                    y: origin.y,
-                    z: origin.z,
-                    source,
-                });
+                return Err(ScanError::Origin { x: origin.x, y: origin.y, z: origin.z, source });
             }
         }
         let mut cleaned: Vec<Point3> = Vec::with_capacity(points.len());
@@ -318,13 +279,7 @@ impl OccupancyTree {
             match (opts.out_of_map, keys.key(p)) {
                 (OutOfMap::Skip, Err(_)) => report.out_of_map += 1,
                 (OutOfMap::Error, Err(source)) => {
-                    return Err(ScanError::PointOutOfMap {
-                        index,
-                        x: p.x,
-                        y: p.y,
-                        z: p.z,
-                        source,
-                    })
+                    return Err(ScanError::PointOutOfMap { index, x: p.x, y: p.y, z: p.z, source })
                 }
                 _ => cleaned.push(p),
             }
@@ -332,9 +287,7 @@ impl OccupancyTree {
         let points = if opts.discretize {
             let mut seen = KeySet::default();
             cleaned.retain(|&p| seen.insert(MortonCode::encode(keys.key_unchecked(p))));
-            cleaned
-                .iter_mut()
-                .for_each(|p| *p = keys.key_to_point(keys.key_unchecked(*p)));
+            cleaned.iter_mut().for_each(|p| *p = keys.key_to_point(keys.key_unchecked(*p)));
             cleaned
         } else {
             cleaned
@@ -364,26 +317,15 @@ impl OccupancyTree {
                 acc
             })
             .map(|c| (c.free, c.occupied))
-            .reduce(
-                || (KeySet::default(), KeySet::default()),
-                |(f1, o1), (f2, o2)| (union(f1, f2), union(o1, o2)),
-            );
+            .reduce(|| (KeySet::default(), KeySet::default()), |(f1, o1), (f2, o2)| (union(f1, f2), union(o1, o2)));
         free.retain(|k| !occupied.contains(k));
         ScanUpdate { free, occupied }
     }
 
     /// OctoMap's `insertPointCloudRays` ("simple" mode): ray by ray, each
     /// free voxel and end point updated as it comes, duplicates included.
-    pub fn insert_point_cloud_rays(
-        &mut self,
-        points: &[Point3],
-        origin: Point3,
-        inner: InnerNodes,
-    ) -> ScanReport {
-        let mut report = ScanReport {
-            points: points.len(),
-            ..Default::default()
-        };
+    pub fn insert_point_cloud_rays(&mut self, points: &[Point3], origin: Point3, inner: InnerNodes) -> ScanReport {
+        let mut report = ScanReport { points: points.len(), ..Default::default() };
         for &p in points {
             if !p.is_finite() {
                 report.non_finite += 1;

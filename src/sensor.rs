@@ -36,13 +36,7 @@ pub struct SensorProbabilities {
 impl Default for SensorProbabilities {
     /// OctoMap's defaults.
     fn default() -> Self {
-        SensorProbabilities {
-            hit: 0.7,
-            miss: 0.4,
-            clamping_min: 0.1192,
-            clamping_max: 0.971,
-            occupancy_threshold: 0.5,
-        }
+        SensorProbabilities { hit: 0.7, miss: 0.4, clamping_min: 0.1192, clamping_max: 0.971, occupancy_threshold: 0.5 }
     }
 }
 
@@ -58,8 +52,7 @@ pub struct SensorModel {
 
 impl Default for SensorModel {
     fn default() -> Self {
-        SensorModel::from_probabilities(&SensorProbabilities::default())
-            .expect("OctoMap's defaults are valid")
+        SensorModel::from_probabilities(&SensorProbabilities::default()).expect("OctoMap's defaults are valid")
     }
 }
 
@@ -84,10 +77,7 @@ impl SensorModel {
             return Err(SensorError::MissAboveHalf(p.miss));
         }
         if p.clamping_min >= p.clamping_max {
-            return Err(SensorError::ClampingOrder {
-                min: p.clamping_min,
-                max: p.clamping_max,
-            });
+            return Err(SensorError::ClampingOrder { min: p.clamping_min, max: p.clamping_max });
         }
         Ok(SensorModel {
             hit: logodds(p.hit),
@@ -125,11 +115,7 @@ impl SensorModel {
     /// `setNodeValue`'s clamping: `std::min(std::max(v, min), max)`.
     #[inline]
     pub fn clamp(&self, value: f32) -> f32 {
-        let v = if value < self.clamping_min {
-            self.clamping_min
-        } else {
-            value
-        };
+        let v = if value < self.clamping_min { self.clamping_min } else { value };
         if self.clamping_max < v {
             self.clamping_max
         } else {
@@ -181,21 +167,11 @@ mod tests {
 
     #[test]
     fn rejects_nonsense() {
-        let mut p = SensorProbabilities {
-            hit: f64::NAN,
-            ..Default::default()
-        };
+        let mut p = SensorProbabilities { hit: f64::NAN, ..Default::default() };
         assert!(SensorModel::from_probabilities(&p).is_err());
         p.hit = 0.3;
-        assert_eq!(
-            SensorModel::from_probabilities(&p),
-            Err(SensorError::HitBelowHalf(0.3))
-        );
-        p = SensorProbabilities {
-            clamping_min: 0.9,
-            clamping_max: 0.2,
-            ..Default::default()
-        };
+        assert_eq!(SensorModel::from_probabilities(&p), Err(SensorError::HitBelowHalf(0.3)));
+        p = SensorProbabilities { clamping_min: 0.9, clamping_max: 0.2, ..Default::default() };
         assert!(SensorModel::from_probabilities(&p).is_err());
     }
 }

@@ -52,11 +52,9 @@ fn finalize(mut z: u64) -> u64 {
 
 /// Derives an independent stream seed from a seed and a list of indices.
 fn mix(seed: u64, parts: &[u64]) -> u64 {
-    parts
-        .iter()
-        .fold(finalize(seed ^ 0x6A09_E667_F3BC_C909), |h, &p| {
-            finalize(h ^ finalize(p.wrapping_add(0x9E37_79B9_7F4A_7C15)))
-        })
+    parts.iter().fold(finalize(seed ^ 0x6A09_E667_F3BC_C909), |h, &p| {
+        finalize(h ^ finalize(p.wrapping_add(0x9E37_79B9_7F4A_7C15)))
+    })
 }
 
 /// sin and cos from fixed polynomials, identical on every platform (libm is not).
@@ -187,7 +185,7 @@ impl Prim {
             Shape::Cylinder { c, r, z0, z1 } => {
                 let mut best = None::<f64>;
                 let mut take = |t: f64| {
-                    if t > EPS && t <= tmax && best.map_or(true, |b| t < b) {
+                    if t > EPS && t <= tmax && best.is_none_or(|b| t < b) {
                         best = Some(t);
                     }
                 };
@@ -502,10 +500,7 @@ fn rect_overlap(a0: [f64; 2], a1: [f64; 2], b0: [f64; 2], b1: [f64; 2], gap: f64
 }
 
 fn boxp(min: V3, max: V3, surface: Surface) -> Prim {
-    Prim {
-        shape: Shape::Box { min, max },
-        surface,
-    }
+    Prim { shape: Shape::Box { min, max }, surface }
 }
 
 impl Scene {
@@ -532,9 +527,7 @@ impl Scene {
         let len = xs[rooms];
         let y_out = [half_corridor + depth[0], -(half_corridor + depth[1])];
         let mut prims = Vec::new();
-        let wall = |x0: f64, x1: f64, y0: f64, y1: f64| {
-            boxp([x0, y0, 0.0], [x1, y1, height], Surface::Wall)
-        };
+        let wall = |x0: f64, x1: f64, y0: f64, y1: f64| boxp([x0, y0, 0.0], [x1, y1, height], Surface::Wall);
         // Shell.
         prims.push(wall(-wt, len + wt, y_out[0], y_out[0] + wt));
         prims.push(wall(-wt, len + wt, y_out[1] - wt, y_out[1]));
@@ -545,11 +538,8 @@ impl Scene {
         for (side, &room_depth) in depth.iter().enumerate() {
             let sign = if side == 0 { 1.0 } else { -1.0 };
             // Corridor wall on this side, y in [inner, inner + wt] (mirrored), with doors.
-            let (y0, y1) = if side == 0 {
-                (half_corridor, half_corridor + wt)
-            } else {
-                (-half_corridor - wt, -half_corridor)
-            };
+            let (y0, y1) =
+                if side == 0 { (half_corridor, half_corridor + wt) } else { (-half_corridor - wt, -half_corridor) };
             let mut x = 0.0;
             for &dx in &door_x {
                 prims.push(wall(x, dx - 0.5, y0, y1));
@@ -557,11 +547,7 @@ impl Scene {
             }
             prims.push(wall(x, len, y0, y1));
             // Partitions between rooms.
-            let (py0, py1) = if side == 0 {
-                (half_corridor + wt, y_out[0])
-            } else {
-                (y_out[1], -half_corridor - wt)
-            };
+            let (py0, py1) = if side == 0 { (half_corridor + wt, y_out[0]) } else { (y_out[1], -half_corridor - wt) };
             for &xp in &xs[1..rooms] {
                 prims.push(wall(xp - wt / 2.0, xp + wt / 2.0, py0, py1));
             }
@@ -570,32 +556,16 @@ impl Scene {
             for i in 0..rooms {
                 let (rx0, rx1) = (xs[i] + wt, xs[i + 1] - wt);
                 let (ry0, ry1) = (py0.min(py1) + 0.05, py0.max(py1) - 0.05);
-                let (ky0, ky1) = if side == 0 {
-                    (half_corridor, yc + 0.9)
-                } else {
-                    (yc - 0.9, -half_corridor)
-                };
+                let (ky0, ky1) = if side == 0 { (half_corridor, yc + 0.9) } else { (yc - 0.9, -half_corridor) };
                 let (keep0, keep1) = ([door_x[i] - 0.9, ky0], [door_x[i] + 0.9, ky1]);
                 let wanted = 2 + rng.below(4);
                 let mut placed: Vec<([f64; 2], [f64; 2])> = Vec::new();
                 for _ in 0..wanted {
                     for _try in 0..20 {
                         let (mut sx, mut sy, sz) = match rng.below(3) {
-                            0 => (
-                                rng.range(0.8, 1.6),
-                                rng.range(0.6, 1.0),
-                                rng.range(0.72, 0.78),
-                            ),
-                            1 => (
-                                rng.range(0.4, 0.6),
-                                rng.range(0.8, 2.0),
-                                rng.range(1.2, 2.1),
-                            ),
-                            _ => (
-                                rng.range(0.8, 2.0),
-                                rng.range(0.8, 2.0),
-                                rng.range(0.4, 0.6),
-                            ),
+                            0 => (rng.range(0.8, 1.6), rng.range(0.6, 1.0), rng.range(0.72, 0.78)),
+                            1 => (rng.range(0.4, 0.6), rng.range(0.8, 2.0), rng.range(1.2, 2.1)),
+                            _ => (rng.range(0.8, 2.0), rng.range(0.8, 2.0), rng.range(0.4, 0.6)),
                         };
                         if rng.below(2) == 1 {
                             std::mem::swap(&mut sx, &mut sy);
@@ -607,18 +577,12 @@ impl Scene {
                         let y0 = rng.range(ry0, ry1 - sy);
                         let (a0, a1) = ([x0, y0], [x0 + sx, y0 + sy]);
                         if rect_overlap(a0, a1, keep0, keep1, 0.0)
-                            || placed
-                                .iter()
-                                .any(|&(b0, b1)| rect_overlap(a0, a1, b0, b1, 0.2))
+                            || placed.iter().any(|&(b0, b1)| rect_overlap(a0, a1, b0, b1, 0.2))
                         {
                             continue;
                         }
                         placed.push((a0, a1));
-                        prims.push(boxp(
-                            [x0, y0, 0.0],
-                            [x0 + sx, y0 + sy, sz],
-                            Surface::Furniture,
-                        ));
+                        prims.push(boxp([x0, y0, 0.0], [x0 + sx, y0 + sy, sz], Surface::Furniture));
                         break;
                     }
                 }
@@ -636,29 +600,9 @@ impl Scene {
         let lo = [-wt - margin, y_out[1] - wt - margin];
         let hi = [len + wt + margin, y_out[0] + wt + margin];
         let global = vec![prims.len(), prims.len() + 1];
-        prims.push(boxp(
-            [lo[0], lo[1], -0.2],
-            [hi[0], hi[1], 0.0],
-            Surface::Floor,
-        ));
-        prims.push(boxp(
-            [lo[0], lo[1], height],
-            [hi[0], hi[1], height + 0.2],
-            Surface::Ceiling,
-        ));
-        Self::assemble(
-            SceneKind::Indoor,
-            prims,
-            global,
-            None,
-            Path {
-                points: path,
-                closed: false,
-            },
-            0.25,
-            1.0,
-            1.0,
-        )
+        prims.push(boxp([lo[0], lo[1], -0.2], [hi[0], hi[1], 0.0], Surface::Floor));
+        prims.push(boxp([lo[0], lo[1], height], [hi[0], hi[1], height + 0.2], Surface::Ceiling));
+        Self::assemble(SceneKind::Indoor, prims, global, None, Path { points: path, closed: false }, 0.25, 1.0, 1.0)
     }
 
     fn outdoor(seed: u64) -> Self {
@@ -694,20 +638,11 @@ impl Scene {
         for iy in 0..n {
             for ix in 0..n {
                 let v = |x: usize, y: usize| h[y * (n + 1) + x];
-                cell_max.push(
-                    v(ix, iy)
-                        .max(v(ix + 1, iy))
-                        .max(v(ix, iy + 1))
-                        .max(v(ix + 1, iy + 1)),
-                );
+                cell_max.push(v(ix, iy).max(v(ix + 1, iy)).max(v(ix, iy + 1)).max(v(ix + 1, iy + 1)));
             }
         }
         let terrain = Terrain {
-            grid: Grid2 {
-                origin,
-                cell: spacing,
-                n: [n, n],
-            },
+            grid: Grid2 { origin, cell: spacing, n: [n, n] },
             max_h: h.iter().copied().fold(f64::NEG_INFINITY, f64::max),
             h,
             cell_max,
@@ -722,32 +657,17 @@ impl Scene {
                 let (sx, sy) = (rng.range(8.0, 25.0), rng.range(8.0, 25.0));
                 let (cx, cy) = (rng.range(-110.0, 110.0), rng.range(-110.0, 110.0));
                 let half_diag = (sx * sx + sy * sy).sqrt() / 2.0;
-                let (a0, a1) = (
-                    [cx - sx / 2.0, cy - sy / 2.0],
-                    [cx + sx / 2.0, cy + sy / 2.0],
-                );
+                let (a0, a1) = ([cx - sx / 2.0, cy - sy / 2.0], [cx + sx / 2.0, cy + sy / 2.0]);
                 if road_dist(cx, cy) < half_diag + 6.0
-                    || footprints
-                        .iter()
-                        .any(|&(b0, b1)| rect_overlap(a0, a1, b0, b1, 4.0))
+                    || footprints.iter().any(|&(b0, b1)| rect_overlap(a0, a1, b0, b1, 4.0))
                 {
                     continue;
                 }
-                let corners = [
-                    ground(a0[0], a0[1]),
-                    ground(a1[0], a0[1]),
-                    ground(a0[0], a1[1]),
-                    ground(a1[0], a1[1]),
-                ];
+                let corners = [ground(a0[0], a0[1]), ground(a1[0], a0[1]), ground(a0[0], a1[1]), ground(a1[0], a1[1])];
                 let base = corners.iter().copied().fold(f64::INFINITY, f64::min) - 1.0;
-                let top = corners.iter().copied().fold(f64::NEG_INFINITY, f64::max)
-                    + rng.range(5.0, 20.0);
+                let top = corners.iter().copied().fold(f64::NEG_INFINITY, f64::max) + rng.range(5.0, 20.0);
                 footprints.push((a0, a1));
-                prims.push(boxp(
-                    [a0[0], a0[1], base],
-                    [a1[0], a1[1], top],
-                    Surface::Building,
-                ));
+                prims.push(boxp([a0[0], a0[1], base], [a1[0], a1[1], top], Surface::Building));
                 break;
             }
         }
@@ -755,16 +675,10 @@ impl Scene {
         for _ in 0..60 + rng.below(100) {
             for _try in 0..30 {
                 let (x, y) = (rng.range(-120.0, 120.0), rng.range(-120.0, 120.0));
-                let (tr, th, cr) = (
-                    rng.range(0.15, 0.35),
-                    rng.range(2.0, 4.0),
-                    rng.range(1.2, 3.0),
-                );
+                let (tr, th, cr) = (rng.range(0.15, 0.35), rng.range(2.0, 4.0), rng.range(1.2, 3.0));
                 let (p0, p1) = ([x - cr, y - cr], [x + cr, y + cr]);
                 if road_dist(x, y) < cr + 3.0
-                    || footprints
-                        .iter()
-                        .any(|&(b0, b1)| rect_overlap(p0, p1, b0, b1, 1.0))
+                    || footprints.iter().any(|&(b0, b1)| rect_overlap(p0, p1, b0, b1, 1.0))
                     || trees.iter().any(|&(c, r)| {
                         let (dx, dy) = (c[0] - x, c[1] - y);
                         dx * dx + dy * dy < (r + cr) * (r + cr)
@@ -776,21 +690,10 @@ impl Scene {
                 let top = base + 0.3 + th;
                 trees.push(([x, y], cr));
                 prims.push(Prim {
-                    shape: Shape::Cylinder {
-                        c: [x, y],
-                        r: tr,
-                        z0: base,
-                        z1: top,
-                    },
+                    shape: Shape::Cylinder { c: [x, y], r: tr, z0: base, z1: top },
                     surface: Surface::Trunk,
                 });
-                prims.push(Prim {
-                    shape: Shape::Sphere {
-                        c: [x, y, top + 0.6 * cr],
-                        r: cr,
-                    },
-                    surface: Surface::Crown,
-                });
+                prims.push(Prim { shape: Shape::Sphere { c: [x, y, top + 0.6 * cr], r: cr }, surface: Surface::Crown });
                 break;
             }
         }
@@ -806,10 +709,7 @@ impl Scene {
             prims,
             Vec::new(),
             Some(terrain),
-            Path {
-                points: path,
-                closed: true,
-            },
+            Path { points: path, closed: true },
             1.0,
             1.8,
             8.0,
@@ -842,36 +742,21 @@ impl Scene {
             (lo, hi) = ([0.0; 2], [cell; 2]);
         }
         let n = [0, 1].map(|k| (((hi[k] - lo[k]) / cell).ceil() as usize).max(1));
-        let grid = Grid2 {
-            origin: lo,
-            cell,
-            n,
-        };
+        let grid = Grid2 { origin: lo, cell, n };
         let mut cells = vec![Vec::new(); n[0] * n[1]];
         for (i, p) in prims.iter().enumerate() {
             if global.contains(&i) {
                 continue;
             }
             let (a, b) = p.xy_bounds();
-            let idx =
-                |v: f64, k: usize| (((v - lo[k]) / cell).floor().max(0.0) as usize).min(n[k] - 1);
+            let idx = |v: f64, k: usize| (((v - lo[k]) / cell).floor().max(0.0) as usize).min(n[k] - 1);
             for iy in idx(a[1], 1)..=idx(b[1], 1) {
                 for ix in idx(a[0], 0)..=idx(b[0], 0) {
                     cells[iy * n[0] + ix].push(i as u32);
                 }
             }
         }
-        Self {
-            kind,
-            prims,
-            global,
-            grid,
-            cells,
-            terrain,
-            path,
-            spacing,
-            sensor_height,
-        }
+        Self { kind, prims, global, grid, cells, terrain, path, spacing, sensor_height }
     }
 
     /// Closest hit along `origin + t * dir` for t in (0, max_t]. `dir` need not be unit
@@ -881,11 +766,8 @@ impl Scene {
         let consider = |p: &Prim, best: &mut Option<Hit>| {
             let tmax = best.map_or(max_t, |h| h.t);
             if let Some(t) = p.intersect(origin, dir, tmax) {
-                if best.map_or(true, |h| t < h.t) {
-                    *best = Some(Hit {
-                        t,
-                        surface: p.surface,
-                    });
+                if best.is_none_or(|h| t < h.t) {
+                    *best = Some(Hit { t, surface: p.surface });
                 }
             }
         };
@@ -895,23 +777,15 @@ impl Scene {
         if let Some(ter) = &self.terrain {
             let tmax = best.map_or(max_t, |h| h.t);
             if let Some(t) = ter.intersect(origin, dir, tmax) {
-                best = Some(Hit {
-                    t,
-                    surface: Surface::Terrain,
-                });
+                best = Some(Hit { t, surface: Surface::Terrain });
             }
         }
-        self.grid.walk(
-            origin,
-            dir,
-            best.map_or(max_t, |h| h.t),
-            |ix, iy, _, t_exit| {
-                for &i in &self.cells[iy * self.grid.n[0] + ix] {
-                    consider(&self.prims[i as usize], &mut best);
-                }
-                best.is_some_and(|h| h.t <= t_exit)
-            },
-        );
+        self.grid.walk(origin, dir, best.map_or(max_t, |h| h.t), |ix, iy, _, t_exit| {
+            for &i in &self.cells[iy * self.grid.n[0] + ix] {
+                consider(&self.prims[i as usize], &mut best);
+            }
+            best.is_some_and(|h| h.t <= t_exit)
+        });
         best
     }
 
@@ -920,13 +794,13 @@ impl Scene {
         let mut best: Option<(f64, Surface)> = None;
         for prim in &self.prims {
             let d = prim.surface_distance(p);
-            if d <= tol && best.map_or(true, |b| d < b.0) {
+            if d <= tol && best.is_none_or(|b| d < b.0) {
                 best = Some((d, prim.surface));
             }
         }
         if let Some(h) = self.terrain.as_ref().and_then(|t| t.height(p[0], p[1])) {
             let d = (p[2] - h).abs();
-            if d <= tol && best.map_or(true, |b| d < b.0) {
+            if d <= tol && best.is_none_or(|b| d < b.0) {
                 best = Some((d, Surface::Terrain));
             }
         }
@@ -940,11 +814,7 @@ impl Scene {
             .map(|i| {
                 let s = i as f64 * self.spacing;
                 let (p, h) = self.path.at(s);
-                let ground = self
-                    .terrain
-                    .as_ref()
-                    .and_then(|t| t.height(p[0], p[1]))
-                    .unwrap_or(0.0);
+                let ground = self.terrain.as_ref().and_then(|t| t.height(p[0], p[1])).unwrap_or(0.0);
                 let z = ground + self.sensor_height;
                 let roll = 0.03 * sin_cos(0.7 * s).0;
                 let pitch = 0.02 * sin_cos(1.3 * s + 1.0).0;
@@ -964,12 +834,7 @@ impl Scene {
                 let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
                 Pose6D::new(
                     Point3::new(p[0] as f32, p[1] as f32, z as f32),
-                    Quaternion::new(
-                        (q[0] / n) as f32,
-                        (q[1] / n) as f32,
-                        (q[2] / n) as f32,
-                        (q[3] / n) as f32,
-                    ),
+                    Quaternion::new((q[0] / n) as f32, (q[1] / n) as f32, (q[2] / n) as f32, (q[3] / n) as f32),
                 )
             })
             .collect()
@@ -1016,16 +881,11 @@ impl LidarConfig {
 
     /// Longer range for open scenes.
     pub fn outdoor() -> Self {
-        Self {
-            max_range: 100.0,
-            noise_sigma: 0.02,
-            ..Self::indoor()
-        }
+        Self { max_range: 100.0, noise_sigma: 0.02, ..Self::indoor() }
     }
 
     fn validate(&self) -> Result<(), SimError> {
-        let bad =
-            |field: &'static str, value: String| Err(SimError::InvalidConfig { field, value });
+        let bad = |field: &'static str, value: String| Err(SimError::InvalidConfig { field, value });
         if self.beams == 0 {
             return bad("beams", self.beams.to_string());
         }
@@ -1057,18 +917,13 @@ impl LidarConfig {
         let (lo, hi) = self.vertical_fov;
         let elev: Vec<(f64, f64)> = (0..self.beams)
             .map(|b| {
-                let f = if self.beams == 1 {
-                    0.5
-                } else {
-                    b as f64 / (self.beams - 1) as f64
-                };
+                let f = if self.beams == 1 { 0.5 } else { b as f64 / (self.beams - 1) as f64 };
                 sin_cos((lo + (hi - lo) * f) * deg)
             })
             .collect();
         let mut dirs = Vec::with_capacity(self.beams as usize * self.horizontal_steps as usize);
         for col in 0..self.horizontal_steps {
-            let (sa, ca) =
-                sin_cos(std::f64::consts::TAU * col as f64 / self.horizontal_steps as f64);
+            let (sa, ca) = sin_cos(std::f64::consts::TAU * col as f64 / self.horizontal_steps as f64);
             for &(se, ce) in &elev {
                 dirs.push([ce * ca, ce * sa, se]);
             }
@@ -1086,12 +941,7 @@ pub enum SimError {
 }
 
 /// Generates `kind` from `seed` and scans it `scans` times along its path.
-pub fn simulate(
-    kind: SceneKind,
-    scans: usize,
-    seed: u64,
-    cfg: &LidarConfig,
-) -> Result<ScanGraph, SimError> {
+pub fn simulate(kind: SceneKind, scans: usize, seed: u64, cfg: &LidarConfig) -> Result<ScanGraph, SimError> {
     let scene = Scene::generate(kind, seed);
     let poses = scene.trajectory(scans);
     simulate_scene(&scene, &poses, seed, cfg)
@@ -1100,12 +950,7 @@ pub fn simulate(
 /// Scans `scene` from each pose. Points are in the sensor frame (graph2tree
 /// puts them in the world); rays without a return inside the range produce no
 /// point. Parallel over scans and columns, identical for any thread count.
-pub fn simulate_scene(
-    scene: &Scene,
-    poses: &[Pose6D],
-    seed: u64,
-    cfg: &LidarConfig,
-) -> Result<ScanGraph, SimError> {
+pub fn simulate_scene(scene: &Scene, poses: &[Pose6D], seed: u64, cfg: &LidarConfig) -> Result<ScanGraph, SimError> {
     cfg.validate()?;
     if u32::try_from(poses.len()).is_err() {
         return Err(SimError::TooManyScans { scans: poses.len() });
@@ -1166,21 +1011,9 @@ fn rotation_matrix(q: Quaternion) -> [[f64; 3]; 3] {
         (w, x, y, z) = (w / n, x / n, y / n, z / n);
     }
     [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - w * z),
-            2.0 * (x * z + w * y),
-        ],
-        [
-            2.0 * (x * y + w * z),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - w * x),
-        ],
-        [
-            2.0 * (x * z - w * y),
-            2.0 * (y * z + w * x),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
+        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
+        [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
+        [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)],
     ]
 }
 
@@ -1200,11 +1033,7 @@ mod tests {
 
     #[test]
     fn grid_walk_visits_cells_in_order() {
-        let g = Grid2 {
-            origin: [0.0, 0.0],
-            cell: 1.0,
-            n: [4, 4],
-        };
+        let g = Grid2 { origin: [0.0, 0.0], cell: 1.0, n: [4, 4] };
         let mut seen = Vec::new();
         g.walk([0.5, 0.5, 0.0], [1.0, 1.0, 0.0], 10.0, |x, y, _, _| {
             seen.push((x, y));
@@ -1212,8 +1041,6 @@ mod tests {
         });
         assert_eq!(seen.first(), Some(&(0, 0)));
         assert_eq!(seen.last(), Some(&(3, 3)));
-        assert!(seen
-            .windows(2)
-            .all(|w| w[0].0 + w[0].1 < w[1].0 + w[1].1 || w[0] == w[1]));
+        assert!(seen.windows(2).all(|w| w[0].0 + w[0].1 < w[1].0 + w[1].1 || w[0] == w[1]));
     }
 }

@@ -22,26 +22,16 @@ fn case_scans(g: &Golden, case: &Value) -> Option<Vec<Scan>> {
     if input.starts_with("inputs/scan.dat.bz2") {
         let raw = std::fs::read(g.input("inputs/scan.dat.bz2")).unwrap();
         let mut text = String::new();
-        bzip2::read::BzDecoder::new(&raw[..])
-            .read_to_string(&mut text)
-            .unwrap();
+        bzip2::read::BzDecoder::new(&raw[..]).read_to_string(&mut text).unwrap();
         return Some(vec![(read_xyz(&text), Point3::new(0.0, 0.0, 0.0))]);
     }
     if input.ends_with(".graph") {
         // exactly as graph2tree: each scan transformed by its pose
         let graph = octolinear::formats::graph::read_file(g.input(input)).unwrap();
-        let scans = graph
-            .nodes
-            .iter()
-            .map(|n| n.graph2tree())
-            .map(|(c, o)| (c.points, o));
+        let scans = graph.nodes.iter().map(|n| n.graph2tree()).map(|(c, o)| (c.points, o));
         return Some(scans.collect());
     }
-    let stem = input
-        .trim_start_matches("inputs/")
-        .split('.')
-        .next()
-        .unwrap();
+    let stem = input.trim_start_matches("inputs/").split('.').next().unwrap();
     let origins = std::fs::read_to_string(g.input(&format!("inputs/{stem}.origins.csv"))).ok()?;
     let mut scans = Vec::new();
     for line in origins.lines().skip(1) {
@@ -54,12 +44,7 @@ fn case_scans(g: &Golden, case: &Value) -> Option<Vec<Scan>> {
 
 fn parse_bbx(tree: &OccupancyTree, s: &str) -> UpdateBox {
     let v: Vec<f32> = s.split(',').map(|t| t.parse().unwrap()).collect();
-    UpdateBox::new(
-        tree,
-        Point3::new(v[0], v[1], v[2]),
-        Point3::new(v[3], v[4], v[5]),
-    )
-    .unwrap()
+    UpdateBox::new(tree, Point3::new(v[0], v[1], v[2]), Point3::new(v[3], v[4], v[5])).unwrap()
 }
 
 fn ot_bytes(tree: &OccupancyTree) -> Vec<u8> {
@@ -86,8 +71,7 @@ fn opt_f32(v: Option<f32>) -> String {
 
 /// Answers the point queries listed in `query_points.csv`.
 fn query_points_csv(tree: &OccupancyTree, expected: &str) -> String {
-    let mut s =
-        String::from("i,x,y,z,key_ok,kx,ky,kz,found,logodds,occupied,found_d14,logodds_d14\n");
+    let mut s = String::from("i,x,y,z,key_ok,kx,ky,kz,found,logodds,occupied,found_d14,logodds_d14\n");
     for line in expected.lines().skip(1) {
         let cols: Vec<&str> = line.split(',').collect();
         let p = point_from_hex(&cols[1..4]);
@@ -123,15 +107,10 @@ fn castray_csv(tree: &OccupancyTree, expected: &str) -> String {
         let dir = point_from_hex(&cols[4..7]);
         let ignore_unknown = cols[7] == "1";
         let max_range = parse_f64hex(cols[8]);
-        let opts = CastOptions {
-            ignore_unknown,
-            max_range: Some(max_range),
-        };
+        let opts = CastOptions { ignore_unknown, max_range: Some(max_range) };
         let (ret, end) = match tree.cast_ray(origin, dir, opts) {
             Ok(o) => (o.hit(), o.end()),
-            Err(CastError::Origin(_) | CastError::ZeroDirection) => {
-                (false, Point3::new(f32::NAN, f32::NAN, f32::NAN))
-            }
+            Err(CastError::Origin(_) | CastError::ZeroDirection) => (false, Point3::new(f32::NAN, f32::NAN, f32::NAN)),
         };
         writeln!(
             s,
@@ -163,11 +142,7 @@ fn raykeys_csv(tree: &OccupancyTree, expected: &str) -> String {
         let origin = point_from_hex(&cols[1..4]);
         let end = point_from_hex(&cols[4..7]);
         let (ok, keys): (bool, Vec<String>) = match tree.ray_keys(origin, end) {
-            Ok(ray) => (
-                true,
-                ray.map(|k| format!("{}:{}:{}", k.0[0], k.0[1], k.0[2]))
-                    .collect(),
-            ),
+            Ok(ray) => (true, ray.map(|k| format!("{}:{}:{}", k.0[0], k.0[1], k.0[2])).collect()),
             Err(_) => (false, Vec::new()),
         };
         writeln!(
@@ -194,10 +169,7 @@ fn run_build_case(g: &Golden, case: &Value) -> Vec<String> {
     let mut f = Failures::default();
     let id = case["id"].as_str().unwrap();
     let Some(scans) = case_scans(g, case) else {
-        return vec![format!(
-            "{id}: no plain-text scans for input {}",
-            case["input"]
-        )];
+        return vec![format!("{id}: no plain-text scans for input {}", case["input"])];
     };
     let p = &case["params"];
     let res = p["resolution"].as_f64().unwrap();
@@ -210,21 +182,14 @@ fn run_build_case(g: &Golden, case: &Value) -> Vec<String> {
     let opts = ScanOptions {
         max_range: (max_range >= 0.0).then_some(max_range),
         discretize: p["discretize"].as_bool().unwrap_or(false),
-        inner: if lazy {
-            InnerNodes::Defer
-        } else {
-            InnerNodes::Update
-        },
+        inner: if lazy { InnerNodes::Defer } else { InnerNodes::Update },
         bbx: p["bbx"].as_str().map(|s| parse_bbx(&tree, s)),
         ..Default::default()
     };
     let mut changes = String::from("scan,kx,ky,kz,is_new\n");
     let mut original = StatsTracker::default();
     let expected = expected_stats(g, case);
-    let per_scan_stats = case["harness_command_line"]
-        .as_str()
-        .unwrap_or("")
-        .contains("--per_scan_stats");
+    let per_scan_stats = case["harness_command_line"].as_str().unwrap_or("").contains("--per_scan_stats");
     for (i, (points, origin)) in scans.iter().enumerate() {
         tree.insert_point_cloud(points, *origin, &opts).unwrap();
         if lazy {
@@ -232,15 +197,7 @@ fn run_build_case(g: &Golden, case: &Value) -> Vec<String> {
         }
         if change_detection {
             for (k, new) in tree.changed_keys() {
-                writeln!(
-                    changes,
-                    "{i},{},{},{},{}",
-                    k.0[0],
-                    k.0[1],
-                    k.0[2],
-                    u8::from(new)
-                )
-                .unwrap();
+                writeln!(changes, "{i},{},{},{},{}", k.0[0], k.0[1], k.0[2], u8::from(new)).unwrap();
             }
             tree.reset_change_detection();
         }
@@ -267,10 +224,7 @@ fn run_build_case(g: &Golden, case: &Value) -> Vec<String> {
         f.check_digest(g, case, "nodes.csv", nodes_csv(&tree).as_bytes());
     }
     for (name, answer) in [
-        (
-            "query_points.csv",
-            query_points_csv as fn(&OccupancyTree, &str) -> String,
-        ),
+        ("query_points.csv", query_points_csv as fn(&OccupancyTree, &str) -> String),
         ("query_castray.csv", castray_csv),
         ("query_raykeys.csv", raykeys_csv),
     ] {
@@ -280,23 +234,16 @@ fn run_build_case(g: &Golden, case: &Value) -> Vec<String> {
     }
 
     // .ot read back and written again
-    let back = ot::read(&tree_ot[..]).unwrap().into_occupancy();
+    let back = ot::read(&tree_ot[..]).unwrap().into_occupancy().unwrap();
     let back_ot = ot_bytes(&back);
-    f.check(back_ot == tree_ot, || {
-        format!("{id}: .ot read-back rewrites different bytes")
-    });
+    f.check(back_ot == tree_ot, || format!("{id}: .ot read-back rewrites different bytes"));
     let mut ml = back;
     let mut copy = StatsTracker::default();
     ml.set_sensor(sensor);
     ml.to_max_likelihood();
     copy.check(&mut f, id, &expected, "ml_unpruned", &ml);
     if g.file(case, "leaves_ml_unpruned.csv").is_some() {
-        f.check_digest(
-            g,
-            case,
-            "leaves_ml_unpruned.csv",
-            leaves_csv(&ml, 0).as_bytes(),
-        );
+        f.check_digest(g, case, "leaves_ml_unpruned.csv", leaves_csv(&ml, 0).as_bytes());
     }
     ml.prune();
     copy.check(&mut f, id, &expected, "ml_pruned", &ml);
@@ -304,19 +251,12 @@ fn run_build_case(g: &Golden, case: &Value) -> Vec<String> {
 
     // writeBinary: the caller's tree must stay as it was
     let tree_bt = bt_bytes(&tree);
-    f.check(ot_bytes(&tree) == tree_ot, || {
-        format!("{id}: bt::write changed the tree")
-    });
+    f.check(ot_bytes(&tree) == tree_ot, || format!("{id}: bt::write changed the tree"));
     f.check_digest(g, case, "tree.bt", &tree_bt);
     f.check_digest(g, case, "after_writeBinary.ot", &ot_bytes(&ml));
     original.check(&mut f, id, &expected, "after_writeBinary", &ml);
     if g.file(case, "leaves_after_writeBinary.csv").is_some() {
-        f.check_digest(
-            g,
-            case,
-            "leaves_after_writeBinary.csv",
-            leaves_csv(&ml, 0).as_bytes(),
-        );
+        f.check_digest(g, case, "leaves_after_writeBinary.csv", leaves_csv(&ml, 0).as_bytes());
     }
 
     // a fresh default tree reads the .bt back
@@ -324,12 +264,7 @@ fn run_build_case(g: &Golden, case: &Value) -> Vec<String> {
     StatsTracker::default().check(&mut f, id, &expected, "bt_readback", &read);
     f.check_digest(g, case, "bt_readback.ot", &ot_bytes(&read));
     if g.file(case, "leaves_bt_readback.csv").is_some() {
-        f.check_digest(
-            g,
-            case,
-            "leaves_bt_readback.csv",
-            leaves_csv(&read, 0).as_bytes(),
-        );
+        f.check_digest(g, case, "leaves_bt_readback.csv", leaves_csv(&read, 0).as_bytes());
     }
     f.check_digest(g, case, "bt_rewrite_const.bt", &bt_const_bytes(&read));
     f.0
@@ -342,9 +277,6 @@ fn golden_build_cases_reproduce_octomap() {
     };
     let cases = g.cases("build");
     assert!(cases.len() > 100, "manifest lists the build cases");
-    let failures: Vec<String> = cases
-        .par_iter()
-        .flat_map(|c| run_build_case(&g, c))
-        .collect();
+    let failures: Vec<String> = cases.par_iter().flat_map(|c| run_build_case(&g, c)).collect();
     Failures(failures).finish("golden build cases");
 }

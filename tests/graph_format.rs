@@ -130,11 +130,7 @@ fn graph2tree_matches_xyz_and_origins() {
             let cloud = xyz::read_file(path.with_file_name(f[1])).unwrap();
             assert_eq!(cloud.len(), world.len(), "{stem} scan {i}");
             for (k, (a, b)) in world.iter().zip(cloud.iter()).enumerate() {
-                assert_eq!(
-                    a.to_bits(),
-                    b.to_bits(),
-                    "{stem} scan {i} point {k}: {a:?} vs {b:?}"
-                );
+                assert_eq!(a.to_bits(), b.to_bits(), "{stem} scan {i} point {k}: {a:?} vs {b:?}");
             }
             checked += world.len();
         }
@@ -145,13 +141,7 @@ fn graph2tree_matches_xyz_and_origins() {
 fn scans_csv(scans: &[(PointCloud, Point3)]) -> String {
     let mut s = String::from("scan,num_points,origin_x,origin_y,origin_z\n");
     for (i, (c, o)) in scans.iter().enumerate() {
-        s += &format!(
-            "{i},{},{},{},{}\n",
-            c.len(),
-            hex32(o.x),
-            hex32(o.y),
-            hex32(o.z)
-        );
+        s += &format!("{i},{},{},{},{}\n", c.len(), hex32(o.x), hex32(o.y), hex32(o.z));
     }
     s
 }
@@ -172,9 +162,7 @@ fn stored_text(dir: &Path, file: &serde_json::Value) -> Option<String> {
         "plain" => Some(fs::read_to_string(path).unwrap()),
         "gzip" => {
             let mut s = String::new();
-            flate2::read::GzDecoder::new(fs::File::open(path).unwrap())
-                .read_to_string(&mut s)
-                .unwrap();
+            flate2::read::GzDecoder::new(fs::File::open(path).unwrap()).read_to_string(&mut s).unwrap();
             Some(s)
         }
         _ => None,
@@ -194,27 +182,23 @@ fn golden_case_scans_and_world_points() {
             continue;
         };
         let handling = case["origin_handling"].as_str().unwrap_or("");
-        let scans: Vec<(PointCloud, Point3)> =
-            if input.ends_with(".graph") && handling.starts_with("graph2tree") {
-                let g = graph::read_file(dir.join(input)).unwrap();
-                g.nodes.iter().map(|n| n.graph2tree()).collect()
-            } else if input.starts_with("inputs/syn_edges.scan{0,1,2}.xyz") {
-                let origins = fs::read_to_string(dir.join("inputs/syn_edges.origins.csv")).unwrap();
-                origins
-                    .lines()
-                    .skip(1)
-                    .map(|row| {
-                        let f: Vec<&str> = row.split(',').collect();
-                        let o = [2, 3, 4].map(|k| f32::from_bits(parse_hex32(f[k])));
-                        (
-                            xyz::read_file(dir.join("inputs").join(f[1])).unwrap(),
-                            Point3::from_array(o),
-                        )
-                    })
-                    .collect()
-            } else {
-                continue;
-            };
+        let scans: Vec<(PointCloud, Point3)> = if input.ends_with(".graph") && handling.starts_with("graph2tree") {
+            let g = graph::read_file(dir.join(input)).unwrap();
+            g.nodes.iter().map(|n| n.graph2tree()).collect()
+        } else if input.starts_with("inputs/syn_edges.scan{0,1,2}.xyz") {
+            let origins = fs::read_to_string(dir.join("inputs/syn_edges.origins.csv")).unwrap();
+            origins
+                .lines()
+                .skip(1)
+                .map(|row| {
+                    let f: Vec<&str> = row.split(',').collect();
+                    let o = [2, 3, 4].map(|k| f32::from_bits(parse_hex32(f[k])));
+                    (xyz::read_file(dir.join("inputs").join(f[1])).unwrap(), Point3::from_array(o))
+                })
+                .collect()
+        } else {
+            continue;
+        };
         for file in case["files"].as_array().unwrap() {
             let name = file["name"].as_str().unwrap();
             let ours = match name {
@@ -248,12 +232,7 @@ fn edges_round_trip() {
     g.add_node(PointCloud::new(), p1);
     g.connect_previous();
     g.nodes[1].id = 77;
-    g.edges.push(ScanEdge {
-        first: 77,
-        second: 0,
-        constraint: Pose6D::IDENTITY,
-        weight: 0.123456789012345,
-    });
+    g.edges.push(ScanEdge { first: 77, second: 0, constraint: Pose6D::IDENTITY, weight: 0.123456789012345 });
     let mut bytes = Vec::new();
     graph::write(&g, &mut bytes).unwrap();
     let back = graph::read_bytes(&bytes).unwrap();
@@ -267,19 +246,12 @@ fn edges_round_trip() {
 #[test]
 fn errors_carry_offsets_and_values() {
     let mut g = ScanGraph::new();
-    g.add_node(
-        PointCloud::from(vec![Point3::new(1.0, 2.0, 3.0); 3]),
-        Pose6D::IDENTITY,
-    );
+    g.add_node(PointCloud::from(vec![Point3::new(1.0, 2.0, 3.0); 3]), Pose6D::IDENTITY);
     let mut bytes = Vec::new();
     graph::write(&g, &mut bytes).unwrap();
     // Truncation inside point 1 (streamed: no length known up front).
     match graph::read(&bytes[..4 + 4 + 28 + 10]) {
-        Err(GraphError::Truncated {
-            offset,
-            missing,
-            context,
-        }) => {
+        Err(GraphError::Truncated { offset, missing, context }) => {
             assert_eq!(offset, 46);
             assert_eq!(missing, 18);
             assert!(context.contains("point 1 of node 0"), "{context}");
@@ -288,25 +260,14 @@ fn errors_carry_offsets_and_values() {
     }
     // With the length known, the node count is checked first.
     match graph::read_bytes(&bytes[..40]) {
-        Err(GraphError::CountTooLarge {
-            offset: 0,
-            what: "node",
-            count: 1,
-            remaining: 36,
-            ..
-        }) => {}
+        Err(GraphError::CountTooLarge { offset: 0, what: "node", count: 1, remaining: 36, .. }) => {}
         other => panic!("{other:?}"),
     }
     // Bad marker of point 2.
     let mut bad = bytes.clone();
     bad[8 + 56..8 + 60].copy_from_slice(&7i32.to_le_bytes());
     match graph::read_bytes(&bad) {
-        Err(GraphError::BadMarker {
-            offset: 64,
-            expected: 3,
-            found: 7,
-            ..
-        }) => {}
+        Err(GraphError::BadMarker { offset: 64, expected: 3, found: 7, .. }) => {}
         other => panic!("{other:?}"),
     }
     // Rotation marker.
@@ -321,24 +282,13 @@ fn errors_carry_offsets_and_values() {
     let mut bad = bytes.clone();
     bad[4..8].copy_from_slice(&u32::MAX.to_le_bytes());
     match graph::read_bytes(&bad) {
-        Err(GraphError::CountTooLarge {
-            offset: 4,
-            count: u32::MAX,
-            what: "point",
-            ..
-        }) => {}
+        Err(GraphError::CountTooLarge { offset: 4, count: u32::MAX, what: "point", .. }) => {}
         other => panic!("{other:?}"),
     }
     let msg = graph::read_bytes(&bad).unwrap_err().to_string();
-    assert!(
-        msg.contains("4294967295") && msg.contains("offset 4"),
-        "{msg}"
-    );
+    assert!(msg.contains("4294967295") && msg.contains("offset 4"), "{msg}");
     // Empty input.
-    assert!(matches!(
-        graph::read_bytes(&[]),
-        Err(GraphError::Truncated { offset: 0, .. })
-    ));
+    assert!(matches!(graph::read_bytes(&[]), Err(GraphError::Truncated { offset: 0, .. })));
 }
 
 /// Seeded truncations, bit flips and forged counts: never a panic, never an
@@ -363,8 +313,7 @@ fn corrupted_graphs_never_panic_or_overallocate() {
                 2 => {
                     // Forge a u32 at an aligned-to-record position or anywhere.
                     let i = rng.below(b.len() as u32 - 3) as usize;
-                    let v = [u32::MAX, 0x8000_0000, 0x0100_0000, rng.next_u64() as u32]
-                        [rng.below(4) as usize];
+                    let v = [u32::MAX, 0x8000_0000, 0x0100_0000, rng.next_u64() as u32][rng.below(4) as usize];
                     b[i..i + 4].copy_from_slice(&v.to_le_bytes());
                 }
                 _ => {
@@ -380,11 +329,7 @@ fn corrupted_graphs_never_panic_or_overallocate() {
             let r1 = graph::read_bytes(&b);
             let r2 = graph::read(&b[..]);
             let largest = LARGEST.with(|x| x.get());
-            assert!(
-                largest <= 2 * b.len() + (2 << 20),
-                "allocation of {largest} bytes for a {}-byte input",
-                b.len()
-            );
+            assert!(largest <= 2 * b.len() + (2 << 20), "allocation of {largest} bytes for a {}-byte input", b.len());
             match (&r1, &r2) {
                 (Ok(g1), Ok(g2)) => {
                     assert_eq!(g1.nodes.len(), g2.nodes.len());
@@ -403,14 +348,7 @@ fn corrupted_graphs_never_panic_or_overallocate() {
 #[test]
 fn xyz_reader_rules() {
     let c = xyz::read(&b"1 2 3\n\n  -0.5\t+.25 1e-3\r\n4 5 6"[..]).unwrap();
-    assert_eq!(
-        c.points,
-        vec![
-            Point3::new(1.0, 2.0, 3.0),
-            Point3::new(-0.5, 0.25, 0.001),
-            Point3::new(4.0, 5.0, 6.0)
-        ]
-    );
+    assert_eq!(c.points, vec![Point3::new(1.0, 2.0, 3.0), Point3::new(-0.5, 0.25, 0.001), Point3::new(4.0, 5.0, 6.0)]);
     // Correct rounding, subnormals accepted.
     let c = xyz::read(&b"0.1 1e-45 3.4028235e38\n"[..]).unwrap();
     assert_eq!(c.points[0].to_bits(), [0x3dcccccd, 1, 0x7f7fffff]);
@@ -429,34 +367,22 @@ fn xyz_reader_rules() {
         assert!(s.starts_with(&format!("line {line}:")), "{s}");
     }
     // Writer output reads back bit-exactly, including extremes and -0.
-    let pts: PointCloud = [
-        1e-40f32,
-        -0.0,
-        3.4028235e38,
-        0.1,
-        -123456.79,
-        1e-5,
-        7e15,
-        2e16,
-    ]
-    .windows(3)
-    .map(|w| Point3::new(w[0], w[1], w[2]))
-    .collect();
+    let pts: PointCloud = [1e-40f32, -0.0, 3.4028235e38, 0.1, -123456.79, 1e-5, 7e15, 2e16]
+        .windows(3)
+        .map(|w| Point3::new(w[0], w[1], w[2]))
+        .collect();
     let mut out = Vec::new();
     xyz::write(&pts, &mut out).unwrap();
     let back = xyz::read(&out[..]).unwrap();
     let bits = |c: &PointCloud| c.iter().map(|p| p.to_bits()).collect::<Vec<_>>();
     assert_eq!(bits(&back), bits(&pts));
-    assert!(xyz::write(
-        &PointCloud::from(vec![Point3::new(f32::NAN, 0.0, 0.0)]),
-        &mut Vec::new()
-    )
-    .is_err());
+    assert!(xyz::write(&PointCloud::from(vec![Point3::new(f32::NAN, 0.0, 0.0)]), &mut Vec::new()).is_err());
 }
 
 #[test]
 fn log_reader_follows_log2graph() {
-    let text = b"# header\nNODE 1 2 3 0.1 0.2 0.3\n1 2 3\n 9 9 9\n4 5 6 extra\nNODEX 0 0 0 0 0 1.5 ignored\n\n7 8 9\n10 11 12";
+    let text =
+        b"# header\nNODE 1 2 3 0.1 0.2 0.3\n1 2 3\n 9 9 9\n4 5 6 extra\nNODEX 0 0 0 0 0 1.5 ignored\n\n7 8 9\n10 11 12";
     let g = log::read(&text[..]).unwrap();
     assert_eq!(g.nodes.len(), 2);
     assert_eq!(g.nodes[0].id, 0);
@@ -464,17 +390,11 @@ fn log_reader_follows_log2graph() {
     // Angles are read as float and widened.
     let p0 = Pose6D::from_euler(1.0, 2.0, 3.0, 0.1f32 as f64, 0.2f32 as f64, 0.3f32 as f64);
     assert_eq!(g.nodes[0].pose, p0);
-    assert_eq!(
-        g.nodes[0].scan.points,
-        vec![Point3::new(1.0, 2.0, 3.0), Point3::new(4.0, 5.0, 6.0)]
-    );
+    assert_eq!(g.nodes[0].scan.points, vec![Point3::new(1.0, 2.0, 3.0), Point3::new(4.0, 5.0, 6.0)]);
     // The unterminated last line is dropped, like std::getline at EOF in log2graph.
     assert_eq!(g.nodes[1].scan.points, vec![Point3::new(7.0, 8.0, 9.0)]);
     assert_eq!(g.edges.len(), 1);
-    assert_eq!(
-        g.edges[0].constraint,
-        g.nodes[0].pose.inv() * g.nodes[1].pose
-    );
+    assert_eq!(g.edges[0].constraint, g.nodes[0].pose.inv() * g.nodes[1].pose);
     assert_eq!(g.edges[0].weight, 1.0);
 
     for (text, line) in [
@@ -511,11 +431,7 @@ fn geometry_identities() {
         let q = Quaternion::from_euler(r, pi, y);
         assert!((q.norm() - 1.0).abs() < 1e-6);
         let e = q.to_euler();
-        assert!(
-            (e.x as f64 - r).abs() < 1e-5
-                && (e.y as f64 - pi).abs() < 1e-5
-                && (e.z as f64 - y).abs() < 1e-5
-        );
+        assert!((e.x as f64 - r).abs() < 1e-5 && (e.y as f64 - pi).abs() < 1e-5 && (e.z as f64 - y).abs() < 1e-5);
         let pose = Pose6D::new(Point3::new(1.0, 2.0, 3.0), q);
         let back = pose.inv().transform(pose.transform(p));
         assert!(back.distance(p) < 1e-5);
@@ -533,14 +449,8 @@ fn geometry_identities() {
     let q = Quaternion::from_euler(0.0, 0.0, std::f64::consts::FRAC_PI_2);
     let v = q.rotate(Point3::new(1.0, 0.0, 0.0));
     assert!(v.distance(Point3::new(0.0, 1.0, 0.0)) < 1e-6);
-    let mut cloud = PointCloud::from(vec![
-        Point3::new(0.0, 0.0, 0.0),
-        Point3::new(2.0, -1.0, 5.0),
-    ]);
-    assert_eq!(
-        cloud.bounding_box(),
-        Some((Point3::new(0.0, -1.0, 0.0), Point3::new(2.0, 0.0, 5.0)))
-    );
+    let mut cloud = PointCloud::from(vec![Point3::new(0.0, 0.0, 0.0), Point3::new(2.0, -1.0, 5.0)]);
+    assert_eq!(cloud.bounding_box(), Some((Point3::new(0.0, -1.0, 0.0), Point3::new(2.0, 0.0, 5.0))));
     cloud.crop(Point3::new(-1.0, -1.0, -1.0), Point3::new(1.0, 1.0, 1.0));
     assert_eq!(cloud.len(), 1);
 }

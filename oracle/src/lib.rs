@@ -88,12 +88,7 @@ pub struct SensorParams {
 impl Default for SensorParams {
     /// OctoMap's defaults: hit 0.7, miss 0.4, clamping 0.1192 / 0.971.
     fn default() -> Self {
-        SensorParams {
-            prob_hit: 0.7,
-            prob_miss: 0.4,
-            clamp_min: 0.1192,
-            clamp_max: 0.971,
-        }
+        SensorParams { prob_hit: 0.7, prob_miss: 0.4, clamp_min: 0.1192, clamp_max: 0.971 }
     }
 }
 
@@ -409,11 +404,7 @@ fn status(code: i32, what: &'static str) -> Result<(), OracleError> {
 
 /// For calls that can only fail through a C++ exception (e.g. `bad_alloc`).
 fn must(code: i32, what: &'static str) -> i32 {
-    assert!(
-        code >= 0,
-        "OctoMap shim: {what} failed ({:?})",
-        status(code, what)
-    );
+    assert!(code >= 0, "OctoMap shim: {what} failed ({:?})", status(code, what));
     code
 }
 
@@ -423,14 +414,10 @@ fn validate_sensor(s: &SensorParams) -> Result<(), OracleError> {
         return Err(OracleError::InvalidArgument("prob_hit must be in [0.5, 1]"));
     }
     if !(s.prob_miss >= 0.0 && s.prob_miss <= 0.5) {
-        return Err(OracleError::InvalidArgument(
-            "prob_miss must be in [0, 0.5]",
-        ));
+        return Err(OracleError::InvalidArgument("prob_miss must be in [0, 0.5]"));
     }
     if !(s.clamp_min >= 0.0 && s.clamp_min <= 1.0 && s.clamp_max >= 0.0 && s.clamp_max <= 1.0) {
-        return Err(OracleError::InvalidArgument(
-            "clamping thresholds must be in [0, 1]",
-        ));
+        return Err(OracleError::InvalidArgument("clamping thresholds must be in [0, 1]"));
     }
     Ok(())
 }
@@ -439,9 +426,7 @@ fn validate_resolution(resolution: f64) -> Result<(), OracleError> {
     if resolution.is_finite() && resolution > 0.0 {
         Ok(())
     } else {
-        Err(OracleError::InvalidArgument(
-            "resolution must be finite and > 0",
-        ))
+        Err(OracleError::InvalidArgument("resolution must be finite and > 0"))
     }
 }
 
@@ -460,9 +445,7 @@ impl Drop for OracleTree {
 
 impl fmt::Debug for OracleTree {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.debug_struct("OracleTree")
-            .field("resolution", &self.resolution())
-            .finish_non_exhaustive()
+        f.debug_struct("OracleTree").field("resolution", &self.resolution()).finish_non_exhaustive()
     }
 }
 
@@ -499,15 +482,7 @@ impl OracleTree {
         validate_sensor(sensor)?;
         let s = sensor;
         // SAFETY: plain value arguments (validated against OctoMap's assertions).
-        let p = unsafe {
-            ffi::olo_tree_new_sensor(
-                resolution,
-                s.clamp_min,
-                s.clamp_max,
-                s.prob_hit,
-                s.prob_miss,
-            )
-        };
+        let p = unsafe { ffi::olo_tree_new_sensor(resolution, s.clamp_min, s.clamp_max, s.prob_hit, s.prob_miss) };
         Self::from_raw(p).ok_or(OracleError::CppException)
     }
 
@@ -520,8 +495,7 @@ impl OracleTree {
         }
         validate_resolution(resolution)?;
         // SAFETY: plain value argument; returns an owned handle or null.
-        Self::from_raw(unsafe { ffi::olo_tree_new_graph2tree_default(resolution) })
-            .ok_or(OracleError::CppException)
+        Self::from_raw(unsafe { ffi::olo_tree_new_graph2tree_default(resolution) }).ok_or(OracleError::CppException)
     }
 
     /// `AbstractOcTree::read` of `.ot` bytes; `None` on failure or if the file is
@@ -551,9 +525,7 @@ impl OracleTree {
         let s = sensor;
         // SAFETY: valid handle; plain value arguments.
         status(
-            unsafe {
-                ffi::olo_set_sensor(self.hm(), s.clamp_min, s.clamp_max, s.prob_hit, s.prob_miss)
-            },
+            unsafe { ffi::olo_set_sensor(self.hm(), s.clamp_min, s.clamp_max, s.prob_hit, s.prob_miss) },
             "set_sensor",
         )
     }
@@ -561,10 +533,7 @@ impl OracleTree {
     /// `setOccupancyThres(p)`.
     pub fn set_occupancy_thres(&mut self, p: f64) {
         // SAFETY: valid handle; plain value argument.
-        must(
-            unsafe { ffi::olo_set_occupancy_thres(self.hm(), p) },
-            "setOccupancyThres",
-        );
+        must(unsafe { ffi::olo_set_occupancy_thres(self.hm(), p) }, "setOccupancyThres");
     }
 
     /// The sensor model as stored in the tree.
@@ -589,10 +558,7 @@ impl OracleTree {
     /// `setBBXMin(min); setBBXMax(max); useBBXLimit(true)`.
     pub fn set_bbx(&mut self, min: [f32; 3], max: [f32; 3]) {
         // SAFETY: valid handle; the arrays hold 3 floats each.
-        must(
-            unsafe { ffi::olo_set_bbx(self.hm(), min.as_ptr(), max.as_ptr()) },
-            "setBBX",
-        );
+        must(unsafe { ffi::olo_set_bbx(self.hm(), min.as_ptr(), max.as_ptr()) }, "setBBX");
     }
 
     /// `useBBXLimit(enable)`.
@@ -618,10 +584,7 @@ impl OracleTree {
     pub fn changed_keys(&self) -> Vec<([u16; 3], bool)> {
         let (mut p, mut n) = (std::ptr::null_mut(), 0usize);
         // SAFETY: valid handle and out-pointers.
-        must(
-            unsafe { ffi::olo_changed_keys(self.h(), &mut p, &mut n) },
-            "changedKeys",
-        );
+        must(unsafe { ffi::olo_changed_keys(self.h(), &mut p, &mut n) }, "changedKeys");
         // SAFETY: the shim returned a malloc'ed array of `n` OloChange (or null).
         let v = unsafe { take_vec(p, n) };
         let mut out: Vec<([u16; 3], bool)> = v.iter().map(|c| (c.key, c.is_new != 0)).collect();
@@ -708,19 +671,14 @@ impl OracleTree {
     /// `updateInnerOccupancy()`.
     pub fn update_inner_occupancy(&mut self) {
         // SAFETY: valid handle.
-        must(
-            unsafe { ffi::olo_update_inner_occupancy(self.hm()) },
-            "updateInnerOccupancy",
-        );
+        must(unsafe { ffi::olo_update_inner_occupancy(self.hm()) }, "updateInnerOccupancy");
     }
 
     /// `updateNode(point, occupied, lazy_eval)`; `false` if the point is outside the map.
     pub fn update_node(&mut self, p: [f32; 3], occupied: bool, lazy_eval: bool) -> bool {
         // SAFETY: valid handle; `p` holds 3 floats.
         must(
-            unsafe {
-                ffi::olo_update_node_occ(self.hm(), p.as_ptr(), occupied.into(), lazy_eval.into())
-            },
+            unsafe { ffi::olo_update_node_occ(self.hm(), p.as_ptr(), occupied.into(), lazy_eval.into()) },
             "updateNode",
         ) == 1
     }
@@ -728,45 +686,33 @@ impl OracleTree {
     /// `updateNode(point, log_odds_delta, lazy_eval)`; `false` if outside the map.
     pub fn update_node_logodds(&mut self, p: [f32; 3], delta: f32, lazy_eval: bool) -> bool {
         // SAFETY: valid handle; `p` holds 3 floats.
-        must(
-            unsafe { ffi::olo_update_node_logodds(self.hm(), p.as_ptr(), delta, lazy_eval.into()) },
-            "updateNode",
-        ) == 1
+        must(unsafe { ffi::olo_update_node_logodds(self.hm(), p.as_ptr(), delta, lazy_eval.into()) }, "updateNode") == 1
     }
 
     /// `updateNode(key, occupied, lazy_eval)`.
     pub fn update_node_key(&mut self, key: [u16; 3], occupied: bool, lazy_eval: bool) -> bool {
         // SAFETY: valid handle; `key` holds 3 u16.
-        let r = unsafe {
-            ffi::olo_update_node_key_occ(self.hm(), key.as_ptr(), occupied.into(), lazy_eval.into())
-        };
+        let r = unsafe { ffi::olo_update_node_key_occ(self.hm(), key.as_ptr(), occupied.into(), lazy_eval.into()) };
         must(r, "updateNode") == 1
     }
 
     /// `updateNode(key, log_odds_delta, lazy_eval)`.
     pub fn update_node_key_logodds(&mut self, key: [u16; 3], delta: f32, lazy_eval: bool) -> bool {
         // SAFETY: valid handle; `key` holds 3 u16.
-        let r = unsafe {
-            ffi::olo_update_node_key_logodds(self.hm(), key.as_ptr(), delta, lazy_eval.into())
-        };
+        let r = unsafe { ffi::olo_update_node_key_logodds(self.hm(), key.as_ptr(), delta, lazy_eval.into()) };
         must(r, "updateNode") == 1
     }
 
     /// `setNodeValue(point, log_odds_value, lazy_eval)`; `false` if outside the map.
     pub fn set_node_value(&mut self, p: [f32; 3], value: f32, lazy_eval: bool) -> bool {
         // SAFETY: valid handle; `p` holds 3 floats.
-        must(
-            unsafe { ffi::olo_set_node_value(self.hm(), p.as_ptr(), value, lazy_eval.into()) },
-            "setNodeValue",
-        ) == 1
+        must(unsafe { ffi::olo_set_node_value(self.hm(), p.as_ptr(), value, lazy_eval.into()) }, "setNodeValue") == 1
     }
 
     /// `setNodeValue(key, log_odds_value, lazy_eval)`.
     pub fn set_node_value_key(&mut self, key: [u16; 3], value: f32, lazy_eval: bool) -> bool {
         // SAFETY: valid handle; `key` holds 3 u16.
-        let r = unsafe {
-            ffi::olo_set_node_value_key(self.hm(), key.as_ptr(), value, lazy_eval.into())
-        };
+        let r = unsafe { ffi::olo_set_node_value_key(self.hm(), key.as_ptr(), value, lazy_eval.into()) };
         must(r, "setNodeValue") == 1
     }
 
@@ -785,10 +731,7 @@ impl OracleTree {
     /// `toMaxLikelihood()`.
     pub fn to_max_likelihood(&mut self) {
         // SAFETY: valid handle.
-        must(
-            unsafe { ffi::olo_to_max_likelihood(self.hm()) },
-            "toMaxLikelihood",
-        );
+        must(unsafe { ffi::olo_to_max_likelihood(self.hm()) }, "toMaxLikelihood");
     }
 
     /// `clear()`.
@@ -803,10 +746,7 @@ impl OracleTree {
         let (mut p, mut n) = (std::ptr::null_mut(), 0usize);
         // SAFETY: valid handle and out-pointers. For which = 1 (writeBinary) the tree is
         // mutated; that variant is only reachable through `write_bt(&mut self)`.
-        status(
-            unsafe { ffi::olo_write(self.ptr.as_ptr(), which, &mut p, &mut n) },
-            what,
-        )?;
+        status(unsafe { ffi::olo_write(self.ptr.as_ptr(), which, &mut p, &mut n) }, what)?;
         // SAFETY: the shim returned a malloc'ed buffer of `n` bytes (or null).
         Ok(unsafe { take_vec(p, n) })
     }
@@ -844,15 +784,8 @@ impl OracleTree {
         let d = check_depth(depth);
         let (mut l, mut o, mut t) = (0f32, 0i32, 0i32);
         // SAFETY: valid handle; `p` holds 3 floats; valid out-pointers.
-        let r = must(
-            unsafe { ffi::olo_search(self.h(), p.as_ptr(), d, &mut l, &mut o, &mut t) },
-            "search",
-        );
-        (r == 1).then_some(SearchResult {
-            logodds: l,
-            occupied: o != 0,
-            at_threshold: t != 0,
-        })
+        let r = must(unsafe { ffi::olo_search(self.h(), p.as_ptr(), d, &mut l, &mut o, &mut t) }, "search");
+        (r == 1).then_some(SearchResult { logodds: l, occupied: o != 0, at_threshold: t != 0 })
     }
 
     /// `search(key, depth)`.
@@ -860,35 +793,18 @@ impl OracleTree {
         let d = check_depth(depth);
         let (mut l, mut o, mut t) = (0f32, 0i32, 0i32);
         // SAFETY: valid handle; `key` holds 3 u16; valid out-pointers.
-        let r = must(
-            unsafe { ffi::olo_search_key(self.h(), key.as_ptr(), d, &mut l, &mut o, &mut t) },
-            "search",
-        );
-        (r == 1).then_some(SearchResult {
-            logodds: l,
-            occupied: o != 0,
-            at_threshold: t != 0,
-        })
+        let r = must(unsafe { ffi::olo_search_key(self.h(), key.as_ptr(), d, &mut l, &mut o, &mut t) }, "search");
+        (r == 1).then_some(SearchResult { logodds: l, occupied: o != 0, at_threshold: t != 0 })
     }
 
     fn dump(&self, which: i32, max_depth: u8) -> Vec<NodeInfo> {
         let d = check_depth(max_depth);
         let (mut p, mut n) = (std::ptr::null_mut(), 0usize);
         // SAFETY: valid handle and out-pointers.
-        must(
-            unsafe { ffi::olo_dump(self.h(), which, d, &mut p, &mut n) },
-            "iterate",
-        );
+        must(unsafe { ffi::olo_dump(self.h(), which, d, &mut p, &mut n) }, "iterate");
         // SAFETY: the shim returned a malloc'ed array of `n` OloNode (or null).
         let v = unsafe { take_vec(p, n) };
-        v.iter()
-            .map(|x| NodeInfo {
-                key: x.key,
-                depth: x.depth,
-                is_leaf: x.is_leaf != 0,
-                logodds: x.logodds,
-            })
-            .collect()
+        v.iter().map(|x| NodeInfo { key: x.key, depth: x.depth, is_leaf: x.is_leaf != 0, logodds: x.logodds }).collect()
     }
 
     /// Every node of `begin_leafs(max_depth)` in iteration order.
@@ -903,25 +819,16 @@ impl OracleTree {
 
     /// `computeRayKeys(origin, end, ray)`: OctoMap's return value and the key list.
     /// Fails with `RayTooLong` instead of overflowing OctoMap's `KeyRay`.
-    pub fn compute_ray_keys(
-        &mut self,
-        origin: [f32; 3],
-        end: [f32; 3],
-    ) -> Result<(bool, Vec<[u16; 3]>), OracleError> {
+    pub fn compute_ray_keys(&mut self, origin: [f32; 3], end: [f32; 3]) -> Result<(bool, Vec<[u16; 3]>), OracleError> {
         let (mut p, mut n) = (std::ptr::null_mut(), 0usize);
         // SAFETY: valid handle; 3-float arrays; valid out-pointers.
-        let r = unsafe {
-            ffi::olo_compute_ray_keys(self.hm(), origin.as_ptr(), end.as_ptr(), &mut p, &mut n)
-        };
+        let r = unsafe { ffi::olo_compute_ray_keys(self.hm(), origin.as_ptr(), end.as_ptr(), &mut p, &mut n) };
         // SAFETY: the shim returned a malloc'ed array of 3*n u16 (or null); free it even on error.
         let flat = unsafe { take_vec(p, 3 * n) };
         if r < 0 {
             return Err(status(r, "computeRayKeys").unwrap_err());
         }
-        Ok((
-            r == 1,
-            flat.chunks_exact(3).map(|k| [k[0], k[1], k[2]]).collect(),
-        ))
+        Ok((r == 1, flat.chunks_exact(3).map(|k| [k[0], k[1], k[2]]).collect()))
     }
 
     /// `castRay(origin, direction, end, ignore_unknown, max_range)`: the return
@@ -971,10 +878,7 @@ impl OracleTree {
         let d = check_depth(depth);
         let mut k = 0u16;
         // SAFETY: valid handle; valid out-pointer.
-        must(
-            unsafe { ffi::olo_coord_to_key_scalar(self.h(), c, d, &mut k) },
-            "coordToKey",
-        );
+        must(unsafe { ffi::olo_coord_to_key_scalar(self.h(), c, d, &mut k) }, "coordToKey");
         k
     }
 
@@ -983,10 +887,7 @@ impl OracleTree {
         let d = check_depth(depth);
         let mut out = [0f32; 3];
         // SAFETY: valid handle; 3-element arrays.
-        must(
-            unsafe { ffi::olo_key_to_coord(self.h(), key.as_ptr(), d, out.as_mut_ptr()) },
-            "keyToCoord",
-        );
+        must(unsafe { ffi::olo_key_to_coord(self.h(), key.as_ptr(), d, out.as_mut_ptr()) }, "keyToCoord");
         out
     }
 
@@ -995,10 +896,7 @@ impl OracleTree {
         let d = check_depth(depth);
         let mut out = 0f64;
         // SAFETY: valid handle; valid out-pointer.
-        must(
-            unsafe { ffi::olo_key_to_coord_scalar(self.h(), key, d, &mut out) },
-            "keyToCoord",
-        );
+        must(unsafe { ffi::olo_key_to_coord_scalar(self.h(), key, d, &mut out) }, "keyToCoord");
         out
     }
 
@@ -1092,22 +990,10 @@ impl OracleTree {
     /// `search(p, depth)` for every point, loop in C++. `out[i]` = log-odds or NaN.
     /// Returns the number of points found.
     pub fn bench_search(&self, points: &[[f32; 3]], depth: u8, out: &mut [f32]) -> usize {
-        assert_eq!(
-            points.len(),
-            out.len(),
-            "bench_search: out must have one slot per point"
-        );
+        assert_eq!(points.len(), out.len(), "bench_search: out must have one slot per point");
         let d = check_depth(depth);
         // SAFETY: valid handle; `points` and `out` have the same length `n`.
-        let r = unsafe {
-            ffi::olo_bench_search(
-                self.h(),
-                points.as_ptr().cast(),
-                points.len(),
-                d,
-                out.as_mut_ptr(),
-            )
-        };
+        let r = unsafe { ffi::olo_bench_search(self.h(), points.as_ptr().cast(), points.len(), d, out.as_mut_ptr()) };
         assert!(r >= 0, "bench_search failed");
         r as usize
     }
@@ -1135,10 +1021,7 @@ impl OracleTree {
         hits: &mut [bool],
     ) -> usize {
         let n = origins.len();
-        assert!(
-            directions.len() == n && ends.len() == n && hits.len() == n,
-            "bench_cast_rays: length mismatch"
-        );
+        assert!(directions.len() == n && ends.len() == n && hits.len() == n, "bench_cast_rays: length mismatch");
         // SAFETY: valid handle; all four slices have length n; the shim writes 0/1 bytes into
         // `hits`, which are valid `bool` values.
         let r = unsafe {
@@ -1165,21 +1048,10 @@ mod tests {
     #[test]
     fn skip_logic() {
         assert_eq!(skip_decision("t", true, Some("true")), SkipDecision::Run);
-        let msg =
-            "t: skipped, OctoMap oracle unavailable (install: apt-get install -y liboctomap-dev)"
-                .to_string();
-        assert_eq!(
-            skip_decision("t", false, None),
-            SkipDecision::Skip(msg.clone())
-        );
-        assert_eq!(
-            skip_decision("t", false, Some("1")),
-            SkipDecision::Skip(msg.clone())
-        );
-        assert_eq!(
-            skip_decision("t", false, Some("true")),
-            SkipDecision::Fail(msg)
-        );
+        let msg = "t: skipped, OctoMap oracle unavailable (install: apt-get install -y liboctomap-dev)".to_string();
+        assert_eq!(skip_decision("t", false, None), SkipDecision::Skip(msg.clone()));
+        assert_eq!(skip_decision("t", false, Some("1")), SkipDecision::Skip(msg.clone()));
+        assert_eq!(skip_decision("t", false, Some("true")), SkipDecision::Fail(msg));
     }
 
     #[test]
@@ -1199,18 +1071,9 @@ mod tests {
         // SAFETY: argument-less functions returning sizeof values.
         unsafe {
             assert_eq!(ffi::olo_sizeof_node(), std::mem::size_of::<ffi::OloNode>());
-            assert_eq!(
-                ffi::olo_sizeof_change(),
-                std::mem::size_of::<ffi::OloChange>()
-            );
-            assert_eq!(
-                ffi::olo_sizeof_stats(),
-                std::mem::size_of::<ffi::OloStats>()
-            );
-            assert_eq!(
-                ffi::olo_sizeof_sensor(),
-                std::mem::size_of::<ffi::OloSensor>()
-            );
+            assert_eq!(ffi::olo_sizeof_change(), std::mem::size_of::<ffi::OloChange>());
+            assert_eq!(ffi::olo_sizeof_stats(), std::mem::size_of::<ffi::OloStats>());
+            assert_eq!(ffi::olo_sizeof_sensor(), std::mem::size_of::<ffi::OloSensor>());
         }
     }
 }

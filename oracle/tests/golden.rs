@@ -28,29 +28,19 @@ fn golden(test_name: &str) -> Option<Golden> {
     if !require_or_skip(test_name) {
         return None;
     }
-    let dir = PathBuf::from(
-        std::env::var("OCTOLINEAR_GOLDEN_DIR").unwrap_or_else(|_| "/work/shared/golden".into()),
-    );
+    let dir = PathBuf::from(std::env::var("OCTOLINEAR_GOLDEN_DIR").unwrap_or_else(|_| "/work/shared/golden".into()));
     let Ok(text) = std::fs::read_to_string(dir.join("manifest.json")) else {
-        println!(
-            "{test_name}: skipped, golden vectors not found at {}",
-            dir.display()
-        );
+        println!("{test_name}: skipped, golden vectors not found at {}", dir.display());
         return None;
     };
-    Some(Golden {
-        dir,
-        manifest: serde_json::from_str(&text).expect("manifest.json parses"),
-    })
+    Some(Golden { dir, manifest: serde_json::from_str(&text).expect("manifest.json parses") })
 }
 
 fn sha256_hex(bytes: &[u8]) -> String {
-    Sha256::digest(bytes)
-        .iter()
-        .fold(String::new(), |mut s, b| {
-            let _ = write!(s, "{b:02x}");
-            s
-        })
+    Sha256::digest(bytes).iter().fold(String::new(), |mut s, b| {
+        let _ = write!(s, "{b:02x}");
+        s
+    })
 }
 
 impl Golden {
@@ -64,25 +54,18 @@ impl Golden {
     }
 
     fn entry<'a>(&self, case: &'a Value, name: &str) -> Option<&'a Value> {
-        case["files"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|f| f["name"] == name)
+        case["files"].as_array().unwrap().iter().find(|f| f["name"] == name)
     }
 
     fn sha(&self, case: &Value, name: &str) -> Option<String> {
-        self.entry(case, name)
-            .map(|f| f["sha256"].as_str().unwrap().to_string())
+        self.entry(case, name).map(|f| f["sha256"].as_str().unwrap().to_string())
     }
 
     fn read_path(&self, rel: &str) -> Vec<u8> {
         let raw = std::fs::read(self.dir.join(rel)).unwrap_or_else(|e| panic!("{rel}: {e}"));
         if rel.ends_with(".gz") {
             let mut out = Vec::new();
-            flate2::read::GzDecoder::new(&raw[..])
-                .read_to_end(&mut out)
-                .unwrap();
+            flate2::read::GzDecoder::new(&raw[..]).read_to_end(&mut out).unwrap();
             out
         } else {
             raw
@@ -100,11 +83,7 @@ impl Golden {
                 None => return None,
             },
         };
-        assert_eq!(
-            sha256_hex(&bytes),
-            f["sha256"].as_str().unwrap(),
-            "digest of {name}"
-        );
+        assert_eq!(sha256_hex(&bytes), f["sha256"].as_str().unwrap(), "digest of {name}");
         Some(bytes)
     }
 
@@ -117,10 +96,7 @@ impl Golden {
         let mut out: HashMap<String, HashMap<String, (String, String)>> = HashMap::new();
         for line in self.text(case, "stats.csv").unwrap().lines().skip(1) {
             let f: Vec<&str> = line.split(',').collect();
-            out.entry(f[0].into()).or_default().insert(
-                f[1].into(),
-                (f[2].into(), f.get(3).unwrap_or(&"").to_string()),
-            );
+            out.entry(f[0].into()).or_default().insert(f[1].into(), (f[2].into(), f.get(3).unwrap_or(&"").to_string()));
         }
         out
     }
@@ -130,8 +106,7 @@ impl Golden {
     fn scans(&self, case: &Value) -> Option<Vec<Scan>> {
         let input = case["input"].as_str()?;
         let base = input.strip_prefix("inputs/")?.split('.').next()?;
-        let origins =
-            std::fs::read_to_string(self.dir.join(format!("inputs/{base}.origins.csv"))).ok()?;
+        let origins = std::fs::read_to_string(self.dir.join(format!("inputs/{base}.origins.csv"))).ok()?;
         let mut scans = Vec::new();
         for line in origins.lines().skip(1) {
             let f: Vec<&str> = line.split(',').collect();
@@ -209,15 +184,7 @@ fn set_case_sensor(tree: &mut OracleTree, case: &Value) {
 fn leaves_csv(nodes: &[octolinear_oracle::NodeInfo]) -> String {
     let mut s = String::from("kx,ky,kz,depth,logodds\n");
     for n in nodes {
-        let _ = writeln!(
-            s,
-            "{},{},{},{},{}",
-            n.key[0],
-            n.key[1],
-            n.key[2],
-            n.depth,
-            h32(n.logodds)
-        );
+        let _ = writeln!(s, "{},{},{},{},{}", n.key[0], n.key[1], n.key[2], n.depth, h32(n.logodds));
     }
     s
 }
@@ -225,16 +192,8 @@ fn leaves_csv(nodes: &[octolinear_oracle::NodeInfo]) -> String {
 fn nodes_csv(nodes: &[octolinear_oracle::NodeInfo]) -> String {
     let mut s = String::from("kx,ky,kz,depth,is_leaf,logodds\n");
     for n in nodes {
-        let _ = writeln!(
-            s,
-            "{},{},{},{},{},{}",
-            n.key[0],
-            n.key[1],
-            n.key[2],
-            n.depth,
-            n.is_leaf as u8,
-            h32(n.logodds)
-        );
+        let _ =
+            writeln!(s, "{},{},{},{},{},{}", n.key[0], n.key[1], n.key[2], n.depth, n.is_leaf as u8, h32(n.logodds));
     }
     s
 }
@@ -256,12 +215,7 @@ impl Checker<'_> {
     }
 
     /// Compares the statistics of `stage` (all the names the oracle can reproduce).
-    fn stats(
-        &mut self,
-        stats: &HashMap<String, HashMap<String, (String, String)>>,
-        stage: &str,
-        t: &mut OracleTree,
-    ) {
+    fn stats(&mut self, stats: &HashMap<String, HashMap<String, (String, String)>>, stage: &str, t: &mut OracleTree) {
         let Some(want) = stats.get(stage) else { return };
         if !want.contains_key("size") {
             // Not a statistics stage (e.g. only `equal_bytes`). Do not call the extent
@@ -278,10 +232,7 @@ impl Checker<'_> {
         let at_thr = |n: &octolinear_oracle::NodeInfo| -> bool {
             n.logodds >= sensor.clamp_max_log || n.logodds <= sensor.clamp_min_log
         };
-        let occupied = leaves
-            .iter()
-            .filter(|n| n.logodds >= sensor.occupancy_thres_log)
-            .count();
+        let occupied = leaves.iter().filter(|n| n.logodds >= sensor.occupancy_thres_log).count();
         let mut got: HashMap<String, String> = HashMap::new();
         got.insert("tree_type".into(), "OcTree".into());
         got.insert("resolution".into(), h64(s.resolution));
@@ -289,10 +240,7 @@ impl Checker<'_> {
         got.insert("size".into(), s.size.to_string());
         got.insert("num_leaf_nodes".into(), s.num_leaf_nodes.to_string());
         got.insert("calc_num_nodes".into(), s.calc_num_nodes.to_string());
-        got.insert(
-            "num_inner_nodes_iter".into(),
-            nodes.iter().filter(|n| !n.is_leaf).count().to_string(),
-        );
+        got.insert("num_inner_nodes_iter".into(), nodes.iter().filter(|n| !n.is_leaf).count().to_string());
         got.insert("memory_usage".into(), s.memory_usage.to_string());
         got.insert("memory_usage_node".into(), s.memory_usage_node.to_string());
         got.insert("memory_full_grid".into(), s.memory_full_grid.to_string());
@@ -306,29 +254,17 @@ impl Checker<'_> {
         got.insert("volume".into(), h64(s.volume));
         got.insert("leaves_occupied".into(), occupied.to_string());
         got.insert("leaves_free".into(), (leaves.len() - occupied).to_string());
-        got.insert(
-            "leaves_at_threshold".into(),
-            leaves.iter().filter(|n| at_thr(n)).count().to_string(),
-        );
-        got.insert(
-            "nodes_at_threshold".into(),
-            nodes.iter().filter(|n| at_thr(n)).count().to_string(),
-        );
+        got.insert("leaves_at_threshold".into(), leaves.iter().filter(|n| at_thr(n)).count().to_string());
+        got.insert("nodes_at_threshold".into(), nodes.iter().filter(|n| at_thr(n)).count().to_string());
         got.insert("clamping_thres_min_log".into(), h32(sensor.clamp_min_log));
         got.insert("clamping_thres_max_log".into(), h32(sensor.clamp_max_log));
         got.insert("prob_hit_log".into(), h32(sensor.prob_hit_log));
         got.insert("prob_miss_log".into(), h32(sensor.prob_miss_log));
-        got.insert(
-            "occupancy_thres_log".into(),
-            h32(sensor.occupancy_thres_log),
-        );
+        got.insert("occupancy_thres_log".into(), h32(sensor.occupancy_thres_log));
         if let Some(r) = s.root_logodds {
             got.insert("root_logodds".into(), h32(r));
         }
-        got.insert(
-            "num_changes_detected".into(),
-            s.num_changes_detected.to_string(),
-        );
+        got.insert("num_changes_detected".into(), s.num_changes_detected.to_string());
         let mut compared = 0;
         for (name, value) in &got {
             if let Some((v, hex)) = want.get(name) {
@@ -411,10 +347,7 @@ impl Checker<'_> {
                 let o = [hex_f32(f[1]), hex_f32(f[2]), hex_f32(f[3])];
                 let e = [hex_f32(f[4]), hex_f32(f[5]), hex_f32(f[6])];
                 let (ok, keys) = t.compute_ray_keys(o, e).unwrap();
-                let ks: Vec<String> = keys
-                    .iter()
-                    .map(|k| format!("{}:{}:{}", k[0], k[1], k[2]))
-                    .collect();
+                let ks: Vec<String> = keys.iter().map(|k| format!("{}:{}:{}", k[0], k[1], k[2])).collect();
                 let _ = writeln!(
                     out,
                     "{},{},{},{},{},{},{},{},{},{}",
@@ -446,16 +379,9 @@ fn check_build_case(g: &Golden, id: &str) -> Vec<String> {
     let lazy = p["lazy_eval"].as_bool().unwrap();
     let disc = p["discretize"].as_bool().unwrap();
     let change = p["change_detection"].as_bool().unwrap_or(false);
-    let scans = g
-        .scans(case)
-        .unwrap_or_else(|| panic!("{id}: no xyz inputs"));
+    let scans = g.scans(case).unwrap_or_else(|| panic!("{id}: no xyz inputs"));
     let stats = g.stats(case);
-    let mut c = Checker {
-        g,
-        case,
-        id: id.to_string(),
-        checked: Vec::new(),
-    };
+    let mut c = Checker { g, case, id: id.to_string(), checked: Vec::new() };
 
     // 1-3: tree, sensor model, insertion.
     let mut t = new_tree(case);
@@ -464,8 +390,7 @@ fn check_build_case(g: &Golden, id: &str) -> Vec<String> {
     }
     let mut changes = String::from("scan,kx,ky,kz,is_new\n");
     for (i, (pts, origin)) in scans.iter().enumerate() {
-        t.insert_point_cloud(pts, *origin, maxrange, lazy, disc)
-            .unwrap();
+        t.insert_point_cloud(pts, *origin, maxrange, lazy, disc).unwrap();
         if lazy {
             t.update_inner_occupancy();
         }
@@ -499,10 +424,7 @@ fn check_build_case(g: &Golden, id: &str) -> Vec<String> {
     set_case_sensor(&mut copy, case);
     copy.to_max_likelihood();
     c.stats(&stats, "ml_unpruned", &mut copy);
-    c.file(
-        "leaves_ml_unpruned.csv",
-        leaves_csv(&copy.leaves(0)).as_bytes(),
-    );
+    c.file("leaves_ml_unpruned.csv", leaves_csv(&copy.leaves(0)).as_bytes());
     copy.prune();
     c.stats(&stats, "ml_pruned", &mut copy);
     c.file("ml_pruned.ot", &copy.write_ot().unwrap());
@@ -512,19 +434,13 @@ fn check_build_case(g: &Golden, id: &str) -> Vec<String> {
     c.file("tree.bt", &bt);
     c.stats(&stats, "after_writeBinary", &mut t);
     c.file("after_writeBinary.ot", &t.write_ot().unwrap());
-    c.file(
-        "leaves_after_writeBinary.csv",
-        leaves_csv(&t.leaves(0)).as_bytes(),
-    );
+    c.file("leaves_after_writeBinary.csv", leaves_csv(&t.leaves(0)).as_bytes());
 
     // 7: .bt read-back into a fresh OcTree(0.1).
     let mut back = OracleTree::read_bt(&bt).expect("read_bt");
     c.stats(&stats, "bt_readback", &mut back);
     c.file("bt_readback.ot", &back.write_ot().unwrap());
-    c.file(
-        "leaves_bt_readback.csv",
-        leaves_csv(&back.leaves(0)).as_bytes(),
-    );
+    c.file("leaves_bt_readback.csv", leaves_csv(&back.leaves(0)).as_bytes());
     let rewrite = back.write_bt_const().unwrap();
     assert_eq!(rewrite, bt, "{id}: .bt round trip");
     c.file("bt_rewrite_const.bt", &rewrite);
@@ -555,10 +471,7 @@ fn syn_room_default_matches_golden_bytes() {
         "bt_readback.ot",
         "bt_rewrite_const.bt",
     ] {
-        assert!(
-            checked.iter().any(|c| c == must),
-            "{must} not checked: {checked:?}"
-        );
+        assert!(checked.iter().any(|c| c == must), "{must} not checked: {checked:?}");
     }
 }
 
@@ -579,10 +492,7 @@ fn representative_build_cases_match_golden() {
         "syn_edges_xyz_r0.1_mrm1_d0_l0_def",
     ] {
         let checked = check_build_case(&g, id);
-        assert!(
-            checked.iter().any(|c| c == "tree.ot") && checked.iter().any(|c| c == "tree.bt"),
-            "{id}: {checked:?}"
-        );
+        assert!(checked.iter().any(|c| c == "tree.ot") && checked.iter().any(|c| c == "tree.bt"), "{id}: {checked:?}");
     }
 }
 
@@ -603,10 +513,7 @@ fn all_xyz_build_cases_match_golden() {
         .filter(|c| c["command"] == "build" && c["identical_in_1.9.7"] == true)
         .filter(|c| c["params"].get("bbx").is_none() && !c.to_string().contains("bbx_min"))
         .filter(|c| g.scans(c).is_some())
-        .filter(|c| {
-            std::env::var("OCTOLINEAR_GOLDEN_CASES")
-                .map_or(true, |f| c["id"].as_str().unwrap().contains(&f))
-        })
+        .filter(|c| std::env::var("OCTOLINEAR_GOLDEN_CASES").map_or(true, |f| c["id"].as_str().unwrap().contains(&f)))
         .map(|c| c["id"].as_str().unwrap().to_string())
         .collect();
     if std::env::var("OCTOLINEAR_GOLDEN_CASES").is_err() {
@@ -615,10 +522,7 @@ fn all_xyz_build_cases_match_golden() {
     let mut files = 0;
     for id in &ids {
         let checked = check_build_case(&g, id);
-        assert!(
-            checked.iter().any(|c| c == "tree.ot") && checked.iter().any(|c| c == "tree.bt"),
-            "{id}: {checked:?}"
-        );
+        assert!(checked.iter().any(|c| c == "tree.ot") && checked.iter().any(|c| c == "tree.bt"), "{id}: {checked:?}");
         files += checked.len();
     }
     println!("{} cases, {files} files/stat stages compared", ids.len());
@@ -630,21 +534,13 @@ fn default_sensor_params_equal_graph2tree_default() {
     if !require_or_skip("default_sensor_params_equal_graph2tree_default") {
         return;
     }
-    let a = OracleTree::with_sensor(0.1, &SensorParams::default())
-        .unwrap()
-        .sensor();
+    let a = OracleTree::with_sensor(0.1, &SensorParams::default()).unwrap().sensor();
     let b = OracleTree::with_graph2tree_default(0.1).unwrap().sensor();
     let c = OracleTree::new(0.1).unwrap().sensor();
     for s in [a, b, c] {
         assert_eq!(
-            [
-                s.clamp_min_log,
-                s.clamp_max_log,
-                s.prob_hit_log,
-                s.prob_miss_log,
-                s.occupancy_thres_log
-            ]
-            .map(f32::to_bits),
+            [s.clamp_min_log, s.clamp_max_log, s.prob_hit_log, s.prob_miss_log, s.occupancy_thres_log]
+                .map(f32::to_bits),
             [0xc0000075, 0x4060b4ba, 0x3f58e883, 0xbecf991f, 0]
         );
     }
@@ -661,10 +557,7 @@ fn compute_ray_keys_first_golden_line() {
     // computeRayKeys does not depend on the tree content.
     let mut t = OracleTree::new(0.1).unwrap();
     let (ok, keys) = t
-        .compute_ray_keys(
-            [hex_f32(f[1]), hex_f32(f[2]), hex_f32(f[3])],
-            [hex_f32(f[4]), hex_f32(f[5]), hex_f32(f[6])],
-        )
+        .compute_ray_keys([hex_f32(f[1]), hex_f32(f[2]), hex_f32(f[3])], [hex_f32(f[4]), hex_f32(f[5]), hex_f32(f[6])])
         .unwrap();
     assert_eq!(ok, f[7] == "1");
     assert_eq!(keys.len(), f[8].parse::<usize>().unwrap());
@@ -684,29 +577,14 @@ fn bt_write_read_round_trip() {
         return;
     }
     let mut t = OracleTree::new(0.05).unwrap();
-    let pts: Vec<[f32; 3]> = (0..400)
-        .map(|i| {
-            [
-                (i % 20) as f32 * 0.13 - 1.0,
-                (i / 20) as f32 * 0.11 - 1.0,
-                1.5,
-            ]
-        })
-        .collect();
-    t.insert_point_cloud(&pts, [0.0, 0.0, 0.0], -1.0, false, false)
-        .unwrap();
+    let pts: Vec<[f32; 3]> =
+        (0..400).map(|i| [(i % 20) as f32 * 0.13 - 1.0, (i / 20) as f32 * 0.11 - 1.0, 1.5]).collect();
+    t.insert_point_cloud(&pts, [0.0, 0.0, 0.0], -1.0, false, false).unwrap();
     let before = t.leaves(0).len();
     let bt_const = t.write_bt_const().unwrap();
-    assert_eq!(
-        t.leaves(0).len(),
-        before,
-        "writeBinaryConst must not change the tree"
-    );
+    assert_eq!(t.leaves(0).len(), before, "writeBinaryConst must not change the tree");
     let bt = t.write_bt().unwrap();
-    assert_eq!(
-        bt, bt_const,
-        "writeBinary and writeBinaryConst write the same bytes"
-    );
+    assert_eq!(bt, bt_const, "writeBinary and writeBinaryConst write the same bytes");
     let back = OracleTree::read_bt(&bt).expect("read_bt");
     assert_eq!(back.resolution(), 0.05);
     assert_eq!(back.write_bt_const().unwrap(), bt);
@@ -727,10 +605,7 @@ fn misc_api() {
     assert_eq!(t.size(), 0);
     assert_eq!(t.stats().root_logodds, None);
     assert!(t.update_node([0.05, 0.05, 0.05], true, false));
-    assert_eq!(
-        t.search([0.05, 0.05, 0.05], 0),
-        Some(f32::from_bits(0x3f58e883))
-    );
+    assert_eq!(t.search([0.05, 0.05, 0.05], 0), Some(f32::from_bits(0x3f58e883)));
     assert_eq!(t.is_node_occupied([0.05, 0.05, 0.05], 0), Some(true));
     assert_eq!(t.search([5.0, 5.0, 5.0], 0), None);
     assert!(t.update_node_logodds([0.05, 0.05, 0.05], -1.0, false));
@@ -750,11 +625,7 @@ fn misc_api() {
     assert!(t.volume() > 0.0);
     let (hit, end) = t.cast_ray([-1.05, 0.05, 0.05], [1.0, 0.0, 0.0], true, -1.0);
     assert!(hit);
-    assert_eq!(
-        end,
-        [1.05, 0.05, 0.05],
-        "the voxel at 0.05 is free after the -1.0 update"
-    );
+    assert_eq!(end, [1.05, 0.05, 0.05], "the voxel at 0.05 is free after the -1.0 update");
     let (hit, end) = t.cast_ray([-1.05, 0.05, 0.05], [0.0, 0.0, 0.0], true, -1.0);
     assert!(!hit && end.iter().all(|v| v.is_nan()));
     // Node predicates seen through search_key agree with the iterators' log-odds.
@@ -763,18 +634,12 @@ fn misc_api() {
         let r = t.search_key(n.key, n.depth).unwrap();
         assert_eq!(r.logodds, n.logodds);
         assert_eq!(r.occupied, n.logodds >= sensor.occupancy_thres_log);
-        assert_eq!(
-            r.at_threshold,
-            n.logodds >= sensor.clamp_max_log || n.logodds <= sensor.clamp_min_log
-        );
+        assert_eq!(r.at_threshold, n.logodds >= sensor.clamp_max_log || n.logodds <= sensor.clamp_min_log);
     }
     t.expand();
     t.prune();
     t.to_max_likelihood();
-    assert_eq!(
-        t.search([1.05, 0.05, 0.05], 0),
-        Some(f32::from_bits(0x4060b4ba))
-    );
+    assert_eq!(t.search([1.05, 0.05, 0.05], 0), Some(f32::from_bits(0x4060b4ba)));
     // Batches.
     let pts = [[0.05f32, 0.05, 0.05], [9.0, 9.0, 9.0], [1.05, 0.05, 0.05]];
     let mut out = [0f32; 3];
@@ -783,28 +648,14 @@ fn misc_api() {
     assert_eq!(t.bench_leaf_sum(0).0, 2);
     let mut ends = [[0f32; 3]; 1];
     let mut hits = [false; 1];
-    assert_eq!(
-        t.bench_cast_rays(
-            &[[-1.05, 0.05, 0.05]],
-            &[[1.0, 0.0, 0.0]],
-            true,
-            -1.0,
-            &mut ends,
-            &mut hits
-        ),
-        1
-    );
+    assert_eq!(t.bench_cast_rays(&[[-1.05, 0.05, 0.05]], &[[1.0, 0.0, 0.0]], true, -1.0, &mut ends, &mut hits), 1);
     assert!(hits[0]);
     // Change detection, bbx, rays mode, batch insert.
     let mut u = OracleTree::with_sensor(0.1, &SensorParams::default()).unwrap();
     u.enable_change_detection(true);
-    u.insert_point_cloud_rays(&[[1.0, 0.0, 0.0]], [0.0, 0.0, 0.0], -1.0, false)
-        .unwrap();
+    u.insert_point_cloud_rays(&[[1.0, 0.0, 0.0]], [0.0, 0.0, 0.0], -1.0, false).unwrap();
     assert!(!u.changed_keys().is_empty());
-    assert_eq!(
-        u.stats().num_changes_detected as usize,
-        u.changed_keys().len()
-    );
+    assert_eq!(u.stats().num_changes_detected as usize, u.changed_keys().len());
     u.reset_change_detection();
     assert!(u.changed_keys().is_empty());
     u.set_bbx([-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]);
@@ -817,20 +668,10 @@ fn misc_api() {
     u.clear();
     assert_eq!(u.size(), 0);
     // Guards instead of OctoMap assertions.
-    assert!(OracleTree::with_sensor(
-        0.1,
-        &SensorParams {
-            prob_hit: 0.4,
-            ..Default::default()
-        }
-    )
-    .is_err());
+    assert!(OracleTree::with_sensor(0.1, &SensorParams { prob_hit: 0.4, ..Default::default() }).is_err());
     assert!(OracleTree::new(0.0).is_err());
     let far = 32000.0 * 0.1;
-    assert_eq!(
-        t.compute_ray_keys([-far, -far, 0.0], [far, far, 0.0]),
-        Err(octolinear_oracle::OracleError::RayTooLong)
-    );
+    assert_eq!(t.compute_ray_keys([-far, -far, 0.0], [far, far, 0.0]), Err(octolinear_oracle::OracleError::RayTooLong));
     assert_eq!(
         t.insert_point_cloud(&[[far, far, 0.0]], [-far, -far, 0.0], -1.0, false, false),
         Err(octolinear_oracle::OracleError::RayTooLong)

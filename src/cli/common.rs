@@ -16,18 +16,10 @@ pub enum MapFormat {
 
 impl MapFormat {
     pub fn of(path: &Path) -> Result<MapFormat> {
-        match path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase)
-            .as_deref()
-        {
+        match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
             Some("bt") => Ok(MapFormat::Bt),
             Some("ot") => Ok(MapFormat::Ot),
-            _ => bail!(
-                "{}: unknown map format (expected .bt or .ot)",
-                path.display()
-            ),
+            _ => bail!("{}: unknown map format (expected .bt or .ot)", path.display()),
         }
     }
 }
@@ -44,17 +36,16 @@ pub fn load_map(path: &Path) -> Result<LoadedMap> {
     let r = BufReader::with_capacity(1 << 16, file);
     Ok(match format {
         MapFormat::Bt => LoadedMap {
-            tree: bt::read(r)
-                .with_context(|| format!("{}: not a valid .bt map", path.display()))?,
+            tree: bt::read(r).with_context(|| format!("{}: not a valid .bt map", path.display()))?,
             kind: "OcTree (.bt, maximum likelihood)",
         },
         MapFormat::Ot => {
-            let t =
-                ot::read(r).with_context(|| format!("{}: not a valid .ot map", path.display()))?;
-            LoadedMap {
-                kind: t.kind().id(),
-                tree: t.into_occupancy(),
-            }
+            let t = ot::read(r).with_context(|| format!("{}: not a valid .ot map", path.display()))?;
+            let kind = t.kind().id();
+            let tree = t
+                .into_occupancy()
+                .ok_or_else(|| anyhow::anyhow!("{}: a counting tree holds no occupancy", path.display()))?;
+            LoadedMap { kind, tree }
         }
     })
 }

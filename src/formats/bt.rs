@@ -7,9 +7,7 @@
 //! absent, `01` occupied leaf, `10` free leaf, `11` inner node. Values are
 //! not stored: readers restore the clamping bounds. See `formats/bt.md`.
 
-use super::header::{
-    read_first_line, read_header, write_header, CountingReader, FirstLine, BT_FIRST_LINE,
-};
+use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, BT_FIRST_LINE};
 use super::TreeFileError;
 use crate::sensor::SensorModel;
 use crate::tree::{NodeArena, OccupancyTree};
@@ -23,10 +21,7 @@ pub fn read(r: impl BufRead) -> Result<OccupancyTree, TreeFileError> {
 /// Reads a `.bt` file; leaves get `sensor`'s clamping bounds, inner nodes
 /// the maximum of their children and the root the upper bound, exactly as
 /// OctoMap's `readBinary` does.
-pub fn read_with_sensor(
-    r: impl BufRead,
-    sensor: SensorModel,
-) -> Result<OccupancyTree, TreeFileError> {
+pub fn read_with_sensor(r: impl BufRead, sensor: SensorModel) -> Result<OccupancyTree, TreeFileError> {
     let mut r = CountingReader::new(r);
     let (size, resolution) = match peek_is_text(&mut r)? {
         true => {
@@ -35,33 +30,24 @@ pub fn read_with_sensor(
                 let reason = if first == FirstLine::Full {
                     "this is a full .ot file".to_string()
                 } else {
-                    format!(
-                        "first line is `{}`",
-                        String::from_utf8_lossy(&line[..line.len().min(60)])
-                    )
+                    format!("first line is `{}`", String::from_utf8_lossy(&line[..line.len().min(60)]))
                 };
-                return Err(TreeFileError::WrongFormat {
-                    expected: ".bt",
-                    reason,
-                });
+                return Err(TreeFileError::WrongFormat { expected: ".bt", reason });
             }
             let h = read_header(&mut r)?;
             (h.size, h.resolution)
         }
         false => read_legacy_header(&mut r)?,
     };
-    let mut tree = OccupancyTree::with_sensor(resolution, sensor)
-        .map_err(|_| TreeFileError::BadResolution(resolution))?;
+    let mut tree =
+        OccupancyTree::with_sensor(resolution, sensor).map_err(|_| TreeFileError::BadResolution(resolution))?;
     if size > 0 {
         let mut arena = NodeArena::with_root(sensor.clamping_max);
         read_node(&mut r, &mut arena, 0, 0, &sensor)?;
         tree.set_arena(Some(arena));
     }
     if size != tree.size() as u64 {
-        return Err(TreeFileError::SizeMismatch {
-            header: size,
-            read: tree.size() as u64,
-        });
+        return Err(TreeFileError::SizeMismatch { header: size, read: tree.size() as u64 });
     }
     Ok(tree)
 }
@@ -156,13 +142,8 @@ pub fn write(tree: &OccupancyTree, w: impl Write) -> io::Result<()> {
 /// Writes the tree as it is (`writeBinaryConst`): leaves are labelled
 /// occupied or free by the occupancy threshold.
 pub fn write_const(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
-    write_header(
-        &mut w,
-        BT_FIRST_LINE,
-        "OcTree",
-        tree.size(),
-        tree.resolution(),
-    )?;
+    let id = super::ot::TreeKind::of(tree.kind()).id();
+    write_header(&mut w, BT_FIRST_LINE, id, tree.size(), tree.resolution())?;
     let Some(arena) = tree.arena() else {
         return Ok(());
     };

@@ -71,12 +71,7 @@ impl ScanGraph {
         let n = self.nodes.len();
         if n >= 2 {
             let (a, b) = (&self.nodes[n - 2], &self.nodes[n - 1]);
-            self.edges.push(ScanEdge {
-                first: a.id,
-                second: b.id,
-                constraint: a.pose.inv() * b.pose,
-                weight: 1.0,
-            });
+            self.edges.push(ScanEdge { first: a.id, second: b.id, constraint: a.pose.inv() * b.pose, weight: 1.0 });
         }
     }
 
@@ -101,26 +96,11 @@ pub enum GraphError {
         source: io::Error,
     },
     #[error("input ends at byte offset {offset} inside {context} ({missing} more bytes needed)")]
-    Truncated {
-        offset: u64,
-        missing: u64,
-        context: String,
-    },
+    Truncated { offset: u64, missing: u64, context: String },
     #[error("marker {found} at byte offset {offset} in {context}, expected {expected}")]
-    BadMarker {
-        offset: u64,
-        expected: i32,
-        found: i32,
-        context: String,
-    },
+    BadMarker { offset: u64, expected: i32, found: i32, context: String },
     #[error("{what} count {count} at byte offset {offset} needs at least {needed} bytes, only {remaining} remain")]
-    CountTooLarge {
-        offset: u64,
-        what: &'static str,
-        count: u32,
-        needed: u64,
-        remaining: u64,
-    },
+    CountTooLarge { offset: u64, what: &'static str, count: u32, needed: u64, remaining: u64 },
 }
 
 const POINT_BYTES: usize = 4 + 3 * 8;
@@ -142,11 +122,7 @@ struct Input<R> {
 
 impl<R: Read> Input<R> {
     /// Fills `buf` completely or reports where the input ended.
-    fn fill(
-        &mut self,
-        buf: &mut [u8],
-        context: &dyn Fn(usize) -> String,
-    ) -> Result<(), GraphError> {
+    fn fill(&mut self, buf: &mut [u8], context: &dyn Fn(usize) -> String) -> Result<(), GraphError> {
         let mut filled = 0;
         while filled < buf.len() {
             match self.inner.read(&mut buf[filled..]) {
@@ -159,12 +135,7 @@ impl<R: Read> Input<R> {
                 }
                 Ok(n) => filled += n,
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                Err(source) => {
-                    return Err(GraphError::Io {
-                        offset: self.offset + filled as u64,
-                        source,
-                    })
-                }
+                Err(source) => return Err(GraphError::Io { offset: self.offset + filled as u64, source }),
             }
         }
         self.offset += buf.len() as u64;
@@ -178,24 +149,12 @@ impl<R: Read> Input<R> {
     }
 
     /// Checks that `count` items of at least `each` bytes (+ `tail`) can fit.
-    fn check_count(
-        &self,
-        what: &'static str,
-        count: u32,
-        each: u64,
-        tail: u64,
-    ) -> Result<(), GraphError> {
+    fn check_count(&self, what: &'static str, count: u32, each: u64, tail: u64) -> Result<(), GraphError> {
         if let Some(len) = self.len {
             let remaining = len.saturating_sub(self.offset);
             let needed = count as u64 * each + tail;
             if needed > remaining {
-                return Err(GraphError::CountTooLarge {
-                    offset: self.offset - 4,
-                    what,
-                    count,
-                    needed,
-                    remaining,
-                });
+                return Err(GraphError::CountTooLarge { offset: self.offset - 4, what, count, needed, remaining });
             }
         }
         Ok(())
@@ -222,53 +181,26 @@ fn i32_at(b: &[u8], at: usize) -> i32 {
     i32::from_le_bytes(a)
 }
 
-fn check_marker(
-    found: i32,
-    expected: i32,
-    offset: u64,
-    context: impl Fn() -> String,
-) -> Result<(), GraphError> {
+fn check_marker(found: i32, expected: i32, offset: u64, context: impl Fn() -> String) -> Result<(), GraphError> {
     if found == expected {
         Ok(())
     } else {
-        Err(GraphError::BadMarker {
-            offset,
-            expected,
-            found,
-            context: context(),
-        })
+        Err(GraphError::BadMarker { offset, expected, found, context: context() })
     }
 }
 
 /// Decodes a `Vector3` record (marker + 3 doubles) at `at`.
-fn vector_at(
-    b: &[u8],
-    at: usize,
-    base: u64,
-    context: &dyn Fn() -> String,
-) -> Result<Point3, GraphError> {
+fn vector_at(b: &[u8], at: usize, base: u64, context: &dyn Fn() -> String) -> Result<Point3, GraphError> {
     check_marker(i32_at(b, at), 3, base + at as u64, context)?;
-    Ok(Point3::new(
-        f64_at(b, at + 4) as f32,
-        f64_at(b, at + 12) as f32,
-        f64_at(b, at + 20) as f32,
-    ))
+    Ok(Point3::new(f64_at(b, at + 4) as f32, f64_at(b, at + 12) as f32, f64_at(b, at + 20) as f32))
 }
 
-fn read_pose<R: Read>(
-    input: &mut Input<R>,
-    context: &dyn Fn() -> String,
-) -> Result<Pose6D, GraphError> {
+fn read_pose<R: Read>(input: &mut Input<R>, context: &dyn Fn() -> String) -> Result<Pose6D, GraphError> {
     let mut b = [0u8; POSE_BYTES];
     let base = input.offset;
     input.fill(&mut b, &|_| context())?;
     let t = vector_at(&b, 0, base, &|| format!("translation of {}", context()))?;
-    check_marker(
-        i32_at(&b, POINT_BYTES),
-        4,
-        base + POINT_BYTES as u64,
-        || format!("rotation of {}", context()),
-    )?;
+    check_marker(i32_at(&b, POINT_BYTES), 4, base + POINT_BYTES as u64, || format!("rotation of {}", context()))?;
     let q = |i: usize| f64_at(&b, POINT_BYTES + 4 + 8 * i) as f32;
     Ok(Pose6D::new(t, Quaternion::new(q(0), q(1), q(2), q(3))))
 }
@@ -284,21 +216,17 @@ fn read_cloud<R: Read>(input: &mut Input<R>, node: usize) -> Result<PointCloud, 
         let n = (total - done).min(POINT_CHUNK);
         let chunk = &mut buf[..n * POINT_BYTES];
         let base = input.offset;
-        input
-            .fill(chunk, &|filled| {
-                format!("point {} of node {node}", done + filled / POINT_BYTES)
-            })
-            .map_err(|e| match e {
+        input.fill(chunk, &|filled| format!("point {} of node {node}", done + filled / POINT_BYTES)).map_err(|e| {
+            match e {
                 // Report what the interrupted point lacks, not the whole chunk.
-                GraphError::Truncated {
-                    offset, context, ..
-                } => GraphError::Truncated {
+                GraphError::Truncated { offset, context, .. } => GraphError::Truncated {
                     offset,
                     missing: (POINT_BYTES - (offset - base) as usize % POINT_BYTES) as u64,
                     context,
                 },
                 e => e,
-            })?;
+            }
+        })?;
         for i in 0..n {
             let ctx = || format!("point {} of node {node}", done + i);
             cloud.push(vector_at(chunk, i * POINT_BYTES, base, &ctx)?);
@@ -340,20 +268,12 @@ fn read_input<R: Read>(mut input: Input<R>) -> Result<ScanGraph, GraphError> {
 
 /// Reads a graph from a stream (buffer it yourself for files, or use [`read_file`]).
 pub fn read(reader: impl Read) -> Result<ScanGraph, GraphError> {
-    read_input(Input {
-        inner: reader,
-        offset: 0,
-        len: None,
-    })
+    read_input(Input { inner: reader, offset: 0, len: None })
 }
 
 /// Reads a graph from memory; counts are checked against the slice length.
 pub fn read_bytes(bytes: &[u8]) -> Result<ScanGraph, GraphError> {
-    read_input(Input {
-        inner: bytes,
-        offset: 0,
-        len: Some(bytes.len() as u64),
-    })
+    read_input(Input { inner: bytes, offset: 0, len: Some(bytes.len() as u64) })
 }
 
 /// Reads a `.graph` file; counts are checked against the file length.
@@ -361,11 +281,7 @@ pub fn read_file(path: impl AsRef<Path>) -> Result<ScanGraph, GraphError> {
     let io_err = |source| GraphError::Io { offset: 0, source };
     let file = fs::File::open(path).map_err(io_err)?;
     let len = file.metadata().map_err(io_err)?.len();
-    read_input(Input {
-        inner: io::BufReader::with_capacity(1 << 16, file),
-        offset: 0,
-        len: Some(len),
-    })
+    read_input(Input { inner: io::BufReader::with_capacity(1 << 16, file), offset: 0, len: Some(len) })
 }
 
 fn put_vector(out: &mut impl Write, v: Point3) -> io::Result<()> {
@@ -389,10 +305,7 @@ fn put_pose(out: &mut impl Write, p: &Pose6D) -> io::Result<()> {
 
 fn count_u32(n: usize, what: &str) -> io::Result<u32> {
     u32::try_from(n).map_err(|_| {
-        io::Error::new(
-            io::ErrorKind::InvalidInput,
-            format!("{what} count {n} does not fit the format's u32"),
-        )
+        io::Error::new(io::ErrorKind::InvalidInput, format!("{what} count {n} does not fit the format's u32"))
     })
 }
 

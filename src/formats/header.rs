@@ -6,8 +6,7 @@ use std::io::{self, BufRead, Write};
 
 pub const OT_FIRST_LINE: &str = "# Octomap OcTree file";
 pub const BT_FIRST_LINE: &str = "# Octomap OcTree binary file";
-const COMMENT_LINE: &str =
-    "# (feel free to add / change comments, but leave the first line as it is!)";
+const COMMENT_LINE: &str = "# (feel free to add / change comments, but leave the first line as it is!)";
 
 /// A reader that counts the bytes consumed.
 pub struct CountingReader<R> {
@@ -28,10 +27,9 @@ impl<R: BufRead> CountingReader<R> {
                 self.offset += buf.len() as u64;
                 Ok(())
             }
-            Err(e) if e.kind() == io::ErrorKind::UnexpectedEof => Err(TreeFileError::Truncated {
-                offset: self.offset,
-                what,
-            }),
+            Err(e) if e.kind() == io::ErrorKind::UnexpectedEof => {
+                Err(TreeFileError::Truncated { offset: self.offset, what })
+            }
             Err(e) => Err(TreeFileError::Io(e)),
         }
     }
@@ -56,10 +54,7 @@ impl<R: BufRead> CountingReader<R> {
                 return Ok(line);
             }
             if line.len() >= limit {
-                return Err(TreeFileError::Header {
-                    offset: start,
-                    reason: "header line too long".into(),
-                });
+                return Err(TreeFileError::Header { offset: start, reason: "header line too long".into() });
             }
             line.push(b);
         }
@@ -82,10 +77,7 @@ impl<R: BufRead> CountingReader<R> {
                 break;
             }
             if tok.len() >= 4096 {
-                return Err(TreeFileError::Header {
-                    offset: start,
-                    reason: "header token too long".into(),
-                });
+                return Err(TreeFileError::Header { offset: start, reason: "header token too long".into() });
             }
             tok.push(b);
             self.consume();
@@ -126,9 +118,7 @@ pub enum FirstLine {
 }
 
 /// Reads and classifies the first line (OctoMap compares its prefix only).
-pub fn read_first_line<R: BufRead>(
-    r: &mut CountingReader<R>,
-) -> Result<(FirstLine, Vec<u8>), TreeFileError> {
+pub fn read_first_line<R: BufRead>(r: &mut CountingReader<R>) -> Result<(FirstLine, Vec<u8>), TreeFileError> {
     let line = r.read_line(1 << 16)?;
     let kind = if line.starts_with(OT_FIRST_LINE.as_bytes()) {
         FirstLine::Full
@@ -148,10 +138,7 @@ pub fn read_header<R: BufRead>(r: &mut CountingReader<R>) -> Result<Header, Tree
     let mut resolution: f64 = 0.0;
     loop {
         let Some((offset, token)) = r.read_token()? else {
-            return Err(TreeFileError::Header {
-                offset: r.offset,
-                reason: "no `data` line".into(),
-            });
+            return Err(TreeFileError::Header { offset: r.offset, reason: "no `data` line".into() });
         };
         match token.as_str() {
             "data" => {
@@ -178,10 +165,7 @@ pub fn read_header<R: BufRead>(r: &mut CountingReader<R>) -> Result<Header, Tree
         }
     }
     if id.is_empty() {
-        return Err(TreeFileError::Header {
-            offset: r.offset,
-            reason: "no `id` given".into(),
-        });
+        return Err(TreeFileError::Header { offset: r.offset, reason: "no `id` given".into() });
     }
     if !(resolution > 0.0 && resolution.is_finite()) {
         return Err(TreeFileError::BadResolution(resolution));
@@ -189,37 +173,19 @@ pub fn read_header<R: BufRead>(r: &mut CountingReader<R>) -> Result<Header, Tree
     if id == "1" {
         id = "OcTree".into();
     }
-    Ok(Header {
-        id,
-        size,
-        resolution,
-    })
+    Ok(Header { id, size, resolution })
 }
 
 /// Writes a header exactly as OctoMap's `write`/`writeBinaryConst` do.
-pub fn write_header(
-    w: &mut impl Write,
-    first_line: &str,
-    id: &str,
-    size: usize,
-    resolution: f64,
-) -> io::Result<()> {
-    write!(
-        w,
-        "{first_line}\n{COMMENT_LINE}\n#\nid {id}\nsize {size}\nres {}\ndata\n",
-        format_double(resolution)
-    )
+pub fn write_header(w: &mut impl Write, first_line: &str, id: &str, size: usize, resolution: f64) -> io::Result<()> {
+    write!(w, "{first_line}\n{COMMENT_LINE}\n#\nid {id}\nsize {size}\nres {}\ndata\n", format_double(resolution))
 }
 
 /// A double as a C++ stream prints it by default (`%g`, six significant digits).
 pub fn format_double(x: f64) -> String {
     const PRECISION: i32 = 6;
     if x == 0.0 {
-        return if x.is_sign_negative() {
-            "-0".into()
-        } else {
-            "0".into()
-        };
+        return if x.is_sign_negative() { "-0".into() } else { "0".into() };
     }
     if !x.is_finite() {
         return if x.is_nan() {
@@ -240,7 +206,7 @@ pub fn format_double(x: f64) -> String {
             s
         }
     }
-    if exp < -4 || exp >= PRECISION {
+    if !(-4..PRECISION).contains(&exp) {
         let sign = if exp < 0 { '-' } else { '+' };
         format!("{}e{}{:02}", strip(mantissa), sign, exp.abs())
     } else {

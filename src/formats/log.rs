@@ -34,11 +34,7 @@ pub enum LogError {
     #[error("line {line}: point before the first NODE line")]
     PointBeforeNode { line: u64 },
     #[error("line {line}: expected at least {expected} tokens, found {found}")]
-    TooFewTokens {
-        line: u64,
-        expected: usize,
-        found: usize,
-    },
+    TooFewTokens { line: u64, expected: usize, found: usize },
     #[error("line {line}: {token:?} is not a decimal number")]
     NotANumber { line: u64, token: String },
     #[error("line {line}: {token:?} is not finite as a float")]
@@ -49,11 +45,7 @@ impl From<XyzError> for LogError {
     fn from(e: XyzError) -> Self {
         match e {
             XyzError::Io { line, source } => LogError::Io { line, source },
-            XyzError::TokenCount { line, found } => LogError::TooFewTokens {
-                line,
-                expected: 3,
-                found,
-            },
+            XyzError::TokenCount { line, found } => LogError::TooFewTokens { line, expected: 3, found },
             XyzError::NotANumber { line, token } => LogError::NotANumber { line, token },
             XyzError::NotFinite { line, token } => LogError::NotFinite { line, token },
         }
@@ -62,14 +54,8 @@ impl From<XyzError> for LogError {
 
 fn float(t: &[u8], line: u64) -> Result<f32, LogError> {
     parse_c_float(t).map_err(|e| match e {
-        FloatError::NotANumber => LogError::NotANumber {
-            line,
-            token: token_str(t),
-        },
-        FloatError::NotFinite => LogError::NotFinite {
-            line,
-            token: token_str(t),
-        },
+        FloatError::NotANumber => LogError::NotANumber { line, token: token_str(t) },
+        FloatError::NotFinite => LogError::NotFinite { line, token: token_str(t) },
     })
 }
 
@@ -88,9 +74,7 @@ pub fn read(mut reader: impl BufRead) -> Result<ScanGraph, LogError> {
     loop {
         buf.clear();
         line += 1;
-        reader
-            .read_until(b'\n', &mut buf)
-            .map_err(|source| LogError::Io { line, source })?;
+        reader.read_until(b'\n', &mut buf).map_err(|source| LogError::Io { line, source })?;
         // getline hitting EOF (no '\n') ends the loop even if it read text.
         if buf.last() != Some(&b'\n') {
             finish(&mut graph, current.take());
@@ -104,11 +88,7 @@ pub fn read(mut reader: impl BufRead) -> Result<ScanGraph, LogError> {
         if text.starts_with(b"NODE") {
             finish(&mut graph, current.take());
             if tokens.len() < 7 {
-                return Err(LogError::TooFewTokens {
-                    line,
-                    expected: 7,
-                    found: tokens.len(),
-                });
+                return Err(LogError::TooFewTokens { line, expected: 7, found: tokens.len() });
             }
             let mut v = [0f32; 6];
             for (slot, t) in v.iter_mut().zip(&tokens[1..7]) {
@@ -121,11 +101,7 @@ pub fn read(mut reader: impl BufRead) -> Result<ScanGraph, LogError> {
                 return Err(LogError::PointBeforeNode { line });
             };
             if tokens.len() < 3 {
-                return Err(LogError::TooFewTokens {
-                    line,
-                    expected: 3,
-                    found: tokens.len(),
-                });
+                return Err(LogError::TooFewTokens { line, expected: 3, found: tokens.len() });
             }
             scan.push(parse_point(&tokens[..3], line)?);
         }
@@ -149,16 +125,7 @@ pub fn write(graph: &ScanGraph, writer: impl Write) -> io::Result<()> {
     for node in &graph.nodes {
         let t = node.pose.translation;
         let e = node.pose.rotation.to_euler();
-        writeln!(
-            out,
-            "NODE {} {} {} {} {} {}",
-            f(t.x),
-            f(t.y),
-            f(t.z),
-            f(e.x),
-            f(e.y),
-            f(e.z)
-        )?;
+        writeln!(out, "NODE {} {} {} {} {} {}", f(t.x), f(t.y), f(t.z), f(e.x), f(e.y), f(e.z))?;
         for (i, p) in node.scan.iter().enumerate() {
             if !p.is_finite() {
                 return Err(io::Error::new(

@@ -35,29 +35,20 @@ pub enum TreeFileError {
     #[error("tree type `{0}` is recognised but not supported yet")]
     UnsupportedTreeType(String),
     #[error("not an OctoMap {expected} file: {reason}")]
-    WrongFormat {
-        expected: &'static str,
-        reason: String,
-    },
+    WrongFormat { expected: &'static str, reason: String },
 }
 
 /// Writes through `write` into a fresh temporary file next to `path`,
 /// syncs it, then renames it into place; on any error the temporary file is
 /// removed and `path` is left as it was.
-pub fn write_atomically(
-    path: &Path,
-    write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>,
-) -> io::Result<()> {
+pub fn write_atomically(path: &Path, write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>) -> io::Result<()> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    let name = path.file_name().ok_or_else(|| {
-        io::Error::new(
-            io::ErrorKind::InvalidInput,
-            format!("{} names no file", path.display()),
-        )
-    })?;
+    let name = path
+        .file_name()
+        .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, format!("{} names no file", path.display())))?;
     let (tmp, file) = create_temp(dir, &name.to_string_lossy())?;
     let result = (|| {
         let mut w = BufWriter::with_capacity(1 << 16, &file);
@@ -78,18 +69,11 @@ fn create_temp(dir: &Path, name: &str) -> io::Result<(PathBuf, File)> {
     let pid = std::process::id();
     for n in 0..1000u32 {
         let tmp = dir.join(format!(".{name}.{pid}.{n}.tmp"));
-        match std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&tmp)
-        {
+        match std::fs::OpenOptions::new().write(true).create_new(true).open(&tmp) {
             Ok(f) => return Ok((tmp, f)),
             Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
             Err(e) => return Err(e),
         }
     }
-    Err(io::Error::new(
-        io::ErrorKind::AlreadyExists,
-        format!("no free temporary name in {}", dir.display()),
-    ))
+    Err(io::Error::new(io::ErrorKind::AlreadyExists, format!("no free temporary name in {}", dir.display())))
 }

@@ -2,18 +2,19 @@
 //!
 //! Layout: the text header (`# Octomap OcTree file`, `id`, `size`, `res`,
 //! `data`), then every node in depth-first pre-order (children 0..7): its
-//! payload (for `OcTree` a little-endian `f32` log-odds) and one byte whose
-//! bit `i` says whether child `i` exists. See `formats/ot.md`.
+//! payload and one byte whose bit `i` says whether child `i` exists. The
+//! payload depends on the tree type named by `id`: `OcTree` and
+//! `OcTreeStamped` a little-endian `f32` log-odds (stamps are not stored),
+//! `ColorOcTree` the log-odds then `r, g, b` bytes, and `CountingOcTree`,
+//! whose id is `OcTreeBase`, a little-endian `u32` count. See `formats/ot.md`.
 
-use super::header::{
-    read_first_line, read_header, write_header, CountingReader, FirstLine, OT_FIRST_LINE,
-};
+use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, OT_FIRST_LINE};
 use super::TreeFileError;
 use crate::sensor::SensorModel;
-use crate::tree::{OccupancyTree, PreorderBuilder};
+use crate::tree::{CountingTree, NodeKind, NodeRef, OccupancyTree, PreorderBuilder};
 use std::io::{self, BufRead, Write};
 
-/// The tree kinds an `.ot` file may hold, by their header id.
+/// The tree types an `.ot` file may hold, by their header id.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TreeKind {
     OcTree,
@@ -28,17 +29,35 @@ impl TreeKind {
             "OcTree" => Some(TreeKind::OcTree),
             "OcTreeStamped" => Some(TreeKind::OcTreeStamped),
             "ColorOcTree" => Some(TreeKind::ColorOcTree),
-            "CountingOcTree" => Some(TreeKind::CountingOcTree),
+            // CountingOcTree does not override getTreeType()
+            "OcTreeBase" => Some(TreeKind::CountingOcTree),
             _ => None,
         }
     }
 
+    /// The id OctoMap writes for this type.
     pub fn id(self) -> &'static str {
         match self {
             TreeKind::OcTree => "OcTree",
             TreeKind::OcTreeStamped => "OcTreeStamped",
             TreeKind::ColorOcTree => "ColorOcTree",
-            TreeKind::CountingOcTree => "CountingOcTree",
+            TreeKind::CountingOcTree => "OcTreeBase",
+        }
+    }
+
+    pub fn of(kind: NodeKind) -> TreeKind {
+        match kind {
+            NodeKind::Plain => TreeKind::OcTree,
+            NodeKind::Color => TreeKind::ColorOcTree,
+            NodeKind::Stamped => TreeKind::OcTreeStamped,
+        }
+    }
+
+    /// Bytes of one node's payload.
+    fn payload_len(self) -> usize {
+        match self {
+            TreeKind::ColorOcTree => 7,
+            _ => 4,
         }
     }
 }
@@ -46,30 +65,32 @@ impl TreeKind {
 /// A tree read from an `.ot` file.
 #[derive(Clone, Debug)]
 pub enum AnyTree {
-    /// `OcTree`.
+    /// `OcTree`, `ColorOcTree` or `OcTreeStamped` (see [`OccupancyTree::kind`]).
     Occupancy(OccupancyTree),
-    /// `OcTreeStamped`: its `.ot` data holds log-odds only (no stamps).
-    Stamped(OccupancyTree),
+    /// `CountingOcTree`.
+    Counting(CountingTree),
 }
 
 impl AnyTree {
     pub fn kind(&self) -> TreeKind {
         match self {
-            AnyTree::Occupancy(_) => TreeKind::OcTree,
-            AnyTree::Stamped(_) => TreeKind::OcTreeStamped,
+            AnyTree::Occupancy(t) => TreeKind::of(t.kind()),
+            AnyTree::Counting(_) => TreeKind::CountingOcTree,
         }
     }
 
-    /// The occupancy part of any kind.
-    pub fn occupancy(&self) -> &OccupancyTree {
+    /// The occupancy tree, if this is one.
+    pub fn occupancy(&self) -> Option<&OccupancyTree> {
         match self {
-            AnyTree::Occupancy(t) | AnyTree::Stamped(t) => t,
+            AnyTree::Occupancy(t) => Some(t),
+            AnyTree::Counting(_) => None,
         }
     }
 
-    pub fn into_occupancy(self) -> OccupancyTree {
+    pub fn into_occupancy(self) -> Option<OccupancyTree> {
         match self {
-            AnyTree::Occupancy(t) | AnyTree::Stamped(t) => t,
+            AnyTree::Occupancy(t) => Some(t),
+            AnyTree::Counting(_) => None,
         }
     }
 }
@@ -82,88 +103,82 @@ pub fn read(r: impl BufRead) -> Result<AnyTree, TreeFileError> {
         let reason = if first == FirstLine::Binary {
             "this is a binary .bt file".to_string()
         } else {
-            format!(
-                "first line is `{}`",
-                String::from_utf8_lossy(&line[..line.len().min(60)])
-            )
+            format!("first line is `{}`", String::from_utf8_lossy(&line[..line.len().min(60)]))
         };
-        return Err(TreeFileError::WrongFormat {
-            expected: ".ot",
-            reason,
-        });
+        return Err(TreeFileError::WrongFormat { expected: ".ot", reason });
     }
     let header = read_header(&mut r)?;
-    let kind = TreeKind::from_id(&header.id)
-        .ok_or_else(|| TreeFileError::UnknownTreeType(header.id.clone()))?;
-    match kind {
-        TreeKind::OcTree | TreeKind::OcTreeStamped => {}
-        _ => return Err(TreeFileError::UnsupportedTreeType(header.id)),
-    }
-    let tree = if header.size > 0 {
-        read_nodes(&mut r, header.resolution)?
-    } else {
-        OccupancyTree::new(header.resolution)
-            .map_err(|_| TreeFileError::BadResolution(header.resolution))?
+    let kind = TreeKind::from_id(&header.id).ok_or_else(|| TreeFileError::UnknownTreeType(header.id.clone()))?;
+    let node_kind = match kind {
+        TreeKind::OcTree => NodeKind::Plain,
+        TreeKind::ColorOcTree => NodeKind::Color,
+        // counts live in the extras, like stamps
+        TreeKind::OcTreeStamped | TreeKind::CountingOcTree => NodeKind::Stamped,
     };
-    Ok(match kind {
-        TreeKind::OcTreeStamped => AnyTree::Stamped(tree),
-        _ => AnyTree::Occupancy(tree),
+    let mut b = PreorderBuilder::with_kind(node_kind);
+    if header.size > 0 {
+        let mut buf = [0u8; 8];
+        let len = kind.payload_len() + 1;
+        let mut index = 0;
+        while !b.is_complete() {
+            let offset = r.offset;
+            r.read_exact(&mut buf[..len], "a node")?;
+            let word = [buf[0], buf[1], buf[2], buf[3]];
+            let (value, extra) = match kind {
+                TreeKind::OcTree => (f32::from_le_bytes(word), None),
+                TreeKind::OcTreeStamped => (f32::from_le_bytes(word), Some(0)),
+                TreeKind::ColorOcTree => {
+                    (f32::from_le_bytes(word), Some(u32::from_le_bytes([buf[4], buf[5], buf[6], 0])))
+                }
+                TreeKind::CountingOcTree => (0.0, Some(u32::from_le_bytes(word))),
+            };
+            b.push_with_extra(value, extra, buf[len - 1], index).map_err(|_| TreeFileError::TooDeep { offset })?;
+            index += 1;
+        }
+    }
+    let bad_res = |_| TreeFileError::BadResolution(header.resolution);
+    if kind == TreeKind::CountingOcTree {
+        let arena = b.finish_arena().expect("complete");
+        return Ok(AnyTree::Counting(CountingTree::from_arena(header.resolution, arena).map_err(bad_res)?));
+    }
+    let tree = b.finish(header.resolution, SensorModel::default()).map_err(bad_res)?.expect("complete");
+    Ok(AnyTree::Occupancy(tree))
+}
+
+/// Writes `tree` as OctoMap's `write` does, under its type's id.
+pub fn write(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
+    let kind = TreeKind::of(tree.kind());
+    write_header(&mut w, OT_FIRST_LINE, kind.id(), tree.size(), tree.resolution())?;
+    write_nodes(tree.root(), &mut w, |n, out| {
+        out.extend_from_slice(&n.value().to_le_bytes());
+        if kind == TreeKind::ColorOcTree {
+            out.extend_from_slice(&n.extra().to_le_bytes()[..3]);
+        }
     })
 }
 
-/// Reads the pre-order node stream (value, child byte) into a tree.
-fn read_nodes<R: BufRead>(
-    r: &mut CountingReader<R>,
-    resolution: f64,
-) -> Result<OccupancyTree, TreeFileError> {
-    let mut b = PreorderBuilder::new();
-    let mut buf = [0u8; 5];
-    let mut index = 0;
-    while !b.is_complete() {
-        let offset = r.offset;
-        r.read_exact(&mut buf, "a node")?;
-        let value = f32::from_le_bytes([buf[0], buf[1], buf[2], buf[3]]);
-        b.push(value, buf[4], index)
-            .map_err(|_| TreeFileError::TooDeep { offset })?;
-        index += 1;
-    }
-    b.finish(resolution, SensorModel::default())
-        .map_err(|_| TreeFileError::BadResolution(resolution))?
-        .ok_or(TreeFileError::Truncated {
-            offset: r.offset,
-            what: "the node stream",
-        })
+/// Writes a counting tree (`id OcTreeBase`, `u32` counts).
+pub fn write_counting(tree: &CountingTree, mut w: impl Write) -> io::Result<()> {
+    write_header(&mut w, OT_FIRST_LINE, TreeKind::CountingOcTree.id(), tree.size(), tree.resolution())?;
+    write_nodes(tree.root(), &mut w, |n, out| out.extend_from_slice(&n.extra().to_le_bytes()))
 }
 
-/// Writes `tree` as OctoMap's `OcTree::write` does.
-pub fn write(tree: &OccupancyTree, w: impl Write) -> io::Result<()> {
-    write_kind(tree, TreeKind::OcTree, w)
-}
-
-/// Writes an occupancy tree under the header id of `kind` (`OcTree` or
-/// `OcTreeStamped`, whose `.ot` data are the same).
-pub fn write_kind(tree: &OccupancyTree, kind: TreeKind, mut w: impl Write) -> io::Result<()> {
-    write_header(
-        &mut w,
-        OT_FIRST_LINE,
-        kind.id(),
-        tree.size(),
-        tree.resolution(),
-    )?;
-    let Some(arena) = tree.arena() else {
-        return Ok(());
-    };
+/// The pre-order node stream: payload, then the child-existence byte.
+fn write_nodes(
+    root: Option<NodeRef<'_>>,
+    w: &mut impl Write,
+    payload: impl Fn(&NodeRef<'_>, &mut Vec<u8>),
+) -> io::Result<()> {
+    let Some(root) = root else { return Ok(()) };
     let mut out = Vec::with_capacity(1 << 16);
-    let mut stack = vec![0u32];
+    let mut stack = vec![root];
     while let Some(n) = stack.pop() {
-        out.extend_from_slice(&arena.value(n).to_le_bytes());
-        let mask = arena.mask(n);
-        out.push(mask);
-        let first = arena.first_child(n);
-        for i in (0..mask.count_ones()).rev() {
-            stack.push(first + i);
+        payload(&n, &mut out);
+        out.push(n.child_mask());
+        for rank in (0..n.child_count()).rev() {
+            stack.extend(n.nth_child(rank));
         }
-        if out.len() >= (1 << 16) - 8 {
+        if out.len() >= (1 << 16) - 16 {
             w.write_all(&out)?;
             out.clear();
         }

@@ -47,10 +47,7 @@ pub(crate) enum FloatError {
 /// Overflow is rejected (libstdc++ sets failbit); underflow to 0 or a
 /// subnormal is accepted like `strtof`.
 pub(crate) fn parse_c_float(token: &[u8]) -> Result<f32, FloatError> {
-    if !token
-        .iter()
-        .all(|b| b.is_ascii_digit() || matches!(b, b'+' | b'-' | b'.' | b'e' | b'E'))
-    {
+    if !token.iter().all(|b| b.is_ascii_digit() || matches!(b, b'+' | b'-' | b'.' | b'e' | b'E')) {
         return Err(FloatError::NotANumber);
     }
     let s = std::str::from_utf8(token).map_err(|_| FloatError::NotANumber)?;
@@ -71,14 +68,8 @@ pub(crate) fn parse_point(tokens: &[&[u8]], line: u64) -> Result<Point3, XyzErro
     let mut c = [0f32; 3];
     for (v, t) in c.iter_mut().zip(tokens) {
         *v = parse_c_float(t).map_err(|e| match e {
-            FloatError::NotANumber => XyzError::NotANumber {
-                line,
-                token: token_str(t),
-            },
-            FloatError::NotFinite => XyzError::NotFinite {
-                line,
-                token: token_str(t),
-            },
+            FloatError::NotANumber => XyzError::NotANumber { line, token: token_str(t) },
+            FloatError::NotFinite => XyzError::NotFinite { line, token: token_str(t) },
         })?;
     }
     Ok(Point3::from_array(c))
@@ -93,9 +84,7 @@ pub fn read(mut reader: impl BufRead) -> Result<PointCloud, XyzError> {
     loop {
         buf.clear();
         line += 1;
-        let n = reader
-            .read_until(b'\n', &mut buf)
-            .map_err(|source| XyzError::Io { line, source })?;
+        let n = reader.read_until(b'\n', &mut buf).map_err(|source| XyzError::Io { line, source })?;
         if n == 0 {
             return Ok(cloud);
         }
@@ -131,18 +120,9 @@ pub fn write(cloud: &PointCloud, writer: impl Write) -> io::Result<()> {
     let mut out = BufWriter::with_capacity(1 << 16, writer);
     for (i, p) in cloud.iter().enumerate() {
         if !p.is_finite() {
-            return Err(io::Error::new(
-                io::ErrorKind::InvalidInput,
-                format!("point {i} ({:?}) is not finite", p),
-            ));
+            return Err(io::Error::new(io::ErrorKind::InvalidInput, format!("point {i} ({:?}) is not finite", p)));
         }
-        writeln!(
-            out,
-            "{} {} {}",
-            format_f32(p.x),
-            format_f32(p.y),
-            format_f32(p.z)
-        )?;
+        writeln!(out, "{} {} {}", format_f32(p.x), format_f32(p.y), format_f32(p.z))?;
     }
     out.flush()
 }

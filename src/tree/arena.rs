@@ -10,6 +10,10 @@
 //! move when their siblings change: node ids are valid only until the next
 //! structural change. [`NodeArena::compacted`] re-lays every group in
 //! depth-first (Morton) order with no free runs left.
+//!
+//! Trees whose nodes carry more than log-odds (colour, time stamp, count)
+//! add a fourth array of `u32` *extras*; plain trees leave it empty and pay
+//! nothing for it.
 
 /// Id of a node in the arena.
 pub type NodeId = u32;
@@ -22,6 +26,10 @@ pub struct NodeArena {
     values: Vec<f32>,
     masks: Vec<u8>,
     first_child: Vec<NodeId>,
+    /// Per-node payload beyond the value; empty unless enabled.
+    extras: Vec<u32>,
+    /// The extra of a newly created node; `None` when extras are off.
+    default_extra: Option<u32>,
     /// Free slot runs by length (index 1..=8).
     free: [Vec<NodeId>; 9],
     free_slots: usize,
@@ -38,10 +46,34 @@ pub struct ArenaUsage {
 impl NodeArena {
     /// An arena holding only a root (id 0) with the given value.
     pub fn with_root(value: f32) -> Self {
-        let mut a = NodeArena::default();
+        Self::with_root_and_extras(value, None)
+    }
+
+    /// Like [`Self::with_root`], with a per-node `u32` extra when
+    /// `default_extra` is given (new nodes start with it).
+    pub fn with_root_and_extras(value: f32, default_extra: Option<u32>) -> Self {
+        let mut a = NodeArena { default_extra, ..Default::default() };
         a.push_run(1);
         a.values[0] = value;
         a
+    }
+
+    #[inline(always)]
+    pub fn has_extras(&self) -> bool {
+        self.default_extra.is_some()
+    }
+
+    /// The extra of `n` (0 when extras are off).
+    #[inline(always)]
+    pub fn extra(&self, n: NodeId) -> u32 {
+        self.extras.get(n as usize).copied().unwrap_or(0)
+    }
+
+    #[inline(always)]
+    pub fn set_extra(&mut self, n: NodeId, v: u32) {
+        if let Some(e) = self.extras.get_mut(n as usize) {
+            *e = v;
+        }
     }
 
     #[inline(always)]
@@ -85,24 +117,22 @@ impl NodeArena {
     pub fn children(&self, n: NodeId) -> impl Iterator<Item = (usize, NodeId)> {
         let m = self.masks[n as usize];
         let first = self.first_child[n as usize];
-        (0..8usize)
-            .filter(move |&i| m & (1 << i) != 0)
-            .scan(first, |next, i| {
-                let id = *next;
-                *next += 1;
-                Some((i, id))
-            })
+        (0..8usize).filter(move |&i| m & (1 << i) != 0).scan(first, |next, i| {
+            let id = *next;
+            *next += 1;
+            Some((i, id))
+        })
     }
 
     fn push_run(&mut self, len: usize) -> NodeId {
         let start = self.values.len();
-        assert!(
-            start + len <= u32::MAX as usize,
-            "node arena exceeds 2^32 slots"
-        );
+        assert!(start + len <= u32::MAX as usize, "node arena exceeds 2^32 slots");
         self.values.resize(start + len, 0.0);
         self.masks.resize(start + len, 0);
         self.first_child.resize(start + len, NO_CHILD);
+        if let Some(e) = self.default_extra {
+            self.extras.resize(start + len, e);
+        }
         start as NodeId
     }
 
@@ -129,6 +159,21 @@ impl NodeArena {
         self.values[t] = self.values[f];
         self.masks[t] = self.masks[f];
         self.first_child[t] = self.first_child[f];
+        if self.default_extra.is_some() {
+            self.extras[t] = self.extras[f];
+        }
+    }
+
+    /// Makes slot `id` a fresh leaf holding `value` and `extra`.
+    #[inline(always)]
+    fn init_slot(&mut self, id: NodeId, value: f32, extra: Option<u32>) {
+        let i = id as usize;
+        self.values[i] = value;
+        self.masks[i] = 0;
+        self.first_child[i] = NO_CHILD;
+        if let Some(e) = extra {
+            self.extras[i] = e;
+        }
     }
 
     /// Adds child `pos` (which must not exist) as a leaf with `value`;
@@ -147,30 +192,25 @@ impl NodeArena {
             self.copy_slot(old + i, new + i + 1);
         }
         let id = new + rank;
-        self.values[id as usize] = value;
-        self.masks[id as usize] = 0;
-        self.first_child[id as usize] = NO_CHILD;
+        self.init_slot(id, value, self.default_extra);
         self.free_run(old, old_len);
         self.masks[n as usize] = m | (1 << pos);
         self.first_child[n as usize] = new;
         id
     }
 
-    /// Gives a leaf `n` the children in `mask`, each a leaf holding
+    /// Gives a leaf `n` the children in `mask`, each a new leaf holding
     /// `value`; returns the id of the first.
     pub fn add_children(&mut self, n: NodeId, mask: u8, value: f32) -> NodeId {
+        self.add_children_with(n, mask, value, self.default_extra)
+    }
+
+    fn add_children_with(&mut self, n: NodeId, mask: u8, value: f32, extra: Option<u32>) -> NodeId {
         debug_assert_eq!(self.masks[n as usize], 0);
         let len = mask.count_ones();
-        let new = if len == 0 {
-            NO_CHILD
-        } else {
-            self.alloc_run(len as usize)
-        };
+        let new = if len == 0 { NO_CHILD } else { self.alloc_run(len as usize) };
         for i in 0..len {
-            let id = (new + i) as usize;
-            self.values[id] = value;
-            self.masks[id] = 0;
-            self.first_child[id] = NO_CHILD;
+            self.init_slot(new + i, value, extra);
         }
         self.masks[n as usize] = mask;
         self.first_child[n as usize] = new;
@@ -198,10 +238,7 @@ impl NodeArena {
                 from += 1;
                 to += 1;
             } else if add & (1 << i) != 0 {
-                let id = to as usize;
-                self.values[id] = value;
-                self.masks[id] = 0;
-                self.first_child[id] = NO_CHILD;
+                self.init_slot(to, value, self.default_extra);
                 to += 1;
             }
         }
@@ -211,9 +248,11 @@ impl NodeArena {
         new
     }
 
-    /// Gives a leaf `n` all eight children, each holding `value`.
-    pub fn add_all_children(&mut self, n: NodeId, value: f32) {
-        self.add_children(n, 0xff, value);
+    /// Expands a leaf `n`: eight children holding its value and extra
+    /// (OctoMap's `expandNode` copies the node's data).
+    pub fn expand_node(&mut self, n: NodeId) {
+        let extra = self.default_extra.map(|_| self.extra(n));
+        self.add_children_with(n, 0xff, self.value(n), extra);
     }
 
     /// Removes child `pos` of `n` and its whole subtree; returns the number
@@ -271,13 +310,17 @@ impl NodeArena {
     /// A copy laid out in depth-first order: the root first, each node's
     /// child group allocated as the node is visited, exactly sized.
     pub fn compacted(&self, root: NodeId) -> NodeArena {
-        let mut out = NodeArena::default();
+        let mut out = NodeArena { default_extra: self.default_extra, ..Default::default() };
         let total = self.values.len() - self.free_slots;
         out.values.reserve_exact(total);
+        if self.default_extra.is_some() {
+            out.extras.reserve_exact(total);
+        }
         out.masks.reserve_exact(total);
         out.first_child.reserve_exact(total);
         out.push_run(1);
         out.values[0] = self.values[root as usize];
+        out.set_extra(0, self.extra(root));
         // (old id, new id) pairs whose child groups still need copying
         let mut stack = vec![(root, 0 as NodeId)];
         while let Some((old, new)) = stack.pop() {
@@ -292,6 +335,7 @@ impl NodeArena {
             out.first_child[new as usize] = first_new;
             for i in 0..len as u32 {
                 out.values[(first_new + i) as usize] = self.values[(first_old + i) as usize];
+                out.set_extra(first_new + i, self.extra(first_old + i));
             }
             for i in (0..len as u32).rev() {
                 stack.push((first_old + i, first_new + i));
@@ -305,20 +349,18 @@ impl NodeArena {
         self.values.shrink_to_fit();
         self.masks.shrink_to_fit();
         self.first_child.shrink_to_fit();
+        self.extras.shrink_to_fit();
     }
 
     pub fn usage(&self) -> ArenaUsage {
-        let free_list_bytes: usize = self
-            .free
-            .iter()
-            .map(|f| f.capacity() * std::mem::size_of::<NodeId>())
-            .sum();
+        let free_list_bytes: usize = self.free.iter().map(|f| f.capacity() * std::mem::size_of::<NodeId>()).sum();
         ArenaUsage {
             live_slots: self.values.len() - self.free_slots,
             free_slots: self.free_slots,
             bytes_reserved: self.values.capacity() * 4
                 + self.masks.capacity()
                 + self.first_child.capacity() * 4
+                + self.extras.capacity() * 4
                 + free_list_bytes,
         }
     }
@@ -346,7 +388,8 @@ mod tests {
         // runs of length 1, 2 and 3 were freed along the way
         assert_eq!(a.usage().free_slots, 6);
         let c = a.child(0, 1).unwrap();
-        a.add_all_children(c, 9.0);
+        a.set_value(c, 9.0);
+        a.expand_node(c);
         assert_eq!(a.remove_child(0, 1), 9);
         let kids: Vec<_> = a.children(0).map(|(i, id)| (i, a.value(id))).collect();
         assert_eq!(kids, vec![(0, 0.0), (5, 5.0), (7, 7.0)]);

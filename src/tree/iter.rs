@@ -31,6 +31,8 @@ pub struct NodeItem<'a> {
     pub key: Key,
     pub depth: u8,
     pub value: f32,
+    /// Colour or stamp, by the tree's kind (0 for plain trees).
+    pub extra: u32,
     /// No children, or at the iteration's depth limit.
     pub is_leaf: bool,
     keys: &'a KeySpace,
@@ -44,9 +46,7 @@ impl NodeItem<'_> {
 
     /// Centre in metres (double, as OctoMap's `getX/Y/Z`).
     pub fn center(&self) -> [f64; 3] {
-        self.key
-            .0
-            .map(|k| self.keys.key_to_coord_at_depth(k, self.depth))
+        self.key.0.map(|k| self.keys.key_to_coord_at_depth(k, self.depth))
     }
 
     /// Centre as a float point (`getCoordinate`).
@@ -66,30 +66,23 @@ pub struct NodeIter<'a> {
 }
 
 impl<'a> NodeIter<'a> {
-    pub(super) fn new(
-        tree: &'a OccupancyTree,
+    pub(super) fn new(tree: &'a OccupancyTree, max_depth: u8, leaves_only: bool, bbx: Option<KeyBox>) -> Self {
+        Self::over(tree.arena(), tree.key_space(), max_depth, leaves_only, bbx)
+    }
+
+    pub(super) fn over(
+        arena: Option<&'a NodeArena>,
+        keys: &'a KeySpace,
         max_depth: u8,
         leaves_only: bool,
         bbx: Option<KeyBox>,
     ) -> Self {
-        let max_depth = if max_depth == 0 || max_depth > TREE_DEPTH {
-            TREE_DEPTH
-        } else {
-            max_depth
-        };
-        let arena = tree.arena();
+        let max_depth = if max_depth == 0 || max_depth > TREE_DEPTH { TREE_DEPTH } else { max_depth };
         let mut stack = Vec::with_capacity(8 * TREE_DEPTH as usize + 1);
         if arena.is_some() {
             stack.push((ROOT, Key::ROOT, 0));
         }
-        NodeIter {
-            arena,
-            keys: tree.key_space(),
-            stack,
-            max_depth,
-            leaves_only,
-            bbx,
-        }
+        NodeIter { arena, keys, stack, max_depth, leaves_only, bbx }
     }
 }
 
@@ -118,13 +111,7 @@ impl<'a> Iterator for NodeIter<'a> {
                     continue;
                 }
             }
-            return Some(NodeItem {
-                key,
-                depth,
-                value: a.value(n),
-                is_leaf,
-                keys: self.keys,
-            });
+            return Some(NodeItem { key, depth, value: a.value(n), extra: a.extra(n), is_leaf, keys: self.keys });
         }
         None
     }

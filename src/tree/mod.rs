@@ -1,9 +1,11 @@
 //! The occupancy octree: OctoMap's `OcTree` semantics on a node arena.
 
 mod arena;
+mod counting;
 mod iter;
 
 pub use arena::{ArenaUsage, NodeArena, NodeId};
+pub use counting::CountingTree;
 pub use iter::{KeyBox, NodeItem, NodeIter};
 
 use crate::geometry::Point3;
@@ -42,6 +44,63 @@ pub struct Found {
     pub value: f32,
     pub depth: u8,
     pub is_leaf: bool,
+    /// Colour (`r | g << 8 | b << 16`) or time stamp, by the tree's
+    /// [`NodeKind`]; 0 for plain trees.
+    pub extra: u32,
+}
+
+/// What nodes carry beyond log-odds, and the OctoMap rules that come with it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum NodeKind {
+    /// `OcTree`.
+    #[default]
+    Plain,
+    /// `ColorOcTree`: an RGB colour per node, white meaning "not set".
+    /// Pruning ignores colours (a pruned node gets its children's average
+    /// colour); inner colours are averaged by `update_inner_occupancy`.
+    Color,
+    /// `OcTreeStamped`: the time of the last update per node. Updates stamp
+    /// the voxel and the inner nodes on its path; pruning needs equal stamps.
+    Stamped,
+}
+
+/// An RGB colour packed as `r | g << 8 | b << 16`; white means unset.
+pub const WHITE: u32 = 0x00ff_ffff;
+
+pub fn pack_rgb(rgb: [u8; 3]) -> u32 {
+    u32::from(rgb[0]) | (u32::from(rgb[1]) << 8) | (u32::from(rgb[2]) << 16)
+}
+
+pub fn unpack_rgb(c: u32) -> [u8; 3] {
+    [c as u8, (c >> 8) as u8, (c >> 16) as u8]
+}
+
+/// Where stamped trees get the time from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Clock {
+    /// Seconds since the Unix epoch, as OctoMap's `time(NULL)`.
+    #[default]
+    System,
+    /// A fixed time (replays, tests).
+    Fixed(u32),
+}
+
+impl Clock {
+    pub fn now(self) -> u32 {
+        match self {
+            Clock::Fixed(t) => t,
+            Clock::System => {
+                std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs() as u32)
+            }
+        }
+    }
+}
+
+/// The per-kind rules, with the time already read.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Rules {
+    pub(crate) kind: NodeKind,
+    pub(crate) now: u32,
 }
 
 /// Metric bounds of the known space.
@@ -53,11 +112,7 @@ pub struct Bounds {
 
 impl Bounds {
     pub fn size(&self) -> [f64; 3] {
-        [
-            self.max[0] - self.min[0],
-            self.max[1] - self.min[1],
-            self.max[2] - self.min[2],
-        ]
+        [self.max[0] - self.min[0], self.max[1] - self.min[1], self.max[2] - self.min[2]]
     }
 }
 
@@ -82,6 +137,8 @@ pub struct OccupancyTree {
     /// when an inner node is deleted, exactly as OctoMap's does.
     size: usize,
     changes: Option<HashMap<Key, bool>>,
+    kind: NodeKind,
+    clock: Clock,
 }
 
 impl OccupancyTree {
@@ -91,6 +148,11 @@ impl OccupancyTree {
     }
 
     pub fn with_sensor(resolution: f64, sensor: SensorModel) -> Result<Self, TreeError> {
+        Self::with_kind(resolution, sensor, NodeKind::Plain)
+    }
+
+    /// An empty tree whose nodes carry what `kind` says.
+    pub fn with_kind(resolution: f64, sensor: SensorModel, kind: NodeKind) -> Result<Self, TreeError> {
         if !(resolution.is_finite() && resolution > 0.0) {
             return Err(TreeError::BadResolution(resolution));
         }
@@ -100,7 +162,33 @@ impl OccupancyTree {
             arena: None,
             size: 0,
             changes: None,
+            kind,
+            clock: Clock::System,
         })
+    }
+
+    pub fn kind(&self) -> NodeKind {
+        self.kind
+    }
+
+    /// The clock stamped trees read when updating.
+    pub fn set_clock(&mut self, clock: Clock) {
+        self.clock = clock;
+    }
+
+    fn rules(&self) -> Rules {
+        let now = if self.kind == NodeKind::Stamped { self.clock.now() } else { 0 };
+        Rules { kind: self.kind, now }
+    }
+
+    /// A new arena with a root of `value`, carrying this kind's extras.
+    pub(crate) fn new_arena(kind: NodeKind, value: f32) -> NodeArena {
+        let extra = match kind {
+            NodeKind::Plain => None,
+            NodeKind::Color => Some(WHITE),
+            NodeKind::Stamped => Some(0),
+        };
+        NodeArena::with_root_and_extras(value, extra)
     }
 
     pub fn resolution(&self) -> f64 {
@@ -162,26 +250,17 @@ impl OccupancyTree {
             }
         }
         let sensor = self.sensor;
-        self.modify(key, inner, |v| sensor.apply(v, delta))
+        self.modify(key, inner, true, |v| sensor.apply(v, delta))
     }
 
     /// Integrates a hit (`occupied`) or a miss at `key`.
     pub fn update_occupancy(&mut self, key: Key, occupied: bool, inner: InnerNodes) -> f32 {
-        let delta = if occupied {
-            self.sensor.hit
-        } else {
-            self.sensor.miss
-        };
+        let delta = if occupied { self.sensor.hit } else { self.sensor.miss };
         self.update(key, delta, inner)
     }
 
     /// [`Self::update_occupancy`] at the voxel containing `p`.
-    pub fn update_point(
-        &mut self,
-        p: Point3,
-        occupied: bool,
-        inner: InnerNodes,
-    ) -> Result<f32, KeyError> {
+    pub fn update_point(&mut self, p: Point3, occupied: bool, inner: InnerNodes) -> Result<f32, KeyError> {
         let key = self.keys.key(p)?;
         Ok(self.update_occupancy(key, occupied, inner))
     }
@@ -189,16 +268,17 @@ impl OccupancyTree {
     /// Sets the voxel's log-odds (clamped), as `setNodeValue` does.
     pub fn set_value(&mut self, key: Key, value: f32, inner: InnerNodes) -> f32 {
         let v = self.sensor.clamp(value);
-        self.modify(key, inner, |_| v)
+        self.modify(key, inner, false, |_| v)
     }
 
     /// Descends to `key` creating (or expanding) nodes as OctoMap's
     /// `updateNodeRecurs` does, applies `f` to the voxel, then updates and
     /// prunes the path bottom-up unless deferred.
-    fn modify(&mut self, key: Key, inner: InnerNodes, f: impl FnOnce(f32) -> f32) -> f32 {
+    fn modify(&mut self, key: Key, inner: InnerNodes, stamp: bool, f: impl FnOnce(f32) -> f32) -> f32 {
+        let rules = self.rules();
         let mut created = false;
         if self.arena.is_none() {
-            self.arena = Some(NodeArena::with_root(0.0));
+            self.arena = Some(Self::new_arena(self.kind, 0.0));
             self.size += 1;
             created = true;
         }
@@ -214,8 +294,7 @@ impl OccupancyTree {
                     c
                 }
                 None if !arena.has_children(node) && !created => {
-                    let v = arena.value(node);
-                    arena.add_all_children(node, v);
+                    arena.expand_node(node);
                     self.size += 8;
                     created = false;
                     arena.child(node, pos).expect("just expanded")
@@ -230,6 +309,9 @@ impl OccupancyTree {
         let before = arena.value(node);
         let after = f(before);
         arena.set_value(node, after);
+        if stamp && rules.kind == NodeKind::Stamped {
+            arena.set_extra(node, rules.now);
+        }
         if let Some(changes) = self.changes.as_mut() {
             if created {
                 changes.insert(key, true);
@@ -250,11 +332,11 @@ impl OccupancyTree {
         }
         let mut result = after;
         for &n in path.iter().rev() {
-            if let Some(v) = prune_node(arena, n) {
+            if let Some(v) = prune_node(arena, n, rules) {
                 self.size -= 8;
                 result = v;
             } else {
-                arena.set_value(n, max_child_value(arena, n));
+                update_from_children(arena, n, rules);
             }
         }
         result
@@ -273,12 +355,14 @@ impl OccupancyTree {
         }
         let mut created = false;
         if self.arena.is_none() {
-            self.arena = Some(NodeArena::with_root(0.0));
+            self.arena = Some(Self::new_arena(self.kind, 0.0));
             self.size += 1;
             created = true;
         }
+        let rules = self.rules();
         let mut batch = Batch {
             arena: self.arena.as_mut().expect("root exists"),
+            rules,
             sensor: self.sensor,
             delta,
             lazy: inner == InnerNodes::Defer,
@@ -292,19 +376,23 @@ impl OccupancyTree {
     /// Recomputes every inner node as the maximum of its children
     /// (`updateInnerOccupancy`), after deferred updates.
     pub fn update_inner_occupancy(&mut self) {
-        fn recurse(a: &mut NodeArena, n: NodeId) {
+        fn recurse(a: &mut NodeArena, n: NodeId, rules: Rules) {
             if !a.has_children(n) {
                 return;
             }
             let first = a.first_child(n);
             for i in 0..a.mask(n).count_ones() {
-                recurse(a, first + i);
+                recurse(a, first + i, rules);
             }
-            let v = max_child_value(a, n);
-            a.set_value(n, v);
+            update_from_children(a, n, rules);
+            if rules.kind == NodeKind::Color {
+                let c = average_child_color(a, n);
+                a.set_extra(n, c);
+            }
         }
+        let rules = self.rules();
         if let Some(a) = self.arena.as_mut() {
-            recurse(a, ROOT);
+            recurse(a, ROOT, rules);
         }
     }
 
@@ -324,20 +412,21 @@ impl OccupancyTree {
     /// parent, level by level from depth 15 up, stopping at the first level
     /// where nothing merged (OctoMap's `prune`, including that early stop).
     pub fn prune(&mut self) {
-        fn at_depth(a: &mut NodeArena, n: NodeId, depth: u8, target: u8, pruned: &mut usize) {
+        fn at_depth(a: &mut NodeArena, n: NodeId, depth: u8, target: u8, rules: Rules, pruned: &mut usize) {
             if depth < target {
                 let first = a.first_child(n);
                 for i in 0..a.mask(n).count_ones() {
-                    at_depth(a, first + i, depth + 1, target, pruned);
+                    at_depth(a, first + i, depth + 1, target, rules, pruned);
                 }
-            } else if prune_node(a, n).is_some() {
+            } else if prune_node(a, n, rules).is_some() {
                 *pruned += 1;
             }
         }
+        let rules = self.rules();
         let Some(a) = self.arena.as_mut() else { return };
         for depth in (1..TREE_DEPTH).rev() {
             let mut pruned = 0;
-            at_depth(a, ROOT, 0, depth, &mut pruned);
+            at_depth(a, ROOT, 0, depth, rules, &mut pruned);
             self.size -= 8 * pruned;
             if pruned == 0 {
                 break;
@@ -353,8 +442,7 @@ impl OccupancyTree {
                 return;
             }
             if !a.has_children(n) {
-                let v = a.value(n);
-                a.add_all_children(n, v);
+                a.expand_node(n);
                 *added += 8;
             }
             let first = a.first_child(n);
@@ -375,7 +463,7 @@ impl OccupancyTree {
     /// return value is `true` only when the root is left without children
     /// (or the tree was empty).
     pub fn delete(&mut self, key: Key, depth: u8) -> bool {
-        fn recurse(t: &mut OccupancyTree, n: NodeId, depth: u8, max_depth: u8, key: Key) -> bool {
+        fn recurse(t: &mut OccupancyTree, n: NodeId, depth: u8, max_depth: u8, key: Key, rules: Rules) -> bool {
             if depth >= max_depth {
                 return true;
             }
@@ -383,35 +471,30 @@ impl OccupancyTree {
             let pos = key.child_index(depth);
             if a.child(n, pos).is_none() {
                 if !a.has_children(n) && n != ROOT {
-                    let v = a.value(n);
-                    a.add_all_children(n, v);
+                    a.expand_node(n);
                     t.size += 8;
                 } else {
                     return false;
                 }
             }
             let child = a.child(n, pos).expect("exists or expanded");
-            if recurse(t, child, depth + 1, max_depth, key) {
+            if recurse(t, child, depth + 1, max_depth, key, rules) {
                 let a = t.arena.as_mut().expect("root exists");
                 a.remove_child(n, pos);
                 t.size -= 1;
                 if !a.has_children(n) {
                     return true;
                 }
-                let v = max_child_value(a, n);
-                a.set_value(n, v);
+                update_from_children(a, n, rules);
             }
             false
         }
         if self.arena.is_none() {
             return true;
         }
-        let max_depth = if depth == 0 || depth > TREE_DEPTH {
-            TREE_DEPTH
-        } else {
-            depth
-        };
-        recurse(self, ROOT, 0, max_depth, key)
+        let max_depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
+        let rules = self.rules();
+        recurse(self, ROOT, 0, max_depth, key, rules)
     }
 
     /// [`Self::delete`] at the voxel containing `p`.
@@ -428,40 +511,107 @@ impl OccupancyTree {
     #[inline]
     pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
         let a = self.arena.as_ref()?;
-        let depth = if depth == 0 || depth > TREE_DEPTH {
-            TREE_DEPTH
-        } else {
-            depth
-        };
-        let key = if depth == TREE_DEPTH {
-            key
-        } else {
-            adjust_key_to_depth(key, depth)
-        };
+        let (id, depth, is_leaf) = self.search_id(key, depth)?;
+        Some(Found { value: a.value(id), depth, is_leaf, extra: a.extra(id) })
+    }
+
+    /// [`Self::search`] giving the node id (valid until the next change).
+    #[inline]
+    fn search_id(&self, key: Key, depth: u8) -> Option<(NodeId, u8, bool)> {
+        let a = self.arena.as_ref()?;
+        let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
+        let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
         let mut node = ROOT;
         for d in 0..depth {
             match a.child(node, key.child_index(d)) {
                 Some(c) => node = c,
                 None if a.has_children(node) => return None,
-                None => {
-                    return Some(Found {
-                        value: a.value(node),
-                        depth: d,
-                        is_leaf: true,
-                    })
-                }
+                None => return Some((node, d, true)),
             }
         }
-        Some(Found {
-            value: a.value(node),
-            depth,
-            is_leaf: !a.has_children(node),
-        })
+        Some((node, depth, !a.has_children(node)))
     }
 
     /// [`Self::search`] at the voxel containing `p`.
     pub fn search_point(&self, p: Point3, depth: u8) -> Result<Option<Found>, KeyError> {
         Ok(self.search(self.keys.key(p)?, depth))
+    }
+
+    // ----- colour trees (`ColorOcTree`) -------------------------------------
+
+    /// Applies `f` to the colour of the node holding `key` (OctoMap's
+    /// colour setters act on whatever `search` finds, a pruned coarse leaf
+    /// included); returns the new colour, `None` when nothing was found.
+    fn with_color(&mut self, key: Key, f: impl FnOnce(Option<[u8; 3]>, f32) -> [u8; 3]) -> Option<[u8; 3]> {
+        if self.kind != NodeKind::Color {
+            return None;
+        }
+        let (id, _, _) = self.search_id(key, 0)?;
+        let a = self.arena.as_mut()?;
+        let e = a.extra(id);
+        let current = (e != WHITE).then(|| unpack_rgb(e));
+        let rgb = f(current, a.value(id));
+        a.set_extra(id, pack_rgb(rgb));
+        Some(rgb)
+    }
+
+    /// `setNodeColor`.
+    pub fn set_color(&mut self, key: Key, rgb: [u8; 3]) -> Option<[u8; 3]> {
+        self.with_color(key, |_, _| rgb)
+    }
+
+    /// `averageNodeColor`: the mean of the old colour and `rgb`.
+    pub fn average_color(&mut self, key: Key, rgb: [u8; 3]) -> Option<[u8; 3]> {
+        self.with_color(key, |old, _| match old {
+            Some(o) => [0, 1, 2].map(|i| ((u32::from(o[i]) + u32::from(rgb[i])) / 2) as u8),
+            None => rgb,
+        })
+    }
+
+    /// `integrateNodeColor`: the old colour weighted by the node's
+    /// occupancy probability, the new one by `0.99 - p`.
+    pub fn integrate_color(&mut self, key: Key, rgb: [u8; 3]) -> Option<[u8; 3]> {
+        self.with_color(key, |old, value| match old {
+            Some(o) => {
+                let p = crate::sensor::probability(f64::from(value));
+                [0, 1, 2].map(|i| (f64::from(o[i]) * p + f64::from(rgb[i]) * (0.99 - p)) as u8)
+            }
+            None => rgb,
+        })
+    }
+
+    // ----- stamped trees (`OcTreeStamped`) -----------------------------------
+
+    /// `getLastUpdateTime`: the root's stamp.
+    pub fn last_update_time(&self) -> Option<u32> {
+        if self.kind != NodeKind::Stamped {
+            return None;
+        }
+        self.arena.as_ref().map(|a| a.extra(ROOT))
+    }
+
+    /// `degradeOutdatedNodes`: every occupied leaf whose stamp is more than
+    /// `max_age` seconds old gets a miss (without a new stamp). Inner nodes
+    /// are left as they are, as in OctoMap.
+    pub fn degrade_outdated_nodes(&mut self, max_age: u32) {
+        if self.kind != NodeKind::Stamped {
+            return;
+        }
+        let now = self.clock.now();
+        let sensor = self.sensor;
+        let Some(a) = self.arena.as_mut() else { return };
+        let mut stack = vec![ROOT];
+        while let Some(n) = stack.pop() {
+            if a.has_children(n) {
+                let first = a.first_child(n);
+                stack.extend((0..a.mask(n).count_ones()).map(|i| first + i));
+            } else {
+                let v = a.value(n);
+                if sensor.is_occupied(v) && now.wrapping_sub(a.extra(n)) > max_age {
+                    a.set_value(n, sensor.apply(v, sensor.miss));
+                }
+            }
+        }
     }
 
     /// A cursor on the root, `None` for an empty tree.
@@ -503,9 +653,7 @@ impl OccupancyTree {
     pub fn calc_num_nodes(&self) -> usize {
         fn count(a: &NodeArena, n: NodeId) -> usize {
             let first = a.first_child(n);
-            1 + (0..a.mask(n).count_ones())
-                .map(|i| count(a, first + i))
-                .sum::<usize>()
+            1 + (0..a.mask(n).count_ones()).map(|i| count(a, first + i)).sum::<usize>()
         }
         self.arena.as_ref().map_or(0, |a| count(a, ROOT))
     }
@@ -513,22 +661,14 @@ impl OccupancyTree {
     /// Metric bounds of all leaves (zero for an empty tree).
     pub fn bounds(&self, rule: BoundsRule) -> Bounds {
         if self.arena.is_none() {
-            return Bounds {
-                min: [0.0; 3],
-                max: [0.0; 3],
-            };
+            return Bounds { min: [0.0; 3], max: [0.0; 3] };
         }
-        let mut b = Bounds {
-            min: [f64::MAX; 3],
-            max: [-f64::MAX; 3],
-        };
+        let mut b = Bounds { min: [f64::MAX; 3], max: [-f64::MAX; 3] };
         for leaf in self.leaves(0) {
             let size = self.keys.node_size(leaf.depth);
             let half = size / 2.0;
             for axis in 0..3 {
-                let c = self
-                    .keys
-                    .key_to_coord_at_depth(leaf.key.0[axis], leaf.depth);
+                let c = self.keys.key_to_coord_at_depth(leaf.key.0[axis], leaf.depth);
                 let lo = c - half;
                 let hi = match rule {
                     BoundsRule::CenterHalfSize => c + half,
@@ -574,9 +714,7 @@ impl OccupancyTree {
     /// the tree object and change-detection map.
     pub fn memory_usage(&self) -> usize {
         let arena = self.arena.as_ref().map_or(0, |a| a.usage().bytes_reserved);
-        let changes = self.changes.as_ref().map_or(0, |c| {
-            c.capacity() * (std::mem::size_of::<(Key, bool)>() + 1)
-        });
+        let changes = self.changes.as_ref().map_or(0, |c| c.capacity() * (std::mem::size_of::<(Key, bool)>() + 1));
         std::mem::size_of::<Self>() + arena + changes
     }
 
@@ -607,11 +745,7 @@ impl OccupancyTree {
     /// Keys changed since the last reset: `true` for newly created voxels,
     /// `false` for existing voxels whose occupancy state flipped. Sorted.
     pub fn changed_keys(&self) -> Vec<(Key, bool)> {
-        let mut v: Vec<_> = self
-            .changes
-            .iter()
-            .flat_map(|c| c.iter().map(|(k, b)| (*k, *b)))
-            .collect();
+        let mut v: Vec<_> = self.changes.iter().flat_map(|c| c.iter().map(|(k, b)| (*k, *b))).collect();
         v.sort_unstable();
         v
     }
@@ -626,6 +760,7 @@ impl OccupancyTree {
 /// State of one [`OccupancyTree::update_batch`] walk.
 struct Batch<'a> {
     arena: &'a mut NodeArena,
+    rules: Rules,
     sensor: SensorModel,
     delta: f32,
     lazy: bool,
@@ -668,11 +803,10 @@ impl Batch<'_> {
         let mut new_children = 0u8;
         if mask == 0 && !created {
             // a pruned leaf: unchanged when the update saturates, else expanded
-            let v = a.value(n);
-            if self.sensor.is_saturated(v, self.delta) {
+            if self.sensor.is_saturated(a.value(n), self.delta) {
                 return;
             }
-            a.add_all_children(n, v);
+            a.expand_node(n);
             self.size += 8;
         } else {
             new_children = needed & !mask;
@@ -691,11 +825,10 @@ impl Batch<'_> {
             self.apply(child, depth + 1, range, new_children & (1 << pos) != 0);
         }
         if !self.lazy {
-            if prune_node(self.arena, n).is_some() {
+            if prune_node(self.arena, n, self.rules).is_some() {
                 self.size -= 8;
             } else {
-                let v = max_child_value(self.arena, n);
-                self.arena.set_value(n, v);
+                update_from_children(self.arena, n, self.rules);
             }
         }
     }
@@ -707,6 +840,9 @@ impl Batch<'_> {
         }
         let after = self.sensor.apply(before, self.delta);
         self.arena.set_value(n, after);
+        if self.rules.kind == NodeKind::Stamped {
+            self.arena.set_extra(n, self.rules.now);
+        }
         if let Some(changes) = self.changes.as_deref_mut() {
             let key = crate::morton::MortonCode(code).decode();
             if created {
@@ -741,6 +877,12 @@ impl<'a> NodeRef<'a> {
         self.arena.value(self.id)
     }
 
+    /// Colour or stamp, by the tree's [`NodeKind`] (0 for plain trees).
+    #[inline]
+    pub fn extra(&self) -> u32 {
+        self.arena.extra(self.id)
+    }
+
     /// Bit `i` set when child `i` exists.
     #[inline]
     pub fn child_mask(&self) -> u8 {
@@ -754,18 +896,25 @@ impl<'a> NodeRef<'a> {
 
     #[inline]
     pub fn child(&self, pos: usize) -> Option<NodeRef<'a>> {
-        self.arena.child(self.id, pos).map(|id| NodeRef {
-            arena: self.arena,
-            id,
-        })
+        self.arena.child(self.id, pos).map(|id| NodeRef { arena: self.arena, id })
+    }
+
+    /// Number of existing children.
+    #[inline]
+    pub fn child_count(&self) -> u32 {
+        self.arena.mask(self.id).count_ones()
+    }
+
+    /// The `rank`-th existing child (0-based, in child order).
+    #[inline]
+    pub fn nth_child(&self, rank: u32) -> Option<NodeRef<'a>> {
+        (rank < self.child_count()).then(|| NodeRef { arena: self.arena, id: self.arena.first_child(self.id) + rank })
     }
 
     /// Existing children with their index, in child order.
     pub fn children(&self) -> impl Iterator<Item = (usize, NodeRef<'a>)> + 'a {
         let arena = self.arena;
-        arena
-            .children(self.id)
-            .map(move |(i, id)| (i, NodeRef { arena, id }))
+        arena.children(self.id).map(move |(i, id)| (i, NodeRef { arena, id }))
     }
 }
 
@@ -774,6 +923,7 @@ impl<'a> NodeRef<'a> {
 /// mapped format are turned back into a tree. The arena comes out in
 /// depth-first order with no free slots.
 pub struct PreorderBuilder {
+    kind: NodeKind,
     arena: Option<NodeArena>,
     /// Nodes announced by a parent's mask and not given yet, next on top.
     pending: Vec<(NodeId, u8)>,
@@ -788,10 +938,12 @@ pub struct TooDeep {
 
 impl PreorderBuilder {
     pub fn new() -> Self {
-        PreorderBuilder {
-            arena: None,
-            pending: Vec::with_capacity(128),
-        }
+        Self::with_kind(NodeKind::Plain)
+    }
+
+    /// A builder for a tree of `kind`; give extras with [`Self::push_with_extra`].
+    pub fn with_kind(kind: NodeKind) -> Self {
+        PreorderBuilder { kind, arena: None, pending: Vec::with_capacity(128) }
     }
 
     /// True once the root and every announced node have been given.
@@ -809,9 +961,15 @@ impl PreorderBuilder {
 
     /// Gives the next node. `index` only labels errors.
     pub fn push(&mut self, value: f32, mask: u8, index: u64) -> Result<(), TooDeep> {
+        self.push_with_extra(value, None, mask, index)
+    }
+
+    /// Gives the next node with its colour or stamp (`None` keeps the
+    /// kind's default).
+    pub fn push_with_extra(&mut self, value: f32, extra: Option<u32>, mask: u8, index: u64) -> Result<(), TooDeep> {
         let (id, depth) = match self.arena.as_mut() {
             None => {
-                self.arena = Some(NodeArena::with_root(value));
+                self.arena = Some(OccupancyTree::new_arena(self.kind, value));
                 (ROOT, 0)
             }
             Some(a) => {
@@ -822,6 +980,9 @@ impl PreorderBuilder {
                 (id, depth)
             }
         };
+        if let Some(e) = extra {
+            self.arena.as_mut().expect("root exists").set_extra(id, e);
+        }
         if mask != 0 {
             if depth >= TREE_DEPTH {
                 return Err(TooDeep { index });
@@ -835,13 +996,20 @@ impl PreorderBuilder {
         Ok(())
     }
 
+    /// The finished arena (root at 0); `None` when nodes are still missing.
+    pub(crate) fn finish_arena(self) -> Option<Option<NodeArena>> {
+        if !self.pending.is_empty() {
+            return None;
+        }
+        Some(self.arena.map(|mut a| {
+            a.shrink_to_fit();
+            a
+        }))
+    }
+
     /// The finished tree; `None` when nodes are still missing.
-    pub fn finish(
-        self,
-        resolution: f64,
-        sensor: SensorModel,
-    ) -> Result<Option<OccupancyTree>, TreeError> {
-        let mut tree = OccupancyTree::with_sensor(resolution, sensor)?;
+    pub fn finish(self, resolution: f64, sensor: SensorModel) -> Result<Option<OccupancyTree>, TreeError> {
+        let mut tree = OccupancyTree::with_kind(resolution, sensor, self.kind)?;
         if !self.pending.is_empty() {
             return Ok(None);
         }
@@ -873,23 +1041,62 @@ fn max_child_value(a: &NodeArena, n: NodeId) -> f32 {
     max
 }
 
-/// `pruneNode`: merges eight equal childless children; returns the value.
+/// `pruneNode`: merges eight equal childless children into `n` (which
+/// takes child 0's data); returns the value. Stamped trees also need equal
+/// stamps; colour trees ignore colours and give the merged node the average.
 #[inline]
-fn prune_node(a: &mut NodeArena, n: NodeId) -> Option<f32> {
+fn prune_node(a: &mut NodeArena, n: NodeId, rules: Rules) -> Option<f32> {
     if a.mask(n) != 0xff {
         return None;
     }
     let first = a.first_child(n);
     let v = a.value(first);
+    let e = a.extra(first);
     for i in 0..8 {
         let c = first + i;
         if a.has_children(c) || a.value(c) != v {
             return None;
         }
+        if rules.kind == NodeKind::Stamped && a.extra(c) != e {
+            return None;
+        }
     }
+    let extra = if rules.kind == NodeKind::Color && e != WHITE { average_child_color(a, n) } else { e };
     a.remove_all_children(n);
     a.set_value(n, v);
+    a.set_extra(n, extra);
     Some(v)
+}
+
+/// `updateOccupancyChildren`: the maximum of the children's values (and,
+/// for stamped trees, the current time).
+#[inline]
+fn update_from_children(a: &mut NodeArena, n: NodeId, rules: Rules) {
+    let v = max_child_value(a, n);
+    a.set_value(n, v);
+    if rules.kind == NodeKind::Stamped {
+        a.set_extra(n, rules.now);
+    }
+}
+
+/// `getAverageChildColor`: integer mean over children whose colour is set,
+/// white when none is.
+fn average_child_color(a: &NodeArena, n: NodeId) -> u32 {
+    let (mut sum, mut count) = ([0u32; 3], 0u32);
+    for (_, c) in a.children(n) {
+        let e = a.extra(c);
+        if e != WHITE {
+            let rgb = unpack_rgb(e);
+            for k in 0..3 {
+                sum[k] += u32::from(rgb[k]);
+            }
+            count += 1;
+        }
+    }
+    if count == 0 {
+        return WHITE;
+    }
+    pack_rgb([(sum[0] / count) as u8, (sum[1] / count) as u8, (sum[2] / count) as u8])
 }
 
 fn count_leaves(a: &NodeArena, n: NodeId) -> usize {
@@ -897,7 +1104,5 @@ fn count_leaves(a: &NodeArena, n: NodeId) -> usize {
         return 1;
     }
     let first = a.first_child(n);
-    (0..a.mask(n).count_ones())
-        .map(|i| count_leaves(a, first + i))
-        .sum()
+    (0..a.mask(n).count_ones()).map(|i| count_leaves(a, first + i)).sum()
 }

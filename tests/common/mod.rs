@@ -23,10 +23,7 @@ pub fn golden(test: &str) -> Option<Golden> {
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/golden"));
     let manifest_path = root.join("manifest.json");
     let Ok(text) = std::fs::read_to_string(&manifest_path) else {
-        let msg = format!(
-            "{test}: skipped, golden vectors not found at {}",
-            root.display()
-        );
+        let msg = format!("{test}: skipped, golden vectors not found at {}", root.display());
         if std::env::var("CI").as_deref() == Ok("true") {
             panic!("{msg}");
         }
@@ -47,40 +44,24 @@ pub struct GoldenFile {
 
 impl Golden {
     pub fn cases(&self, command: &str) -> Vec<&Value> {
-        self.manifest["cases"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .filter(|c| c["command"] == command)
-            .collect()
+        self.manifest["cases"].as_array().unwrap().iter().filter(|c| c["command"] == command).collect()
     }
 
     pub fn case(&self, id: &str) -> &Value {
-        self.manifest["cases"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|c| c["id"] == id)
-            .expect("case exists")
+        self.manifest["cases"].as_array().unwrap().iter().find(|c| c["id"] == id).expect("case exists")
     }
 
     pub fn file(&self, case: &Value, name: &str) -> Option<GoldenFile> {
-        let f = case["files"]
-            .as_array()?
-            .iter()
-            .find(|f| f["name"] == name)?;
+        let f = case["files"].as_array()?.iter().find(|f| f["name"] == name)?;
         let path = match f["stored"].as_str().unwrap() {
             "plain" | "gzip" => Some(self.root.join(f["path"].as_str().unwrap())),
-            _ => f
-                .get("same_content_as")
-                .and_then(|s| s.as_str())
-                .and_then(|other| {
-                    if other.starts_with("cases/") {
-                        Some(self.root.join(other))
-                    } else {
-                        self.file(case, other).and_then(|g| g.path)
-                    }
-                }),
+            _ => f.get("same_content_as").and_then(|s| s.as_str()).and_then(|other| {
+                if other.starts_with("cases/") {
+                    Some(self.root.join(other))
+                } else {
+                    self.file(case, other).and_then(|g| g.path)
+                }
+            }),
         };
         Some(GoldenFile {
             name: name.to_string(),
@@ -97,8 +78,7 @@ impl Golden {
     }
 
     pub fn load_text(&self, case: &Value, name: &str) -> Option<String> {
-        self.load(case, name)
-            .map(|b| String::from_utf8(b).expect("utf-8 csv"))
+        self.load(case, name).map(|b| String::from_utf8(b).expect("utf-8 csv"))
     }
 
     pub fn input(&self, rel: &str) -> PathBuf {
@@ -110,9 +90,7 @@ pub fn read_maybe_gz(path: &Path) -> Vec<u8> {
     let raw = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     if path.extension().is_some_and(|e| e == "gz") {
         let mut out = Vec::new();
-        flate2::read::GzDecoder::new(&raw[..])
-            .read_to_end(&mut out)
-            .expect("gzip");
+        flate2::read::GzDecoder::new(&raw[..]).read_to_end(&mut out).expect("gzip");
         out
     } else {
         raw
@@ -139,9 +117,7 @@ impl Failures {
     pub fn check_digest(&mut self, g: &Golden, case: &Value, name: &str, ours: &[u8]) {
         let id = case["id"].as_str().unwrap();
         match g.file(case, name) {
-            None => self.0.push(format!(
-                "{id}: golden file {name} missing from the manifest"
-            )),
+            None => self.0.push(format!("{id}: golden file {name} missing from the manifest")),
             Some(f) => {
                 if sha256_hex(ours) != f.sha256 {
                     let detail = f
@@ -157,11 +133,7 @@ impl Failures {
 
     pub fn finish(self, what: &str) {
         if !self.0.is_empty() {
-            let limit = if std::env::var_os("GOLDEN_SHOW_ALL").is_some() {
-                usize::MAX
-            } else {
-                40
-            };
+            let limit = if std::env::var_os("GOLDEN_SHOW_ALL").is_some() { usize::MAX } else { 40 };
             let shown: Vec<_> = self.0.iter().take(limit).cloned().collect();
             panic!("{what}: {} failures\n{}", self.0.len(), shown.join("\n"));
         }
@@ -169,11 +141,7 @@ impl Failures {
 }
 
 fn first_difference(expected: &[u8], ours: &[u8]) -> String {
-    let pos = expected
-        .iter()
-        .zip(ours)
-        .position(|(a, b)| a != b)
-        .unwrap_or(expected.len().min(ours.len()));
+    let pos = expected.iter().zip(ours).position(|(a, b)| a != b).unwrap_or(expected.len().min(ours.len()));
     let line = expected[..pos].iter().filter(|&&b| b == b'\n').count() + 1;
     let ctx = |b: &[u8]| {
         let start = pos.saturating_sub(40);
@@ -222,11 +190,7 @@ pub fn case_sensor(case: &Value) -> SensorModel {
     if how.starts_with("graph2tree style") {
         // probabilities read back from a fresh tree, then set again
         let back = model.probabilities();
-        SensorModel::from_probabilities(&SensorProbabilities {
-            occupancy_threshold: 0.5,
-            ..back
-        })
-        .unwrap()
+        SensorModel::from_probabilities(&SensorProbabilities { occupancy_threshold: 0.5, ..back }).unwrap()
     } else {
         model
     }
@@ -247,14 +211,7 @@ pub fn nodes_csv(tree: &OccupancyTree) -> String {
     let mut s = String::from("kx,ky,kz,depth,is_leaf,logodds\n");
     for n in tree.nodes(0) {
         let [x, y, z] = n.key.0;
-        writeln!(
-            s,
-            "{x},{y},{z},{},{},{}",
-            n.depth,
-            u8::from(n.is_leaf),
-            f32hex(n.value)
-        )
-        .unwrap();
+        writeln!(s, "{x},{y},{z},{},{},{}", n.depth, u8::from(n.is_leaf), f32hex(n.value)).unwrap();
     }
     s
 }
@@ -264,26 +221,16 @@ pub fn nodes_csv(tree: &OccupancyTree) -> String {
 /// getters would answer from the cache its non-const ones fill (see
 /// [`StatsTracker`]).
 pub fn stats(tree: &OccupancyTree, const_cached: bool) -> Vec<(&'static str, String)> {
-    let const_rule = if const_cached {
-        BoundsRule::MinPlusSize
-    } else {
-        BoundsRule::CenterHalfSize
-    };
+    let const_rule = if const_cached { BoundsRule::MinPlusSize } else { BoundsRule::CenterHalfSize };
     let sensor = tree.sensor();
     let mut v: Vec<(&'static str, String)> = vec![
         ("resolution", f64hex(tree.resolution())),
         ("size", tree.size().to_string()),
         ("num_leaf_nodes", tree.num_leaves().to_string()),
         ("calc_num_nodes", tree.calc_num_nodes().to_string()),
-        (
-            "num_inner_nodes_iter",
-            tree.nodes(0).filter(|n| !n.is_leaf).count().to_string(),
-        ),
+        ("num_inner_nodes_iter", tree.nodes(0).filter(|n| !n.is_leaf).count().to_string()),
         ("memory_usage", tree.octomap_memory_usage().to_string()),
-        (
-            "memory_full_grid",
-            tree.memory_full_grid(const_rule).to_string(),
-        ),
+        ("memory_full_grid", tree.memory_full_grid(const_rule).to_string()),
         ("volume", f64hex(tree.volume())),
         ("clamping_thres_min_log", f32hex(sensor.clamping_min)),
         ("clamping_thres_max_log", f32hex(sensor.clamping_max)),
@@ -292,37 +239,10 @@ pub fn stats(tree: &OccupancyTree, const_cached: bool) -> Vec<(&'static str, Str
         ("occupancy_thres_log", f32hex(sensor.occupancy_threshold)),
     ];
     let leaves: Vec<f32> = tree.leaves(0).map(|n| n.value).collect();
-    v.push((
-        "leaves_occupied",
-        leaves
-            .iter()
-            .filter(|&&x| sensor.is_occupied(x))
-            .count()
-            .to_string(),
-    ));
-    v.push((
-        "leaves_free",
-        leaves
-            .iter()
-            .filter(|&&x| !sensor.is_occupied(x))
-            .count()
-            .to_string(),
-    ));
-    v.push((
-        "leaves_at_threshold",
-        leaves
-            .iter()
-            .filter(|&&x| sensor.is_at_threshold(x))
-            .count()
-            .to_string(),
-    ));
-    v.push((
-        "nodes_at_threshold",
-        tree.nodes(0)
-            .filter(|n| sensor.is_at_threshold(n.value))
-            .count()
-            .to_string(),
-    ));
+    v.push(("leaves_occupied", leaves.iter().filter(|&&x| sensor.is_occupied(x)).count().to_string()));
+    v.push(("leaves_free", leaves.iter().filter(|&&x| !sensor.is_occupied(x)).count().to_string()));
+    v.push(("leaves_at_threshold", leaves.iter().filter(|&&x| sensor.is_at_threshold(x)).count().to_string()));
+    v.push(("nodes_at_threshold", tree.nodes(0).filter(|n| sensor.is_at_threshold(n.value)).count().to_string()));
     if let Some(r) = tree.root_value() {
         v.push(("root_logodds", f32hex(r)));
     }
@@ -332,16 +252,8 @@ pub fn stats(tree: &OccupancyTree, const_cached: bool) -> Vec<(&'static str, Str
     const MIN: [&str; 3] = ["metric_min_x", "metric_min_y", "metric_min_z"];
     const MAX: [&str; 3] = ["metric_max_x", "metric_max_y", "metric_max_z"];
     const SIZE: [&str; 3] = ["metric_size_x", "metric_size_y", "metric_size_z"];
-    const CMIN: [&str; 3] = [
-        "const_metric_min_x",
-        "const_metric_min_y",
-        "const_metric_min_z",
-    ];
-    const CMAX: [&str; 3] = [
-        "const_metric_max_x",
-        "const_metric_max_y",
-        "const_metric_max_z",
-    ];
+    const CMIN: [&str; 3] = ["const_metric_min_x", "const_metric_min_y", "const_metric_min_z"];
+    const CMAX: [&str; 3] = ["const_metric_max_x", "const_metric_max_y", "const_metric_max_z"];
     for i in 0..axes.len() {
         v.push((MIN[i], f64hex(nc.min[i])));
         v.push((MAX[i], f64hex(nc.max[i])));
@@ -362,9 +274,7 @@ pub fn expected_stats(g: &Golden, case: &Value) -> StageStats {
         for line in text.lines().skip(1) {
             let cols: Vec<&str> = line.split(',').collect();
             let want = if cols[3].is_empty() { cols[2] } else { cols[3] };
-            out.entry(cols[0].to_string())
-                .or_default()
-                .insert(cols[1].to_string(), want.to_string());
+            out.entry(cols[0].to_string()).or_default().insert(cols[1].to_string(), want.to_string());
         }
         return out;
     }
@@ -399,22 +309,13 @@ pub struct StatsTracker {
 impl StatsTracker {
     /// Checks a stage (when `expected` has it) and records that the
     /// harness computed statistics on this tree.
-    pub fn check(
-        &mut self,
-        f: &mut Failures,
-        id: &str,
-        expected: &StageStats,
-        stage: &str,
-        tree: &OccupancyTree,
-    ) {
+    pub fn check(&mut self, f: &mut Failures, id: &str, expected: &StageStats, stage: &str, tree: &OccupancyTree) {
         let cached = self.last_size == Some(tree.size());
         match expected.get(stage) {
             Some(want) => {
                 for (name, ours) in stats(tree, cached) {
                     if let Some(w) = want.get(name) {
-                        f.check(*w == ours, || {
-                            format!("{id} [{stage}] {name}: expected {w}, got {ours}")
-                        });
+                        f.check(*w == ours, || format!("{id} [{stage}] {name}: expected {w}, got {ours}"));
                     }
                 }
             }
@@ -441,9 +342,5 @@ pub fn read_xyz(text: &str) -> Vec<Point3> {
 }
 
 pub fn point_from_hex(cols: &[&str]) -> Point3 {
-    Point3::new(
-        parse_f32hex(cols[0]),
-        parse_f32hex(cols[1]),
-        parse_f32hex(cols[2]),
-    )
+    Point3::new(parse_f32hex(cols[0]), parse_f32hex(cols[1]), parse_f32hex(cols[2]))
 }
