@@ -17,6 +17,7 @@
 //! # Ok(()) }
 //! ```
 
+pub mod collection;
 pub mod formats;
 pub mod geometry;
 pub mod key;
@@ -27,6 +28,7 @@ pub mod sensor;
 pub mod simulate;
 pub mod tree;
 
+pub use collection::{MapCollection, MapNode};
 pub use formats::graph::{ScanEdge, ScanGraph, ScanNode};
 pub use geometry::{Point3, PointCloud, Pose6D, Quaternion};
 pub use key::{Key, KeyError, KeySpace};
