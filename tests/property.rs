@@ -181,3 +181,27 @@ proptest! {
         prop_assert!(x == y, "batch and sequential trees differ");
     }
 }
+
+#[test]
+fn kinds_convert_without_touching_values_or_structure() {
+    use octolinear::tree::NodeKind;
+    let mut color = OccupancyTree::with_kind(0.1, SensorModel::default(), NodeKind::Color).unwrap();
+    for i in 0..50u16 {
+        let k = Key::new(BASE + i % 4, BASE + (i / 4) % 4, BASE + i / 16);
+        color.update_occupancy(k, i % 3 != 0, InnerNodes::Update);
+        color.set_color(k, [i as u8, 2 * i as u8, 3 * i as u8]);
+    }
+    let plain = color.converted(NodeKind::Plain);
+    assert_eq!(plain.kind(), NodeKind::Plain);
+    let a: Vec<_> = color.nodes(0).map(|n| (n.key, n.depth, n.value.to_bits())).collect();
+    let b: Vec<_> = plain.nodes(0).map(|n| (n.key, n.depth, n.value.to_bits(), n.extra)).collect();
+    assert_eq!(a, b.iter().map(|&(k, d, v, _)| (k, d, v)).collect::<Vec<_>>());
+    assert!(b.iter().all(|&(.., e)| e == 0));
+    let back = plain.converted(NodeKind::Color);
+    assert!(back.nodes(0).all(|n| n.extra == octolinear::tree::WHITE));
+    let same = color.converted(NodeKind::Color);
+    let (mut x, mut y) = (Vec::new(), Vec::new());
+    ot::write(&color, &mut x).unwrap();
+    ot::write(&same, &mut y).unwrap();
+    assert_eq!(x, y);
+}

@@ -580,6 +580,29 @@ impl OccupancyTree {
         })
     }
 
+    /// The same tree with nodes of another kind (e.g. a colour map as plain
+    /// occupancy, which OctoMap cannot do): values and structure are kept,
+    /// colours or stamps dropped, new extras start at the kind's default.
+    pub fn converted(&self, kind: NodeKind) -> OccupancyTree {
+        let mut b = PreorderBuilder::with_kind(kind);
+        let keep = kind == self.kind;
+        if let Some(root) = self.root() {
+            let mut stack = vec![root];
+            let mut index = 0;
+            while let Some(n) = stack.pop() {
+                let extra = keep.then(|| n.extra());
+                b.push_with_extra(n.value(), extra, n.child_mask(), index).expect("a valid tree is at most 16 deep");
+                index += 1;
+                for rank in (0..n.child_count()).rev() {
+                    stack.extend(n.nth_child(rank));
+                }
+            }
+        }
+        let mut t = b.finish(self.resolution(), self.sensor).expect("valid resolution").expect("complete");
+        t.clock = self.clock;
+        t
+    }
+
     // ----- stamped trees (`OcTreeStamped`) -----------------------------------
 
     /// `getLastUpdateTime`: the root's stamp.
