@@ -214,6 +214,9 @@ fn run_build_case(g: &Golden, case: &Value) -> Vec<String> {
     original.check(&mut f, id, &expected, "built", &tree);
     let tree_ot = ot_bytes(&tree);
     f.check_digest(g, case, "tree.ot", &tree_ot);
+    let mut compacted = tree.clone();
+    compacted.compact();
+    f.check(ot_bytes(&compacted) == tree_ot, || format!("{id}: compaction changed the tree"));
     f.check_digest(g, case, "leaves.csv", leaves_csv(&tree, 0).as_bytes());
     for (name, depth) in [("leaves_d14.csv", 14)] {
         if g.file(case, name).is_some() {

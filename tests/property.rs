@@ -21,6 +21,7 @@ enum Op {
     Delete(Key, u8),
     Prune,
     Expand,
+    Compact,
     MaxLikelihood,
 }
 
@@ -37,6 +38,7 @@ fn op() -> impl Strategy<Value = Op> {
         2 => (key(), -5.0f32..5.0).prop_map(|(k, v)| Op::Set(k, v)),
         2 => (key(), prop_oneof![Just(16u8), 13u8..16]).prop_map(|(k, d)| Op::Delete(k, d)),
         1 => Just(Op::Prune),
+        1 => Just(Op::Compact),
         1 => Just(Op::Expand),
         1 => Just(Op::MaxLikelihood),
     ]
@@ -121,6 +123,7 @@ proptest! {
                     }
                 }
                 Op::Prune => tree.prune(),
+                Op::Compact => tree.compact(),
                 // a bare root would expand to 8^16 voxels, in OctoMap too
                 Op::Expand if tree.root().is_some_and(|r| r.has_children()) => tree.expand(),
                 Op::Expand => {}

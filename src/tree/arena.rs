@@ -126,7 +126,18 @@ impl NodeArena {
 
     fn push_run(&mut self, len: usize) -> NodeId {
         let start = self.values.len();
-        assert!(start + len <= u32::MAX as usize, "node arena exceeds 2^32 slots");
+        assert!(start + len <= u32::MAX as usize - 2, "node arena exceeds 2^32 slots");
+        if start + len > self.values.capacity() {
+            // grow by a quarter rather than doubling: large reallocations are
+            // remapped in place by the allocator, and peak memory stays low
+            let more = len.max(start / 4).max(1024);
+            self.values.reserve_exact(more);
+            self.masks.reserve_exact(more);
+            self.first_child.reserve_exact(more);
+            if self.default_extra.is_some() {
+                self.extras.reserve_exact(more);
+            }
+        }
         self.values.resize(start + len, 0.0);
         self.masks.resize(start + len, 0);
         self.first_child.resize(start + len, NO_CHILD);
@@ -307,6 +318,7 @@ impl NodeArena {
         freed
     }
 
+    #[cfg(test)]
     /// A copy laid out in depth-first order: the root first, each node's
     /// child group allocated as the node is visited, exactly sized.
     pub fn compacted(&self, root: NodeId) -> NodeArena {
@@ -352,6 +364,82 @@ impl NodeArena {
         self.extras.shrink_to_fit();
     }
 
+    /// Re-lays the arena in place in the order [`Self::compacted`] gives,
+    /// needing 4 bytes per slot of scratch space instead of a full copy.
+    pub fn compact_in_place(&mut self, root: NodeId) {
+        const FREE: u32 = u32::MAX;
+        const MOVED: u32 = u32::MAX - 1;
+        let len = self.values.len();
+        // new id of every live slot, in depth-first group order
+        let mut new_of = vec![FREE; len];
+        new_of[root as usize] = 0;
+        let mut next = 1u32;
+        let mut stack = vec![root];
+        while let Some(n) = stack.pop() {
+            let k = self.masks[n as usize].count_ones();
+            if k == 0 {
+                continue;
+            }
+            let first = self.first_child[n as usize];
+            for i in 0..k {
+                new_of[(first + i) as usize] = next + i;
+            }
+            next += k;
+            stack.extend((0..k).rev().map(|i| first + i));
+        }
+        for (i, &m) in self.masks.iter().enumerate() {
+            if new_of[i] != FREE && m != 0 {
+                self.first_child[i] = new_of[self.first_child[i] as usize];
+            }
+        }
+        // follow each chain: the element at `dst` is picked up before its slot
+        // is overwritten; a chain ends at a free or already emptied slot
+        let has_extras = self.default_extra.is_some();
+        for start in 0..len {
+            let mut dst = new_of[start];
+            if dst == FREE || dst == MOVED {
+                continue;
+            }
+            new_of[start] = MOVED;
+            let mut carry = self.slot(start, has_extras);
+            loop {
+                let d = dst as usize;
+                let following = new_of[d];
+                let displaced = self.slot(d, has_extras);
+                self.put_slot(d, carry, has_extras);
+                if following == FREE || following == MOVED {
+                    break;
+                }
+                new_of[d] = MOVED;
+                carry = displaced;
+                dst = following;
+            }
+        }
+        let live = next as usize;
+        self.values.truncate(live);
+        self.masks.truncate(live);
+        self.first_child.truncate(live);
+        self.extras.truncate(if has_extras { live } else { 0 });
+        self.shrink_to_fit();
+        self.free = Default::default();
+        self.free_slots = 0;
+    }
+
+    #[inline]
+    fn slot(&self, i: usize, extras: bool) -> (f32, u8, NodeId, u32) {
+        (self.values[i], self.masks[i], self.first_child[i], if extras { self.extras[i] } else { 0 })
+    }
+
+    #[inline]
+    fn put_slot(&mut self, i: usize, s: (f32, u8, NodeId, u32), extras: bool) {
+        self.values[i] = s.0;
+        self.masks[i] = s.1;
+        self.first_child[i] = s.2;
+        if extras {
+            self.extras[i] = s.3;
+        }
+    }
+
     pub fn usage(&self) -> ArenaUsage {
         let free_list_bytes: usize = self.free.iter().map(|f| f.capacity() * std::mem::size_of::<NodeId>()).sum();
         ArenaUsage {
@@ -394,6 +482,12 @@ mod tests {
         let kids: Vec<_> = a.children(0).map(|(i, id)| (i, a.value(id))).collect();
         assert_eq!(kids, vec![(0, 0.0), (5, 5.0), (7, 7.0)]);
         let c = a.compacted(0);
+        let mut d = a.clone();
+        d.compact_in_place(0);
+        assert_eq!(
+            (d.values.clone(), d.masks.clone(), d.first_child.clone()),
+            (c.values.clone(), c.masks.clone(), c.first_child.clone())
+        );
         assert_eq!(c.usage().free_slots, 0);
         assert_eq!(c.usage().live_slots, 4);
         let kids: Vec<_> = c.children(0).map(|(i, id)| (i, c.value(id))).collect();

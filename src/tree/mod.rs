@@ -749,8 +749,8 @@ impl OccupancyTree {
     /// Re-lays the arena in depth-first (Morton) order with no free slots,
     /// so traversals walk memory forwards and no capacity is wasted.
     pub fn compact(&mut self) {
-        if let Some(a) = self.arena.as_ref() {
-            self.arena = Some(a.compacted(ROOT));
+        if let Some(a) = self.arena.as_mut() {
+            a.compact_in_place(ROOT);
         }
     }
 
