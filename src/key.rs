@@ -72,9 +72,15 @@ pub enum KeyError {
 /// for NaN and for anything outside the `i32` range.
 #[inline(always)]
 fn floor_to_int(x: f64) -> i32 {
-    let f = x.floor();
-    if (-2147483648.0..2147483648.0).contains(&f) {
-        f as i32
+    if (-2147483648.0..2147483648.0).contains(&x) {
+        // truncate, then step down for negative fractions: exact, and much
+        // cheaper than `f64::floor` on baseline x86-64 (no SSE4.1 `roundsd`)
+        let t = x as i32;
+        if f64::from(t) > x {
+            t - 1
+        } else {
+            t
+        }
     } else {
         i32::MIN
     }

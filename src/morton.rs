@@ -107,39 +107,40 @@ impl MortonCode {
 }
 
 /// Sorts 48-bit Morton codes: a least-significant-digit radix sort on
-/// bytes, skipping bytes that are equal in every code (the high bytes of
-/// codes from one region usually are).
+/// 12-bit digits (all four histograms counted in one pass), skipping
+/// digits that are equal in every code, as the high ones of codes from one
+/// region usually are.
 pub fn sort_codes(codes: &mut Vec<u64>) {
+    const BITS: u32 = 12;
+    const BUCKETS: usize = 1 << BITS;
     if codes.len() < 256 {
         codes.sort_unstable();
         return;
     }
-    let (mut or, mut and) = (0u64, u64::MAX);
+    debug_assert!(codes.iter().all(|&c| c < 1 << 48));
+    let mut count = vec![[0u32; BUCKETS]; 4];
     for &c in codes.iter() {
-        or |= c;
-        and &= c;
-    }
-    let varying = or ^ and;
-    let mut buf = vec![0u64; codes.len()];
-    for byte in 0..8 {
-        let shift = 8 * byte;
-        if (varying >> shift) & 0xff == 0 {
-            continue;
+        for (d, hist) in count.iter_mut().enumerate() {
+            hist[((c >> (BITS * d as u32)) as usize) & (BUCKETS - 1)] += 1;
         }
-        let mut count = [0usize; 256];
-        for &c in codes.iter() {
-            count[((c >> shift) & 0xff) as usize] += 1;
+    }
+    let n = codes.len() as u32;
+    let mut buf = vec![0u64; codes.len()];
+    for (d, hist) in count.iter_mut().enumerate() {
+        if hist.iter().any(|&h| h == n) {
+            continue; // every code has the same digit here
         }
         let mut sum = 0;
-        for slot in count.iter_mut() {
-            let n = *slot;
+        for slot in hist.iter_mut() {
+            let k = *slot;
             *slot = sum;
-            sum += n;
+            sum += k;
         }
+        let shift = BITS * d as u32;
         for &c in codes.iter() {
-            let d = ((c >> shift) & 0xff) as usize;
-            buf[count[d]] = c;
-            count[d] += 1;
+            let b = ((c >> shift) as usize) & (BUCKETS - 1);
+            buf[hist[b] as usize] = c;
+            hist[b] += 1;
         }
         std::mem::swap(codes, &mut buf);
     }

@@ -208,3 +208,41 @@ fn kinds_convert_without_touching_values_or_structure() {
     ot::write(&same, &mut y).unwrap();
     assert_eq!(x, y);
 }
+
+/// OctoMap's `prune()` goes level by level from depth 15 up and stops at the
+/// first level where nothing merged: equal sibling leaves at depth 14 stay
+/// unmerged while no depth-15 node is collapsible.
+#[test]
+fn prune_stops_at_the_first_level_without_merges() {
+    use octolinear::tree::PreorderBuilder;
+    let mut b = PreorderBuilder::new();
+    let mut index = 0;
+    for _ in 0..13 {
+        b.push(1.0, 0x01, index).unwrap(); // a chain down child 0
+        index += 1;
+    }
+    b.push(1.0, 0xff, index).unwrap(); // depth 13: eight depth-14 leaves
+    for i in 0..8 {
+        b.push(1.0, 0, index + 1 + i).unwrap();
+    }
+    let mut tree = b.finish(0.1, SensorModel::default()).unwrap().unwrap();
+    assert_eq!(tree.size(), 22);
+    tree.prune();
+    assert_eq!(tree.size(), 22, "no depth-15 node merges, so prune stops at once");
+
+    // an aligned 4x4x4 block elsewhere, inserted lazily: it merges at depths 15
+    // and 14, so this time pruning goes on up and merges the depth-14 leaves too
+    let base = 40000u16;
+    for x in 0..4 {
+        for y in 0..4 {
+            for z in 0..4 {
+                tree.set_value(Key::new(base + x, base + y, base + z), 1.0, InnerNodes::Defer);
+            }
+        }
+    }
+    tree.update_inner_occupancy();
+    let before = tree.size();
+    tree.prune();
+    assert_eq!(before - tree.size(), 8 * (8 + 1) + 8, "block merged at 15 and 14, old leaves at 13");
+    assert!(tree.leaves(0).all(|l| l.depth <= 14));
+}

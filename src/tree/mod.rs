@@ -412,26 +412,63 @@ impl OccupancyTree {
     /// parent, level by level from depth 15 up, stopping at the first level
     /// where nothing merged (OctoMap's `prune`, including that early stop).
     pub fn prune(&mut self) {
-        fn at_depth(a: &mut NodeArena, n: NodeId, depth: u8, target: u8, rules: Rules, pruned: &mut usize) {
-            if depth < target {
-                let first = a.first_child(n);
-                for i in 0..a.mask(n).count_ones() {
-                    at_depth(a, first + i, depth + 1, target, rules, pruned);
+        /// What a node would be after level-by-level pruning of every level
+        /// below it: `Some((value, extra))` when it is or would become a
+        /// leaf. Counts the merges per depth.
+        fn would_merge(
+            a: &NodeArena,
+            n: NodeId,
+            depth: u8,
+            rules: Rules,
+            counts: &mut [usize; 16],
+        ) -> Option<(f32, u32)> {
+            let mask = a.mask(n);
+            if mask == 0 {
+                return Some((a.value(n), a.extra(n)));
+            }
+            let first = a.first_child(n);
+            let mut all = mask == 0xff;
+            let mut first_leaf = None;
+            for i in 0..mask.count_ones() {
+                match would_merge(a, first + i, depth + 1, rules, counts) {
+                    None => all = false,
+                    Some((v, e)) => match first_leaf {
+                        None => first_leaf = Some((v, e)),
+                        Some((v0, e0)) => {
+                            if v != v0 || (rules.kind == NodeKind::Stamped && e != e0) {
+                                all = false;
+                            }
+                        }
+                    },
                 }
-            } else if prune_node(a, n, rules).is_some() {
+            }
+            if all && depth >= 1 {
+                counts[depth as usize] += 1;
+                first_leaf
+            } else {
+                None
+            }
+        }
+        fn merge_below(a: &mut NodeArena, n: NodeId, depth: u8, lowest: u8, rules: Rules, pruned: &mut usize) {
+            let first = a.first_child(n);
+            for i in 0..a.mask(n).count_ones() {
+                merge_below(a, first + i, depth + 1, lowest, rules, pruned);
+            }
+            if depth >= lowest && prune_node(a, n, rules).is_some() {
                 *pruned += 1;
             }
         }
         let rules = self.rules();
         let Some(a) = self.arena.as_mut() else { return };
-        for depth in (1..TREE_DEPTH).rev() {
-            let mut pruned = 0;
-            at_depth(a, ROOT, 0, depth, rules, &mut pruned);
-            self.size -= 8 * pruned;
-            if pruned == 0 {
-                break;
-            }
-        }
+        // OctoMap prunes level by level from depth 15 up and stops after the
+        // first level that merged nothing; find that level first, then merge
+        // everything below it in one bottom-up pass
+        let mut counts = [0usize; 16];
+        would_merge(a, ROOT, 0, rules, &mut counts);
+        let stop = (1..TREE_DEPTH).rev().find(|&d| counts[d as usize] == 0).unwrap_or(0);
+        let mut pruned = 0;
+        merge_below(a, ROOT, 0, stop.max(1), rules, &mut pruned);
+        self.size -= 8 * pruned;
     }
 
     /// Gives every leaf above depth 16 eight children holding its value
