@@ -11,8 +11,11 @@ use octolinear::formats::ot::{AnyTree, TreeKind};
 use octolinear::formats::{bt, format_double, ot};
 use octolinear::tree::unpack_rgb;
 use octolinear::{InnerNodes, NodeKind, OccupancyTree, Point3, SensorModel};
-use octomap_port::{input, trees_equal};
+use octomap_port::{assert_octomap_file, input, trees_equal};
 use std::io::BufReader;
+
+/// SHA-256 of the `.bt` OctoMap writes for geb079 (and for its copy).
+const TEST_IO_FILE_BT: &str = "7663c2466e2fe335a27d1d592f91766c8154511e63a9615aeecdad1defb04d3b";
 
 fn write_bt(tree: &OccupancyTree) -> Vec<u8> {
     let mut file = Vec::new();
@@ -59,6 +62,8 @@ fn empty_octree() {
     assert_eq!(empty_tree.size(), 0);
     let bt_file = write_bt(&empty_tree);
     let ot_file = write_ot(&empty_tree);
+    assert_octomap_file(&bt_file, "empty.bt", "9d0ffa3c0b73ee8e27b8fea983971c5c3a00bff90dd8731e572c91f9070d8357");
+    assert_octomap_file(&ot_file, "empty.ot", "0d3789d3a2cf06113ae038368723eadfe2be4fb694de8fffcf20ec0ea0d5cebd");
 
     // readBinary into an OcTree(0.2) takes the file's resolution
     let empty_read_tree = bt::read(bt_file.as_slice()).expect("readBinary");
@@ -80,7 +85,7 @@ fn reference_octree_from_file() {
     // copy constructor / assignment / ==
     let mut tree_copy = tree.clone();
     assert!(trees_equal(&tree, &tree_copy));
-    write_bt(&tree_copy);
+    assert_octomap_file(&write_bt(&tree_copy), "test_io_file_copy.bt", TEST_IO_FILE_BT);
 
     // a different resolution makes the trees differ; setting it back, equal again
     let doubled = with_resolution(&tree_copy, tree.resolution() * 2.0);
@@ -104,11 +109,19 @@ fn reference_octree_from_file() {
 
     // write again to .bt, read and compare (the tree, read from a .bt, is
     // already what OctoMap's writeBinary turns it into)
-    let read_tree_bt = bt::read(write_bt(&tree).as_slice()).expect("readBinary");
+    let bt_file = write_bt(&tree);
+    assert_octomap_file(&bt_file, "test_io_file.bt", TEST_IO_FILE_BT);
+    let read_tree_bt = bt::read(bt_file.as_slice()).expect("readBinary");
     assert!(trees_equal(&tree, &read_tree_bt));
 
     // write to .ot, read through AbstractOcTree
-    let mut read_tree_ot = read_ot(&write_ot(&tree));
+    let ot_file = write_ot(&tree);
+    assert_octomap_file(
+        &ot_file,
+        "test_io_file.ot",
+        "4eb7ecd8e3af243e0c9e03f97acb333a4ac635f55d4fbcf70ea7a351d860faee",
+    );
+    let mut read_tree_ot = read_ot(&ot_file);
     assert_eq!(read_tree_ot.kind(), NodeKind::Plain);
     assert!(trees_equal(&tree, &read_tree_ot));
 
@@ -133,6 +146,11 @@ fn color_octree() {
     color_tree.set_color(color_tree.key(p).unwrap(), [0, 0, 255]).expect("node exists");
 
     let file = write_ot(&color_tree);
+    assert_octomap_file(
+        &file,
+        "test_io_color_file.ot",
+        "042f437fcff1ff9e81882ba75021e286e89b21ba8f3d906391d8ceb985d5cc97",
+    );
     let read_tree = ot::read(file.as_slice()).expect("AbstractOcTree::read");
     assert_eq!(read_tree.kind(), TreeKind::of(color_tree.kind()));
     let read_color_tree = read_tree.into_occupancy().unwrap();
@@ -149,6 +167,11 @@ fn stamped_octree() {
     let stamped_tree = OccupancyTree::with_kind(0.05, SensorModel::default(), NodeKind::Stamped).unwrap();
     assert_eq!(TreeKind::of(stamped_tree.kind()).id(), "OcTreeStamped");
     let file = write_ot(&stamped_tree);
+    assert_octomap_file(
+        &file,
+        "test_io_stamped_file.ot",
+        "cb1631ef6ffec40e1892aef075252e7b16102b0ba22dfeb4b71e5871af8f918b",
+    );
     let read_tree = ot::read(file.as_slice()).expect("AbstractOcTree::read");
     assert_eq!(read_tree.kind(), TreeKind::OcTreeStamped);
     let read_stamped_tree = read_tree.into_occupancy().unwrap();

@@ -11,7 +11,7 @@ mod octomap_port;
 
 use octolinear::formats::ot;
 use octolinear::{InnerNodes, Key, OccupancyTree, Point3};
-use octomap_port::{child_key, float_steps, node_at, node_id};
+use octomap_port::{assert_octomap_file, child_key, float_steps, node_at, node_id};
 
 const UPDATE: InnerNodes = InnerNodes::Update;
 
@@ -171,6 +171,11 @@ fn test_pruning() {
         assert_eq!(tree.search(child0, 0).unwrap().value, 0.123);
         let mut file = Vec::new();
         ot::write(&tree, &mut file).expect("write pruning_test_edited.ot");
+        assert_octomap_file(
+            &file,
+            "pruning_test_edited.ot",
+            "45af668d97c194c54b72dc461a1435fea09a2f755a21c83c9ac27ddb1f496ac9",
+        );
         // the header's `res` is printed with 6 digits, so only the nodes
         // round-trip (OctoMap's own reader gives res 0.01, not 0.01f)
         let read = ot::read(file.as_slice()).unwrap().into_occupancy().unwrap();
@@ -220,6 +225,13 @@ fn test_pruning() {
 
     let mut file = Vec::new();
     ot::write(&tree, &mut file).expect("write pruning_test_out.ot");
+    // (OctoMap overwrites this file at the end; its digest here is from a
+    // run writing it under another name)
+    assert_octomap_file(
+        &file,
+        "pruning_test_out.ot (first)",
+        "2a8b154565643291dac6290f94acaaae376a176f0fdaa15f53cb5889d7eaf568",
+    );
 
     // clearing tree / recursive delete
     {
@@ -239,6 +251,11 @@ fn test_pruning() {
 
     let mut file = Vec::new();
     ot::write(&tree, &mut file).expect("write pruning_test_out.ot");
+    assert_octomap_file(
+        &file,
+        "pruning_test_out.ot",
+        "d4095e1a6ae7f2b8a22d14aa940ba3b4238c55b6817bf2e198c9e094385022d1",
+    );
     let read = ot::read(file.as_slice()).unwrap().into_occupancy().unwrap();
     assert_eq!(read.size(), 0);
 }

@@ -8,13 +8,15 @@ mod octomap_port;
 
 use octolinear::formats::bt;
 use octolinear::{CastOptions, InnerNodes, OccupancyTree, Point3, ScanOptions};
-use octomap_port::{deg2rad, expect_float_eq, expect_near, float_steps};
+use octomap_port::{assert_octomap_file, deg2rad, expect_float_eq, expect_near, float_steps};
 use std::f64::consts::PI;
 
-/// `writeBinary` to memory; returns the number of nodes written.
-fn write_binary(tree: &OccupancyTree) -> usize {
+/// `writeBinary` to memory, checked against what OctoMap writes as
+/// `name`; returns the number of nodes written.
+fn write_binary(tree: &OccupancyTree, name: &str, sha256: &str) -> usize {
     let mut file = Vec::new();
     bt::write(tree, &mut file).expect("writeBinary");
+    assert_octomap_file(&file, name, sha256);
     let mut ml = tree.clone();
     ml.to_max_likelihood();
     ml.prune();
@@ -52,7 +54,10 @@ fn sphere_and_single_beams() {
         point_on_surface.rotate_ip(0.0, angle, 0.0);
     }
     tree.insert_point_cloud(&p, origin, &ScanOptions::default()).expect("scan inserted");
-    assert_eq!(write_binary(&tree), 54800); // sphere.bt
+    assert_eq!(
+        write_binary(&tree, "sphere.bt", "259289fdadef9bc1ab44e420985ff728c6f44fa893ee527d7df5cfcaa1fa8f6a"),
+        54800
+    );
 
     // casting rays in the sphere
     let mut sampled_surface = OccupancyTree::new(0.05).unwrap();
@@ -77,7 +82,14 @@ fn sphere_and_single_beams() {
         }
         direction.rotate_ip(0.0, angle, 0.0);
     }
-    assert_eq!(write_binary(&sampled_surface), 24743); // sampled_surface.bt
+    assert_eq!(
+        write_binary(
+            &sampled_surface,
+            "sampled_surface.bt",
+            "590a574debb7f1817e74a78a19eae40d91f948588c006c6367809be45bec4e17"
+        ),
+        24743
+    );
     mean_dist /= f64::from(hit);
     expect_near(mean_dist, 2.0, 0.05);
     expect_near(mean_dist, 1.99789, 1e-5); // as OctoMap prints it
@@ -100,7 +112,10 @@ fn sphere_and_single_beams() {
         }
         single_endpoint.rotate_ip(0.0, deg2rad(360.0 / f64::from(num_beams)), 0.0);
     }
-    assert_eq!(write_binary(&single_beams), 235406); // beams.bt
+    assert_eq!(
+        write_binary(&single_beams, "beams.bt", "6c3321cac6c521424cb0f2e914e10f41ee94f985e113cb9400082e1ddbd62f82"),
+        235406
+    );
 }
 
 #[test]
@@ -123,7 +138,14 @@ fn cube() {
         let p = Point3::new(x as f32, res_2 as f32, -res_2 as f32);
         cube_tree.update_point(p, true, InnerNodes::Update).expect("node updated");
     }
-    assert_eq!(write_binary(&cube_tree), 1649); // raycasting_cube.bt
+    assert_eq!(
+        write_binary(
+            &cube_tree,
+            "raycasting_cube.bt",
+            "2f6275cbb9891c117830bf4d90e43a0d8803c305160c8792bfb055a4a8633a45"
+        ),
+        1649
+    );
 
     let occupied_at = |p: Point3| {
         let node = cube_tree.search_point(p, 0).unwrap().expect("node exists");

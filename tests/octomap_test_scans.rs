@@ -5,7 +5,7 @@ mod octomap_port;
 
 use octolinear::formats::{bt, graph};
 use octolinear::{OccupancyTree, Point3, PointCloud, Pose6D, ScanOptions};
-use octomap_port::{deg2rad, expect_float_eq, input};
+use octomap_port::{assert_octomap_file, deg2rad, expect_float_eq, input};
 
 fn compare_pose(first: &Pose6D, sec: &Pose6D) {
     let (a, b) = (first.trans(), sec.trans());
@@ -59,6 +59,12 @@ fn test_scans() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("spherical_scan_out.graph");
         graph::write_file(&graph, &path).expect("writeBinary");
+        let bytes = std::fs::read(&path).unwrap();
+        assert_octomap_file(
+            &bytes,
+            "spherical_scan_out.graph",
+            "ea2094cac04d8642c4257f50fec6be55a96ba3d92a2cecef8d65c2bc9a553cbb",
+        );
         let re_read_graph = graph::read_file(&path).expect("readBinary");
         assert_eq!(graph.nodes.len(), re_read_graph.nodes.len());
         assert_eq!(re_read_graph.nodes.len(), 1);
@@ -78,6 +84,11 @@ fn test_scans() {
         tree.insert_point_cloud(cloud.as_slice(), origin.trans(), &ScanOptions::default()).expect("scan inserted");
         let mut file = Vec::new();
         bt::write(&tree, &mut file).expect("writeBinary spherical_scan.bt");
+        assert_octomap_file(
+            &file,
+            "spherical_scan.bt",
+            "62a24e46ece667a54e18058d74c49c4f8ac6923acbaf77b8140b4f2d5321b853",
+        );
         // OctoMap reports writing 21438 nodes (the maximum-likelihood, pruned tree)
         assert_eq!(bt::read(file.as_slice()).unwrap().size(), 21438);
     }

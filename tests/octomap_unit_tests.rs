@@ -6,7 +6,7 @@ mod octomap_port;
 use octolinear::formats::{bt, graph};
 use octolinear::sensor::{logodds, probability, SensorModel, SensorProbabilities};
 use octolinear::{Clock, InnerNodes, NodeKind, OccupancyTree, Point3, PointCloud, Pose6D, Quaternion, ScanOptions};
-use octomap_port::{deg2rad, expect_float_eq};
+use octomap_port::{assert_octomap_file, deg2rad, expect_float_eq};
 use std::f64::consts::PI;
 
 #[test]
@@ -87,6 +87,7 @@ fn insert_ray() {
     }
     let mut file = Vec::new();
     bt::write(&tree, &mut file).expect("writeBinary");
+    assert_octomap_file(&file, "sphere_rays.bt", "39b613a5811d5e35696c042a7441800a74e21ee324f6e62a586151cf9e5098bb");
     // OctoMap's writeBinary turns the tree itself into its maximum-likelihood,
     // pruned form before the size is checked
     tree.to_max_likelihood();
@@ -122,6 +123,8 @@ fn insert_scan() {
 
     let dir = tempfile::tempdir().unwrap();
     graph::write_file(&graph, dir.path().join("test.graph")).expect("writeBinary");
+    let bytes = std::fs::read(dir.path().join("test.graph")).unwrap();
+    assert_octomap_file(&bytes, "test.graph", "65db6b42d4928bff6424395cf4282d968767c2f58f9a0d2b601942ddf02024a4");
 }
 
 #[test]

@@ -95,3 +95,13 @@ pub fn float_steps(start: f32, end: f32, step: f32) -> Vec<f32> {
     }
     v
 }
+
+/// Asserts that `bytes` are the file OctoMap's test program writes as
+/// `name`, by its SHA-256 (taken from running the program against Debian's
+/// liboctomap 1.9.7, which writes these files as 1.10 does).
+#[track_caller]
+pub fn assert_octomap_file(bytes: &[u8], name: &str, sha256: &str) {
+    use sha2::{Digest, Sha256};
+    let digest: String = Sha256::digest(bytes).iter().map(|b| format!("{b:02x}")).collect();
+    assert_eq!(digest, sha256, "{name} differs from what OctoMap writes ({} bytes)", bytes.len());
+}
