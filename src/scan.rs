@@ -240,6 +240,26 @@ impl OccupancyTree {
         Ok(ScanReport { free_updates: free.len(), occupied_updates: occupied.len(), ..report })
     }
 
+    /// Integrates a coloured scan into a colour tree: the scan as
+    /// [`Self::insert_point_cloud`], then each end point's colour blended in
+    /// with `integrateNodeColor`, in point order (what ROS colour mapping
+    /// does with OctoMap). `colors` pairs with `points`.
+    pub fn insert_colored_point_cloud(
+        &mut self,
+        points: &[Point3],
+        colors: &[[u8; 3]],
+        origin: Point3,
+        opts: &ScanOptions,
+    ) -> Result<ScanReport, ScanError> {
+        let report = self.insert_point_cloud(points, origin, opts)?;
+        for (p, rgb) in points.iter().zip(colors) {
+            if let Ok(k) = self.key(*p) {
+                self.integrate_color(k, *rgb);
+            }
+        }
+        Ok(report)
+    }
+
     /// Applies a scan's key sets key by key: misses, then hits, each key
     /// once, in the given order. The result is the same for any order;
     /// [`Self::insert_point_cloud`] uses the faster [`Self::update_batch`].
