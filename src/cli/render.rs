@@ -214,13 +214,11 @@ fn perspective(tree: &OccupancyTree, a: &Args) -> Result<(u32, u32, Vec<u8>)> {
     let tan = (a.fov.to_radians() / 2.0).tan();
     let aspect = f64::from(w) / f64::from(h);
     let origin = Point3::new(eye[0] as f32, eye[1] as f32, eye[2] as f32);
-    tree.key(origin)
-        .with_context(|| format!("camera {eye:?} is outside the map"))?;
-    let max_range = sub(target, eye).iter().map(|d| d * d).sum::<f64>().sqrt() + 2.0 * diag;
-    let opts = CastOptions {
-        ignore_unknown: true,
-        max_range: Some(max_range),
-    };
+    // rays only run through the occupied bounds (widened by a voxel)
+    let pad = tree.resolution();
+    let (blo, bhi) = (lo.map(|c| c - pad), hi.map(|c| c + pad));
+    let span = sub(bhi, blo).iter().map(|d| d * d).sum::<f64>().sqrt();
+    let far = sub(centre, eye).iter().map(|d| d * d).sum::<f64>().sqrt() + span;
     let (zlo, zhi) = (lo[2], hi[2]);
     let mut img = vec![0u8; w as usize * h as usize * 3];
     img.par_chunks_mut(w as usize * 3)
@@ -231,16 +229,41 @@ fn perspective(tree: &OccupancyTree, a: &Args) -> Result<(u32, u32, Vec<u8>)> {
                 let u = (2.0 * (col as f64 + 0.5) / f64::from(w) - 1.0) * tan * aspect;
                 let d = [0, 1, 2].map(|i| forward[i] + u * right[i] + v * up[i]);
                 let dir = Point3::new(d[0] as f32, d[1] as f32, d[2] as f32);
-                let px = match tree.cast_ray(origin, dir, opts) {
-                    Ok(CastOutcome::Occupied { end }) => {
+                let Some(unit) = normalised(d) else {
+                    line[col * 3..col * 3 + 3].copy_from_slice(&UNKNOWN);
+                    continue;
+                };
+                // slab test against the bounds: where the ray enters and leaves
+                let (mut t0, mut t1) = (0.0f64, f64::MAX);
+                for i in 0..3 {
+                    let inv = 1.0 / unit[i];
+                    let (a, b) = ((blo[i] - eye[i]) * inv, (bhi[i] - eye[i]) * inv);
+                    t0 = t0.max(a.min(b));
+                    t1 = t1.min(a.max(b));
+                }
+                let cast = if t0 <= t1 {
+                    let start = Point3::new(
+                        (eye[0] + unit[0] * t0) as f32,
+                        (eye[1] + unit[1] * t0) as f32,
+                        (eye[2] + unit[2] * t0) as f32,
+                    );
+                    let opts = CastOptions {
+                        ignore_unknown: true,
+                        max_range: Some(t1 - t0 + pad),
+                    };
+                    tree.cast_ray(start, dir, opts).ok()
+                } else {
+                    None
+                };
+                let px = match cast {
+                    Some(CastOutcome::Occupied { end }) => {
                         let unit = dir.normalized();
                         let entry = tree.ray_intersection(origin, unit, end, 0.0).unwrap_or(end);
                         let off = (entry - end).to_array().map(f32::abs);
                         let axis = (0..3).fold(0, |m, i| if off[i] > off[m] { i } else { m });
                         let facing = f64::from(unit.to_array()[axis].abs());
                         let dist = (entry - origin).norm();
-                        let shade =
-                            (0.45 + 0.55 * facing) * (1.0 - 0.35 * (dist / max_range).min(1.0));
+                        let shade = (0.45 + 0.55 * facing) * (1.0 - 0.35 * (dist / far).min(1.0));
                         let t = (f64::from(end.z) - zlo) / (zhi - zlo);
                         height_colour(t).map(|c| (c * shade).round() as u8)
                     }
