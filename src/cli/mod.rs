@@ -45,8 +45,29 @@ enum Command {
     Mesh(mesh::Args),
 }
 
+/// Restores the default SIGPIPE action so that `octolinear ... | head`
+/// ends quietly like other command-line tools instead of panicking in
+/// `println!` (Rust ignores SIGPIPE by default).
+#[cfg(target_os = "linux")]
+fn default_sigpipe() {
+    extern "C" {
+        fn signal(signum: i32, handler: usize) -> usize;
+    }
+    const SIGPIPE: i32 = 13;
+    const SIG_DFL: usize = 0;
+    // SAFETY: signal() from the C library with a valid signal number and
+    // the default disposition; called before any other thread exists.
+    unsafe {
+        signal(SIGPIPE, SIG_DFL);
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn default_sigpipe() {}
+
 /// Runs the tool; returns the process exit code.
 pub fn main() -> i32 {
+    default_sigpipe();
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {

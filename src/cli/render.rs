@@ -111,9 +111,9 @@ fn top_view(tree: &OccupancyTree, a: &Args, depth: u8) -> Result<(u32, u32, Vec<
     let (zlo, zhi) = occupied.map_or((lo[2], hi[2]), |(l, h)| (l[2], h[2]));
     let (dx, dy) = (hi[0] - lo[0], hi[1] - lo[1]);
     let w = a.width;
-    let h = a
-        .height
-        .unwrap_or_else(|| ((f64::from(w) * dy / dx).round() as u32).clamp(1, MAX_SIDE));
+    let h = a.height.unwrap_or_else(|| {
+        ((f64::from(w) * dy / dx).round() as u32).clamp(1, (4 * w).min(MAX_SIDE))
+    });
     let s = (dx / f64::from(w)).max(dy / f64::from(h));
     let (cx, cy) = ((lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0);
     let (ox, oy) = (cx - s * f64::from(w) / 2.0, cy + s * f64::from(h) / 2.0);
