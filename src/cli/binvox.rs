@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 ///
 /// Example: octolinear binvox chair.binvox -o chair.bt --mark-free --offset 1 0 0
 #[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
 pub struct Args {
     /// Input `.binvox` files.
     #[arg(required = true)]
@@ -187,9 +188,9 @@ fn insert(
                 p.rotate_ip(std::f64::consts::FRAC_PI_2, 0.0, 0.0);
             }
             if let Some(o) = offset {
-                p = p + o;
+                p += o;
             }
-            let inside = a.bb.as_ref().is_none_or(|b| {
+            let inside = a.bb.as_ref().map_or(true, |b| {
                 let c = p.to_array().map(f64::from);
                 (0..3).all(|i| c[i] <= b[3 + i] && c[i] >= b[i])
             });

@@ -23,6 +23,7 @@ use std::time::Instant;
 /// Example: octolinear build scans.graph -o map.bt --res 0.05 --max-range 20
 /// Example: octolinear build --points a.ply b.pcd --trajectory traj.txt -o map.bt
 #[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
 pub struct Args {
     /// Input `.graph` file (OctoMap ScanGraph).
     #[arg(required_unless_present = "points", conflicts_with = "points")]

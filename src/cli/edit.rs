@@ -18,6 +18,7 @@ use std::path::PathBuf;
 ///
 /// Example: octolinear edit map.bt small.bt --min -2 -2 0 --max 2 2 1.5 --scale 2
 #[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
 pub struct Args {
     /// Input map (.bt or .ot).
     input: PathBuf,
@@ -61,6 +62,7 @@ pub struct CropBox {
 ///
 /// Example: octolinear crop map.ot room.ot --min -2 -2 0 --max 2 2 1.5
 #[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
 pub struct CropArgs {
     input: PathBuf,
     output: PathBuf,
@@ -115,9 +117,9 @@ fn crop_node(
 ) -> Option<f32> {
     let size = 1u32 << (16 - u32::from(depth));
     let mut inside = true;
-    for i in 0..3 {
+    for (i, &a) in min.iter().enumerate() {
         let (lo, hi) = (u32::from(kb.min.0[i]), u32::from(kb.max.0[i]));
-        let (a, b) = (min[i], min[i] + size - 1);
+        let b = a + size - 1;
         if b < lo || a > hi {
             return None;
         }

@@ -24,6 +24,7 @@ use std::path::PathBuf;
 /// Example: octolinear eval map.bt scans.graph --json
 /// Example: octolinear eval scans.graph --res 0.1 --folds 5
 #[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
 pub struct Args {
     /// `MAP SCANS.graph`, or only `SCANS.graph` to build and hold out.
     #[arg(num_args = 1..=2, required = true, value_names = ["MAP", "SCANS"])]

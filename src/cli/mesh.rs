@@ -14,6 +14,7 @@ use std::path::PathBuf;
 ///
 /// Example: octolinear mesh map.bt -o map.ply --depth 15
 #[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
 pub struct Args {
     map: PathBuf,
     /// Output mesh (.ply).

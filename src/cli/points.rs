@@ -16,6 +16,7 @@ use std::path::PathBuf;
 ///
 /// Example: octolinear to-points map.bt occupied.ply --depth 14
 #[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
 pub struct Args {
     /// Input map (.bt or .ot).
     map: PathBuf,

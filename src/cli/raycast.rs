@@ -11,6 +11,7 @@ use std::path::PathBuf;
 ///
 /// Example: octolinear raycast map.bt --origin 0 0 1 --direction 1 0 0 --max-range 10 --json
 #[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
 pub struct Args {
     map: PathBuf,
     /// Start of the ray.

@@ -25,6 +25,7 @@ enum View {
 ///
 /// Example: octolinear render map.bt -o view.png --view perspective --width 640 --height 480
 #[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
 pub struct Args {
     map: PathBuf,
     /// Output image (.png).
