@@ -897,6 +897,45 @@ fn render_draws_the_wall() {
         assert_eq!(brightness(&p, 0, y), 16);
         assert_eq!(brightness(&p, 63, y), 16);
     }
+    // a coarser level draws bigger blocks: the lit area grows
+    let lit_count = |img: &(u32, u32, Vec<u8>)| {
+        (0..img.0 * img.1)
+            .filter(|&i| brightness(img, i % img.0, i / img.0) > 16)
+            .count()
+    };
+    let mut coarse_args = vec![
+        "render",
+        map,
+        "-o",
+        f.p("p12.png"),
+        "--view",
+        "perspective",
+        "--camera",
+        "0",
+        "0",
+        "0.5",
+        "--look-at",
+        "2",
+        "0",
+        "0.5",
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--depth",
+        "12",
+    ];
+    ok(&coarse_args);
+    let c = png_pixels(&f.path("p12.png"));
+    assert!(brightness(&c, 32, 24) >= 100);
+    assert!(
+        lit_count(&c) > lit_count(&p),
+        "{} vs {}",
+        lit_count(&c),
+        lit_count(&p)
+    );
+    coarse_args.push("--free");
+    fail(&coarse_args, "--free applies to --view top only");
     // auto camera sees something
     ok(&[
         "render",

@@ -6,8 +6,9 @@ use anyhow::{bail, Context, Result};
 use octolinear::{InnerNodes, OccupancyTree, Point3};
 use std::path::{Path, PathBuf};
 
-/// Convert binvox voxel grids (run-length encoded) into one map, as
-/// OctoMap's binvox2bt: the voxel size is scale / largest dimension,
+/// Convert binvox voxel grids into a map (OctoMap's binvox2bt).
+///
+/// The voxel size is scale / largest dimension,
 /// voxels with value 1 are marked occupied (the others stay unknown unless
 /// --mark-free). Several inputs are merged into one map; the options apply
 /// to all of them. The `.bt` output is byte-identical to binvox2bt's.

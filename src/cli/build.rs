@@ -11,8 +11,9 @@ use octolinear::{BoundsRule, InnerNodes, OccupancyTree, Pose6D, ScanGraph, ScanO
 use std::path::PathBuf;
 use std::time::Instant;
 
-/// Build a map from the scans of a `.graph` file (like OctoMap's graph2tree),
-/// or from point cloud files (--points: .ply, .pcd, .las, .laz, .xyz), one
+/// Build a map from a `.graph` file (like OctoMap's graph2tree) or point cloud files.
+///
+/// Input is a `.graph` file, or point cloud files (--points: .ply, .pcd, .las, .laz, .xyz), one
 /// scan per file, each taken from a sensor pose (--pose for all files, or
 /// one line `x y z roll pitch yaw` per file in --trajectory; identity by
 /// default). Points are in the sensor frame; rays start at the pose.
@@ -21,6 +22,7 @@ use std::time::Instant;
 /// maximum-likelihood tree; both are byte-identical to what OctoMap writes.
 ///
 /// Example: octolinear build scans.graph -o map.bt --res 0.05 --max-range 20
+///
 /// Example: octolinear build --points a.ply b.pcd --trajectory traj.txt -o map.bt
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]

@@ -8,8 +8,9 @@ use octolinear::tree::NodeRef;
 use octolinear::OccupancyTree;
 use std::path::PathBuf;
 
-/// Compare two maps voxel by voxel at full resolution (like OctoMap's
-/// compare_octrees): counts of voxels known in each, voxels whose occupancy
+/// Compare two maps voxel by voxel (like OctoMap's compare_octrees).
+///
+/// Compares at full resolution: counts of voxels known in each, voxels whose occupancy
 /// or log-odds differ, and the KL divergence KLD(A || B) summed over the
 /// voxels known in both, with compare_octrees' formula and summation order.
 ///

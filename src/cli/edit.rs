@@ -10,9 +10,10 @@ use octolinear::tree::{NodeRef, PreorderBuilder};
 use octolinear::{Key, KeyBox, OccupancyTree, Point3};
 use std::path::PathBuf;
 
-/// Edit a map: crop to a box, change the resolution (like OctoMap's
-/// edit_octree --res / --scale), expand, convert to maximum likelihood,
-/// prune. Operations run in that order; the output format follows the
+/// Crop, rescale (like OctoMap's edit_octree), expand, threshold or prune a map.
+///
+/// Crop to a box, change the resolution (edit_octree --res / --scale),
+/// expand, convert to maximum likelihood, prune. Operations run in that order; the output format follows the
 /// extension (.bt is always written maximum-likelihood and pruned, as
 /// OctoMap's writeBinary does).
 ///
@@ -54,7 +55,9 @@ pub struct CropBox {
     max: Option<Vec<f64>>,
 }
 
-/// Crop a map to an axis-aligned box: keeps exactly the voxels whose keys
+/// Crop a map to an axis-aligned box.
+///
+/// Keeps exactly the voxels whose keys
 /// lie between the keys of the two corners (the voxels containing the
 /// corners included, as OctoMap's bounding-box iterators count them).
 /// Pruned nodes straddling the border are split; inner nodes are

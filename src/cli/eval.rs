@@ -9,7 +9,9 @@ use octolinear::scan::OutOfMap;
 use octolinear::{InnerNodes, OccupancyTree, ScanOptions};
 use std::path::PathBuf;
 
-/// Accuracy of a map against scans: each scan's free voxels (along its
+/// Accuracy of a map against scans (like OctoMap's eval_octree_accuracy).
+///
+/// Each scan's free voxels (along its
 /// rays) and occupied voxels (its end points) are looked up in the map and
 /// counted as correct, wrong or unknown; accuracy = correct / (correct +
 /// wrong).
@@ -22,6 +24,7 @@ use std::path::PathBuf;
 /// scan.
 ///
 /// Example: octolinear eval map.bt scans.graph --json
+///
 /// Example: octolinear eval scans.graph --res 0.1 --folds 5
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]

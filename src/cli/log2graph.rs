@@ -5,9 +5,11 @@ use anyhow::{Context, Result};
 use octolinear::formats::{graph, log};
 use std::path::PathBuf;
 
-/// Convert a plain-text scan log (`NODE x y z roll pitch yaw` lines, each
-/// followed by `x y z` points) into a binary `.graph` file, byte for byte
-/// as OctoMap's log2graph writes it.
+/// Convert a plain-text scan log into a `.graph` file (OctoMap's log2graph).
+///
+/// The log has `NODE x y z roll pitch yaw` lines, each followed by `x y z`
+/// points. The output is byte for byte what log2graph writes, except node
+/// ids, which log2graph leaves uninitialised (we number them 0, 1, 2...).
 ///
 /// Example: octolinear log2graph scans.log scans.graph
 #[derive(clap::Args)]

@@ -7,8 +7,10 @@ use octolinear::{OccupancyTree, Point3};
 use std::io::Write;
 use std::path::PathBuf;
 
-/// Export the occupied voxels as a mesh of cubes (PLY with quad faces and
-/// per-vertex colours by height) for MeshLab, Blender and the like. Faces
+/// Export the occupied voxels as a mesh of cubes (PLY).
+///
+/// Quad faces with per-vertex colours by height, for MeshLab, Blender and
+/// the like. Faces
 /// shared with an occupied neighbour of at least the same size are left
 /// out unless --all-faces.
 ///

@@ -7,7 +7,7 @@ use octolinear::{Key, OccupancyTree, Point3};
 use std::io::Write;
 use std::path::PathBuf;
 
-/// Write the centres of the occupied (or free) voxels as a point cloud.
+/// Write the centres of the occupied (or free) voxels as a point cloud (octree2pointcloud).
 ///
 /// Pruned nodes are expanded first, as octree2pointcloud does, so every
 /// voxel of the chosen depth gives one point, in OctoMap's iteration order.

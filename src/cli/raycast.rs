@@ -5,8 +5,9 @@ use anyhow::{bail, Context, Result};
 use octolinear::{CastOptions, CastOutcome};
 use std::path::PathBuf;
 
-/// Cast one ray through a map (OctoMap's castRay) and print how it ended
-/// (occupied, max-range, unknown or left-map) and the centre of the last
+/// Cast one ray through a map (OctoMap's castRay).
+///
+/// Prints how the ray ended (occupied, max-range, unknown or left-map) and the centre of the last
 /// voxel visited.
 ///
 /// Example: octolinear raycast map.bt --origin 0 0 1 --direction 1 0 0 --max-range 10 --json

@@ -4,7 +4,7 @@
 use super::common::{depth_arg, extension, load_map, point_arg, write_output};
 use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
-use octolinear::{CastOptions, CastOutcome, OccupancyTree, Point3};
+use octolinear::{CastOptions, CastOutcome, InnerNodes, OccupancyTree, Point3};
 use rayon::prelude::*;
 use std::path::PathBuf;
 
@@ -51,7 +51,7 @@ pub struct Args {
     /// Tint free space (top view).
     #[arg(long)]
     free: bool,
-    /// Draw nodes of this depth (top view; 16 = full resolution).
+    /// Draw nodes of this depth (16 = full resolution; lower = coarser).
     #[arg(long, default_value_t = 16)]
     depth: u8,
 }
@@ -182,10 +182,44 @@ fn normalised(a: [f64; 3]) -> Option<[f64; 3]> {
     (n > 1e-12).then(|| a.map(|c| c / n))
 }
 
-fn perspective(tree: &OccupancyTree, a: &Args) -> Result<(u32, u32, Vec<u8>)> {
-    if a.depth != 16 || a.free {
-        bail!("--depth and --free apply to --view top only");
+/// A tree whose voxels are the occupied depth-`depth` nodes of `tree`
+/// (resolution scaled by 2^(16 - depth); the voxel centres coincide with
+/// the nodes' centres), for casting rays at a coarser level.
+pub fn coarse_occupied(tree: &OccupancyTree, depth: u8) -> Result<OccupancyTree> {
+    let factor = f64::from(1u32 << (16 - u32::from(depth)));
+    let mut coarse = OccupancyTree::with_sensor(tree.resolution() * factor, *tree.sensor())?;
+    let sensor = *tree.sensor();
+    let mut failed = None;
+    super::points::for_each_voxel(
+        tree,
+        depth,
+        |v| sensor.is_occupied(v),
+        |_, p, v| match coarse.key(p) {
+            Ok(k) => {
+                coarse.set_value(k, v, InnerNodes::Defer);
+            }
+            Err(e) => failed = Some(e),
+        },
+    );
+    if let Some(e) = failed {
+        bail!("cannot coarsen the map: {e}");
     }
+    coarse.update_inner_occupancy();
+    coarse.prune();
+    Ok(coarse)
+}
+
+fn perspective(tree: &OccupancyTree, a: &Args, depth: u8) -> Result<(u32, u32, Vec<u8>)> {
+    if a.free {
+        bail!("--free applies to --view top only");
+    }
+    let coarse;
+    let tree = if depth < 16 {
+        coarse = coarse_occupied(tree, depth)?;
+        &coarse
+    } else {
+        tree
+    };
     if !(a.fov.is_finite() && a.fov > 0.0 && a.fov < 180.0) {
         bail!("--fov must be between 0 and 180 degrees, got {}", a.fov);
     }
@@ -285,7 +319,7 @@ pub fn run(a: Args) -> Result<()> {
     let tree = load_map(&a.map)?.tree;
     let (w, h, img) = match a.view {
         View::Top => top_view(&tree, &a, depth)?,
-        View::Perspective => perspective(&tree, &a)?,
+        View::Perspective => perspective(&tree, &a, depth)?,
     };
     write_output(&a.output, |out| {
         let mut enc = png::Encoder::new(out, w, h);
