@@ -2,24 +2,44 @@
 //! `.graph` file into a map.
 
 use super::common::{progress, save_map, MapFormat};
+use super::input;
 use anyhow::{bail, Context, Result};
 use octolinear::formats::graph;
 use octolinear::scan::OutOfMap;
 use octolinear::sensor::{SensorModel, SensorProbabilities};
-use octolinear::{BoundsRule, InnerNodes, OccupancyTree, ScanOptions};
+use octolinear::{BoundsRule, InnerNodes, OccupancyTree, Pose6D, ScanGraph, ScanOptions};
 use std::path::PathBuf;
 use std::time::Instant;
 
-/// Build a map from the scans of a `.graph` file (like OctoMap's graph2tree).
+/// Build a map from a `.graph` file (like OctoMap's graph2tree) or point cloud files.
+///
+/// Input is a `.graph` file, or point cloud files (--points: .ply, .pcd, .las, .laz, .xyz), one
+/// scan per file, each taken from a sensor pose (--pose for all files, or
+/// one line `x y z roll pitch yaw` per file in --trajectory; identity by
+/// default). Points are in the sensor frame; rays start at the pose.
 ///
 /// `.ot` output is the full probabilistic tree, `.bt` the compact
 /// maximum-likelihood tree; both are byte-identical to what OctoMap writes.
 ///
 /// Example: octolinear build scans.graph -o map.bt --res 0.05 --max-range 20
+///
+/// Example: octolinear build --points a.ply b.pcd --trajectory traj.txt -o map.bt
 #[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
 pub struct Args {
     /// Input `.graph` file (OctoMap ScanGraph).
-    input: PathBuf,
+    #[arg(required_unless_present = "points", conflicts_with = "points")]
+    input: Option<PathBuf>,
+    /// Point cloud files, one scan each (.ply, .pcd, .las, .laz, .xyz).
+    #[arg(long, num_args = 1.., value_name = "FILE")]
+    points: Vec<PathBuf>,
+    /// Sensor pose of every --points file.
+    #[arg(long, num_args = 6, allow_negative_numbers = true, conflicts_with = "trajectory",
+          value_names = ["X", "Y", "Z", "ROLL", "PITCH", "YAW"], requires = "points")]
+    pose: Option<Vec<f64>>,
+    /// Text file with one pose `x y z roll pitch yaw` per --points file.
+    #[arg(long, requires = "points")]
+    trajectory: Option<PathBuf>,
     /// Output map, `.bt` or `.ot`.
     #[arg(short, long)]
     output: PathBuf,
@@ -128,6 +148,31 @@ fn print_statistics(title: &str, s: &serde_json::Value) {
     println!("Size: {} x {} x {} m^3\n", m[0], m[1], m[2]);
 }
 
+/// The `--points` files as a scan graph, each with its pose.
+fn point_files(a: &Args) -> Result<ScanGraph> {
+    let poses = match (&a.pose, &a.trajectory) {
+        (Some(p), _) => vec![input::pose(p)?; a.points.len()],
+        (None, Some(t)) => {
+            let poses = input::read_trajectory(t)?;
+            if poses.len() != a.points.len() {
+                bail!(
+                    "{} has {} poses for {} --points files",
+                    t.display(),
+                    poses.len(),
+                    a.points.len()
+                );
+            }
+            poses
+        }
+        (None, None) => vec![Pose6D::IDENTITY; a.points.len()],
+    };
+    let mut g = ScanGraph::new();
+    for (path, pose) in a.points.iter().zip(poses) {
+        g.add_node(input::read_points(path)?, pose);
+    }
+    Ok(g)
+}
+
 pub fn run(a: Args) -> Result<()> {
     let format = MapFormat::of(&a.output)?;
     let sensor = sensor_model(&a)?;
@@ -140,8 +185,13 @@ pub fn run(a: Args) -> Result<()> {
             bail!("--max-range must be a finite number, got {r}");
         }
     }
-    let g =
-        graph::read_file(&a.input).with_context(|| format!("cannot read {}", a.input.display()))?;
+    let (g, input) = match &a.input {
+        Some(input) => (
+            graph::read_file(input).with_context(|| format!("cannot read {}", input.display()))?,
+            input.display().to_string(),
+        ),
+        None => (point_files(&a)?, format!("{} point files", a.points.len())),
+    };
     let n = a.scans.unwrap_or(g.nodes.len()).min(g.nodes.len());
     let points: usize = g.nodes[..n].iter().map(|s| s.scan.points.len()).sum();
     let opts = ScanOptions {
@@ -187,7 +237,7 @@ pub fn run(a: Args) -> Result<()> {
     save_map(written, &a.output)?;
     if a.json {
         let out = serde_json::json!({
-            "input": a.input, "output": a.output, "scans": n, "points": points,
+            "input": input, "output": a.output, "scans": n, "points": points,
             "non_finite_points_skipped": non_finite,
             "insert_seconds": seconds,
             "points_per_second": points as f64 / seconds.max(1e-12),

@@ -75,3 +75,83 @@ pub fn progress(len: u64, what: &str) -> indicatif::ProgressBar {
     bar.set_message(what.to_string());
     bar
 }
+
+/// Three finite numbers from a clap `num_args = 3` flag, as a float point.
+pub fn point_arg(v: &[f64], flag: &str) -> Result<octolinear::Point3> {
+    if v.len() != 3 || v.iter().any(|c| !c.is_finite()) {
+        bail!("{flag} needs three finite numbers, got {v:?}");
+    }
+    Ok(octolinear::Point3::new(
+        v[0] as f32,
+        v[1] as f32,
+        v[2] as f32,
+    ))
+}
+
+/// Checks a `--depth` value (1..=16; 0 means 16 as in OctoMap's iterators).
+pub fn depth_arg(d: u8) -> Result<u8> {
+    if d > 16 {
+        bail!("--depth must be between 1 and 16, got {d}");
+    }
+    Ok(if d == 0 { 16 } else { d })
+}
+
+/// Writes a file atomically through `write`, with the path in the error.
+pub fn write_output(
+    path: &Path,
+    write: impl FnOnce(&mut std::io::BufWriter<&File>) -> std::io::Result<()>,
+) -> Result<()> {
+    write_atomically(path, write).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// The lower-case extension of a path, or an error naming the choices.
+pub fn extension(path: &Path, choices: &[&str]) -> Result<String> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    if choices.contains(&ext.as_str()) {
+        Ok(ext)
+    } else {
+        let list: Vec<String> = choices.iter().map(|c| format!(".{c}")).collect();
+        bail!(
+            "{}: unknown format (expected {})",
+            path.display(),
+            list.join(", ")
+        )
+    }
+}
+
+/// C++ `std::ostream << double` with the default precision 6 (`%g`).
+pub fn format_g6(v: f64) -> String {
+    if v == 0.0 {
+        return if v.is_sign_negative() { "-0" } else { "0" }.to_string();
+    }
+    if !v.is_finite() {
+        return if v.is_nan() {
+            "nan".into()
+        } else if v > 0.0 {
+            "inf".into()
+        } else {
+            "-inf".into()
+        };
+    }
+    let sci = format!("{v:.5e}");
+    let (mantissa, exp) = sci.split_once('e').expect("exponent");
+    let exp: i32 = exp.parse().expect("exponent is a number");
+    let trim = |s: String| -> String {
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    };
+    if !(-4..6).contains(&exp) {
+        let sign = if exp < 0 { '-' } else { '+' };
+        format!("{}e{sign}{:02}", trim(mantissa.to_string()), exp.abs())
+    } else {
+        let decimals = (5 - exp).max(0) as usize;
+        trim(format!("{v:.decimals$}"))
+    }
+}

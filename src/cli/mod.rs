@@ -1,14 +1,24 @@
 //! `octolinear` subcommands: one module per tool, all errors reported as
 //! one line on stderr with a non-zero exit code.
 
+mod binvox;
 mod build;
 mod common;
+mod compare;
+mod edit;
+mod eval;
 mod info;
+mod input;
+mod log2graph;
+mod mesh;
+mod points;
+mod raycast;
+mod render;
 mod simulate;
 
 use clap::{Parser, Subcommand};
 
-/// OctoMap-compatible 3D occupancy maps: build, inspect, convert and query.
+/// OctoMap-compatible 3D occupancy maps: build, inspect, convert, query, compare, edit, evaluate and render.
 #[derive(Parser)]
 #[command(name = "octolinear", version, about, long_about = None)]
 struct Cli {
@@ -23,10 +33,41 @@ enum Command {
     Info(info::Args),
     Convert(info::ConvertArgs),
     Query(info::QueryArgs),
+    Compare(compare::Args),
+    Crop(edit::CropArgs),
+    Edit(edit::Args),
+    ToPoints(points::Args),
+    Eval(eval::Args),
+    Log2graph(log2graph::Args),
+    Binvox(binvox::Args),
+    Raycast(raycast::Args),
+    Render(render::Args),
+    Mesh(mesh::Args),
 }
+
+/// Restores the default SIGPIPE action so that `octolinear ... | head`
+/// ends quietly like other command-line tools instead of panicking in
+/// `println!` (Rust ignores SIGPIPE by default).
+#[cfg(target_os = "linux")]
+fn default_sigpipe() {
+    extern "C" {
+        fn signal(signum: i32, handler: usize) -> usize;
+    }
+    const SIGPIPE: i32 = 13;
+    const SIG_DFL: usize = 0;
+    // SAFETY: signal() from the C library with a valid signal number and
+    // the default disposition; called before any other thread exists.
+    unsafe {
+        signal(SIGPIPE, SIG_DFL);
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+fn default_sigpipe() {}
 
 /// Runs the tool; returns the process exit code.
 pub fn main() -> i32 {
+    default_sigpipe();
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {
@@ -41,6 +82,16 @@ pub fn main() -> i32 {
         Command::Info(a) => info::run(a),
         Command::Convert(a) => info::convert(a),
         Command::Query(a) => info::query(a),
+        Command::Compare(a) => compare::run(a),
+        Command::Crop(a) => edit::run_crop(a),
+        Command::Edit(a) => edit::run(a),
+        Command::ToPoints(a) => points::run(a),
+        Command::Eval(a) => eval::run(a),
+        Command::Log2graph(a) => log2graph::run(a),
+        Command::Binvox(a) => binvox::run(a),
+        Command::Raycast(a) => raycast::run(a),
+        Command::Render(a) => render::run(a),
+        Command::Mesh(a) => mesh::run(a),
     };
     match result {
         Ok(()) => 0,

@@ -16,6 +16,7 @@ enum Scene {
 ///
 /// Example: octolinear simulate --scene indoor --scans 16 --seed 1 -o indoor.graph
 #[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
 pub struct Args {
     #[arg(long, value_enum, default_value = "indoor")]
     scene: Scene,

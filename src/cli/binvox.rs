@@ -1,0 +1,256 @@
+//! `octolinear binvox`: OctoMap's `binvox2bt` — voxel grids written by
+//! Patrick Min's binvox into a `.bt` map.
+
+use super::common::{point_arg, save_map};
+use anyhow::{bail, Context, Result};
+use octolinear::{InnerNodes, OccupancyTree, Point3};
+use std::path::{Path, PathBuf};
+
+/// Convert binvox voxel grids into a map (OctoMap's binvox2bt).
+///
+/// The voxel size is scale / largest dimension,
+/// voxels with value 1 are marked occupied (the others stay unknown unless
+/// --mark-free). Several inputs are merged into one map; the options apply
+/// to all of them. The `.bt` output is byte-identical to binvox2bt's.
+///
+/// Example: octolinear binvox chair.binvox -o chair.bt --mark-free --offset 1 0 0
+#[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
+pub struct Args {
+    /// Input `.binvox` files.
+    #[arg(required = true)]
+    inputs: Vec<PathBuf>,
+    /// Output map (.bt or .ot; default: first input + .bt).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Mark voxels that are not occupied as free (default: unknown).
+    #[arg(long)]
+    mark_free: bool,
+    /// Rotate by 90 degrees about x (fixes files exported from Webots).
+    #[arg(long)]
+    rotate: bool,
+    /// Keep only voxels inside this box.
+    #[arg(long, num_args = 6, allow_negative_numbers = true,
+          value_names = ["MINX", "MINY", "MINZ", "MAXX", "MAXY", "MAXZ"])]
+    bb: Option<Vec<f64>>,
+    /// Add this offset to every voxel coordinate.
+    #[arg(long, num_args = 3, value_names = ["X", "Y", "Z"], allow_negative_numbers = true)]
+    offset: Option<Vec<f64>>,
+    /// One JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// A binvox header and its RLE data.
+pub struct Binvox {
+    /// `dim` as written: depth, height, width.
+    pub dim: [usize; 3],
+    pub translate: [f32; 3],
+    pub scale: f32,
+    /// Pairs of (value, count) bytes.
+    pub data: Vec<u8>,
+}
+
+/// A byte cursor reading like a C++ istream with `>>`.
+struct Cursor<'a> {
+    b: &'a [u8],
+    i: usize,
+}
+
+impl Cursor<'_> {
+    fn token(&mut self) -> Option<&str> {
+        while self.i < self.b.len() && self.b[self.i].is_ascii_whitespace() {
+            self.i += 1;
+        }
+        let start = self.i;
+        while self.i < self.b.len() && !self.b[self.i].is_ascii_whitespace() {
+            self.i += 1;
+        }
+        (self.i > start).then(|| std::str::from_utf8(&self.b[start..self.i]).unwrap_or("\u{fffd}"))
+    }
+
+    fn number<T: std::str::FromStr>(&mut self, what: &str) -> Result<T> {
+        let t = self
+            .token()
+            .with_context(|| format!("header ends before the {what}"))?;
+        t.parse()
+            .ok()
+            .with_context(|| format!("header: {what} {t:?} is not a number"))
+    }
+}
+
+/// Parses a binvox file.
+pub fn parse(bytes: &[u8]) -> Result<Binvox> {
+    let mut c = Cursor { b: bytes, i: 0 };
+    match c.token() {
+        Some("#binvox") => {}
+        other => bail!(
+            "first token is {:?} instead of \"#binvox\"",
+            other.unwrap_or("")
+        ),
+    }
+    let _version: i64 = c.number("version")?;
+    let (mut dim, mut translate, mut scale) = (None, [0f32; 3], 1f32);
+    loop {
+        let Some(t) = c.token() else {
+            bail!("header has no \"data\" line");
+        };
+        match t {
+            "data" => break,
+            "dim" => {
+                dim = Some([
+                    c.number("dimension")?,
+                    c.number("dimension")?,
+                    c.number("dimension")?,
+                ])
+            }
+            "translate" => {
+                for v in &mut translate {
+                    *v = c.number("translation")?;
+                }
+            }
+            "scale" => scale = c.number("scale")?,
+            _ => {
+                while c.i < bytes.len() && bytes[c.i] != b'\n' {
+                    c.i += 1;
+                }
+            }
+        }
+    }
+    let dim = dim.context("header has no \"dim\" line")?;
+    if dim.contains(&0) {
+        bail!("dimension {dim:?} is empty");
+    }
+    if !(scale.is_finite() && scale > 0.0) || translate.iter().any(|t| !t.is_finite()) {
+        bail!("header: scale {scale} / translation {translate:?} not usable");
+    }
+    // the byte after "data" (its line feed) is skipped
+    let data = bytes.get(c.i + 1..).unwrap_or_default().to_vec();
+    Ok(Binvox {
+        dim,
+        translate,
+        scale,
+        data,
+    })
+}
+
+#[derive(Default)]
+struct Counts {
+    voxels: usize,
+    out_of_box: usize,
+}
+
+/// Adds one grid to the tree (creating it at the grid's resolution).
+fn insert(
+    tree: &mut Option<OccupancyTree>,
+    bv: &Binvox,
+    a: &Args,
+    path: &Path,
+    counts: &mut Counts,
+) -> Result<()> {
+    let [depth, height, width] = bv.dim;
+    let size = depth
+        .checked_mul(height)
+        .and_then(|s| s.checked_mul(width))
+        .with_context(|| format!("dimension {:?} is too large", bv.dim))?;
+    let max_side = width.max(height).max(depth) as i32;
+    let res = f64::from(bv.scale) / f64::from(max_side);
+    let t = tree.get_or_insert(OccupancyTree::new(res)?);
+    let offset = match &a.offset {
+        Some(o) => Some(point_arg(o, "--offset")?),
+        None => None,
+    };
+    let [tx, ty, tz] = bv.translate.map(f64::from);
+    let (mut index, mut pairs) = (0usize, bv.data.chunks_exact(2));
+    while index < size {
+        let Some(&[value, count]) = pairs.next() else {
+            bail!(
+                "{}: data ends after {index} of {size} voxels",
+                path.display()
+            );
+        };
+        let end = index + usize::from(count);
+        if end > size {
+            bail!(
+                "{}: run-length data covers more than the {size} voxels of the grid",
+                path.display()
+            );
+        }
+        for j in index..end {
+            let y = j % width;
+            let z = (j / width) % height;
+            let x = j / (width * height);
+            let mut p = Point3::new(
+                (x as f64 * res + tx + 0.000001) as f32,
+                (y as f64 * res + ty + 0.000001) as f32,
+                (z as f64 * res + tz + 0.000001) as f32,
+            );
+            if a.rotate {
+                p.rotate_ip(std::f64::consts::FRAC_PI_2, 0.0, 0.0);
+            }
+            if let Some(o) = offset {
+                p += o;
+            }
+            let inside = a.bb.as_ref().map_or(true, |b| {
+                let c = p.to_array().map(f64::from);
+                (0..3).all(|i| c[i] <= b[3 + i] && c[i] >= b[i])
+            });
+            if inside {
+                if a.mark_free || value == 1 {
+                    // points outside the map are skipped, as updateNode does
+                    let _ = t.update_point(p, value == 1, InnerNodes::Defer);
+                }
+            } else {
+                counts.out_of_box += 1;
+            }
+        }
+        if value != 0 {
+            counts.voxels += usize::from(count);
+        }
+        index = end;
+    }
+    Ok(())
+}
+
+pub fn run(a: Args) -> Result<()> {
+    if let Some(b) = &a.bb {
+        if b.iter().any(|v| !v.is_finite()) || (0..3).any(|i| b[i] > b[3 + i]) {
+            bail!("--bb needs finite MIN <= MAX on every axis, got {b:?}");
+        }
+    }
+    let output = a.output.clone().unwrap_or_else(|| {
+        let mut s = a.inputs[0].clone().into_os_string();
+        s.push(".bt");
+        s.into()
+    });
+    super::common::MapFormat::of(&output)?;
+    let mut tree = None;
+    let mut counts = Counts::default();
+    for path in &a.inputs {
+        let bytes =
+            std::fs::read(path).with_context(|| format!("cannot open {}", path.display()))?;
+        let bv = parse(&bytes).with_context(|| format!("{}: not a binvox file", path.display()))?;
+        insert(&mut tree, &bv, &a, path, &mut counts)?;
+    }
+    let mut tree = tree.context("no input")?;
+    tree.update_inner_occupancy();
+    tree.prune();
+    save_map(&tree, &output)?;
+    if a.json {
+        let out = serde_json::json!({
+            "output": output, "resolution": tree.resolution(),
+            "voxels": counts.voxels, "skipped_out_of_box": counts.out_of_box,
+            "nodes": tree.size(),
+        });
+        println!("{out}");
+    } else {
+        println!(
+            "read {} voxels, skipped {} (out of bounding box); resolution {}; wrote {}",
+            counts.voxels,
+            counts.out_of_box,
+            tree.resolution(),
+            output.display()
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,279 @@
+//! `octolinear edit` and `crop`: OctoMap's `edit_octree` (resolution
+//! change) plus cropping to a box, expansion, pruning and conversion to
+//! maximum likelihood.
+
+use super::common::{load_map, point_arg, save_map};
+use anyhow::{bail, Context, Result};
+use octolinear::key::KeySpace;
+use octolinear::sensor::SensorModel;
+use octolinear::tree::{NodeRef, PreorderBuilder};
+use octolinear::{Key, KeyBox, OccupancyTree, Point3};
+use std::path::PathBuf;
+
+/// Crop, rescale (like OctoMap's edit_octree), expand, threshold or prune a map.
+///
+/// Crop to a box, change the resolution (edit_octree --res / --scale),
+/// expand, convert to maximum likelihood, prune. Operations run in that order; the output format follows the
+/// extension (.bt is always written maximum-likelihood and pruned, as
+/// OctoMap's writeBinary does).
+///
+/// Example: octolinear edit map.bt small.bt --min -2 -2 0 --max 2 2 1.5 --scale 2
+#[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
+pub struct Args {
+    /// Input map (.bt or .ot).
+    input: PathBuf,
+    /// Output map (.bt or .ot).
+    output: PathBuf,
+    #[command(flatten)]
+    crop: CropBox,
+    /// New voxel size in metres (the tree structure is kept, the map scaled).
+    #[arg(long, conflicts_with = "scale")]
+    res: Option<f64>,
+    /// Multiply the resolution by this factor.
+    #[arg(long)]
+    scale: Option<f64>,
+    /// Expand every pruned node to full depth (kept in .ot output only).
+    #[arg(long)]
+    expand: bool,
+    /// Set every node to its clamping bound (occupied or free).
+    #[arg(long)]
+    max_likelihood: bool,
+    /// Merge groups of eight equal leaves.
+    #[arg(long)]
+    prune: bool,
+}
+
+/// Optional crop box flags.
+#[derive(clap::Args)]
+pub struct CropBox {
+    /// Lower corner of the box to keep.
+    #[arg(long, num_args = 3, value_names = ["X", "Y", "Z"], allow_negative_numbers = true, requires = "max")]
+    min: Option<Vec<f64>>,
+    /// Upper corner of the box to keep.
+    #[arg(long, num_args = 3, value_names = ["X", "Y", "Z"], allow_negative_numbers = true, requires = "min")]
+    max: Option<Vec<f64>>,
+}
+
+/// Crop a map to an axis-aligned box.
+///
+/// Keeps exactly the voxels whose keys
+/// lie between the keys of the two corners (the voxels containing the
+/// corners included, as OctoMap's bounding-box iterators count them).
+/// Pruned nodes straddling the border are split; inner nodes are
+/// recomputed as the maximum of their kept children.
+///
+/// Example: octolinear crop map.ot room.ot --min -2 -2 0 --max 2 2 1.5
+#[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
+pub struct CropArgs {
+    input: PathBuf,
+    output: PathBuf,
+    /// Lower corner of the box to keep.
+    #[arg(long, num_args = 3, value_names = ["X", "Y", "Z"], allow_negative_numbers = true, required = true)]
+    min: Vec<f64>,
+    /// Upper corner of the box to keep.
+    #[arg(long, num_args = 3, value_names = ["X", "Y", "Z"], allow_negative_numbers = true, required = true)]
+    max: Vec<f64>,
+}
+
+/// The key box of two metric corners; coordinates beyond the map are
+/// clamped to its edge.
+pub fn key_box(keys: &KeySpace, min: Point3, max: Point3) -> Result<KeyBox> {
+    let (lo, hi) = (min.to_array(), max.to_array());
+    for i in 0..3 {
+        if lo[i] > hi[i] {
+            bail!(
+                "crop box: --min {:?} is above --max {:?} on axis {}",
+                lo,
+                hi,
+                ["x", "y", "z"][i]
+            );
+        }
+    }
+    let key = |c: f32| -> u16 {
+        keys.coord_to_key(f64::from(c))
+            .unwrap_or(if c < 0.0 { 0 } else { u16::MAX })
+    };
+    Ok(KeyBox {
+        min: Key(lo.map(key)),
+        max: Key(hi.map(key)),
+    })
+}
+
+/// A node of the source, real or the virtual child of a pruned leaf.
+#[derive(Clone, Copy)]
+enum Src<'a> {
+    Node(NodeRef<'a>),
+    Leaf(f32),
+}
+
+/// Appends the pre-order (value, child mask) of the part of a node inside
+/// `kb`; `min` is the node's smallest key, `depth` its depth. Returns the
+/// kept node's value, `None` when nothing of it is inside.
+fn crop_node(
+    src: Src<'_>,
+    min: [u32; 3],
+    depth: u8,
+    kb: &KeyBox,
+    out: &mut Vec<(f32, u8)>,
+) -> Option<f32> {
+    let size = 1u32 << (16 - u32::from(depth));
+    let mut inside = true;
+    for (i, &a) in min.iter().enumerate() {
+        let (lo, hi) = (u32::from(kb.min.0[i]), u32::from(kb.max.0[i]));
+        let b = a + size - 1;
+        if b < lo || a > hi {
+            return None;
+        }
+        inside &= a >= lo && b <= hi;
+    }
+    if inside {
+        let v = match src {
+            Src::Node(n) => {
+                copy_preorder(n, out);
+                n.value()
+            }
+            Src::Leaf(v) => {
+                out.push((v, 0));
+                v
+            }
+        };
+        return Some(v);
+    }
+    // partly inside: a node above depth 16, split into its children
+    let at = out.len();
+    out.push((0.0, 0));
+    let half = size / 2;
+    let mut mask = 0u8;
+    let mut max = -f32::MAX;
+    for pos in 0..8 {
+        let child = match src {
+            Src::Node(n) if n.has_children() => match n.child(pos) {
+                Some(c) => Src::Node(c),
+                None => continue,
+            },
+            Src::Node(n) => Src::Leaf(n.value()),
+            Src::Leaf(v) => Src::Leaf(v),
+        };
+        let cmin = [0, 1, 2].map(|a| min[a] + if pos & (1 << a) != 0 { half } else { 0 });
+        if let Some(v) = crop_node(child, cmin, depth + 1, kb, out) {
+            mask |= 1 << pos;
+            if v > max {
+                max = v;
+            }
+        }
+    }
+    if mask == 0 {
+        out.truncate(at);
+        return None;
+    }
+    out[at] = (max, mask);
+    Some(max)
+}
+
+fn copy_preorder(n: NodeRef<'_>, out: &mut Vec<(f32, u8)>) {
+    out.push((n.value(), n.child_mask()));
+    for (_, c) in n.children() {
+        copy_preorder(c, out);
+    }
+}
+
+/// Builds a tree from pre-order (value, mask) pairs.
+fn from_preorder(
+    nodes: &[(f32, u8)],
+    resolution: f64,
+    sensor: SensorModel,
+) -> Result<OccupancyTree> {
+    let mut b = PreorderBuilder::new();
+    for (i, &(v, m)) in nodes.iter().enumerate() {
+        b.push(v, m, i as u64)?;
+    }
+    b.finish(resolution, sensor)?
+        .context("internal error: incomplete pre-order")
+}
+
+/// The part of `tree` inside `kb`, as a new tree.
+pub fn crop(tree: &OccupancyTree, kb: &KeyBox) -> Result<OccupancyTree> {
+    let mut out = Vec::new();
+    if let Some(root) = tree.root() {
+        crop_node(Src::Node(root), [0; 3], 0, kb, &mut out);
+    }
+    from_preorder(&out, tree.resolution(), *tree.sensor())
+}
+
+/// The same tree with another resolution (`setResolution`).
+pub fn with_resolution(tree: &OccupancyTree, resolution: f64) -> Result<OccupancyTree> {
+    let mut out = Vec::new();
+    if let Some(root) = tree.root() {
+        copy_preorder(root, &mut out);
+    }
+    from_preorder(&out, resolution, *tree.sensor())
+}
+
+fn positive(v: f64, flag: &str) -> Result<f64> {
+    if !(v.is_finite() && v > 0.0) {
+        bail!("{flag} must be a positive finite number, got {v}");
+    }
+    Ok(v)
+}
+
+pub fn run(a: Args) -> Result<()> {
+    super::common::MapFormat::of(&a.output)?;
+    let new_res = match (a.res, a.scale) {
+        (Some(r), _) => Some(positive(r, "--res")?),
+        (None, Some(s)) => Some(positive(s, "--scale")?),
+        _ => None,
+    };
+    let corners = match (&a.crop.min, &a.crop.max) {
+        (Some(lo), Some(hi)) => Some((point_arg(lo, "--min")?, point_arg(hi, "--max")?)),
+        _ => None,
+    };
+    let mut tree = load_map(&a.input)?.tree;
+    if let Some((lo, hi)) = corners {
+        let kb = key_box(tree.key_space(), lo, hi)?;
+        tree = crop(&tree, &kb)?;
+    }
+    if let Some(r) = new_res {
+        // edit_octree: --scale multiplies the resolution read from the file
+        let r = if a.scale.is_some() {
+            tree.resolution() * r
+        } else {
+            r
+        };
+        tree = with_resolution(&tree, r)?;
+    }
+    if a.expand {
+        tree.expand();
+    }
+    if a.max_likelihood {
+        tree.to_max_likelihood();
+    }
+    if a.prune {
+        tree.prune();
+    }
+    save_map(&tree, &a.output)?;
+    eprintln!(
+        "wrote {} ({} nodes, resolution {})",
+        a.output.display(),
+        tree.size(),
+        tree.resolution()
+    );
+    Ok(())
+}
+
+pub fn run_crop(a: CropArgs) -> Result<()> {
+    run(Args {
+        input: a.input,
+        output: a.output,
+        crop: CropBox {
+            min: Some(a.min),
+            max: Some(a.max),
+        },
+        res: None,
+        scale: None,
+        expand: false,
+        max_likelihood: false,
+        prune: false,
+    })
+}

@@ -1,0 +1,1559 @@
+//! End-to-end tests of the `octolinear` subcommands: outputs checked against
+//! Debian's OctoMap tools where they exist (bytes of files, numbers they
+//! print), by content otherwise, and every error path a user can hit.
+
+use octolinear::formats::{bt, graph, ot};
+use octolinear::{OccupancyTree, Point3};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_octolinear"))
+}
+
+fn run(args: &[&str]) -> Output {
+    bin().args(args).output().expect("binary runs")
+}
+
+/// Runs and requires success; returns stdout.
+fn ok(args: &[&str]) -> String {
+    let out = run(args);
+    assert!(
+        out.status.success(),
+        "{args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).expect("utf-8 stdout")
+}
+
+/// Runs and requires a failure with one clear line on stderr containing `needle`.
+fn fail(args: &[&str], needle: &str) {
+    let out = run(args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{args:?} succeeded: {err}");
+    assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+    assert!(err.starts_with("octolinear: error: "), "{args:?}: {err}");
+    assert!(err.contains(needle), "{args:?}: {err:?} lacks {needle:?}");
+}
+
+/// Fails in argument parsing (clap's own message, which has a usage block).
+fn fail_usage(args: &[&str], needle: &str) {
+    let out = run(args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+    assert!(!err.contains("panicked"));
+    assert!(err.lines().next().unwrap().starts_with("error:"), "{err}");
+    assert!(err.contains(needle), "{err:?} lacks {needle:?}");
+}
+
+/// A Debian OctoMap tool, or `None` with one line saying the test part is skipped.
+fn tool(name: &str) -> Option<PathBuf> {
+    let p = Path::new("/usr/bin").join(name);
+    if p.exists() {
+        Some(p)
+    } else {
+        eprintln!("skipped: {name} is not installed");
+        None
+    }
+}
+
+fn oracle(tool: &Path, args: &[&str]) -> String {
+    let out = Command::new(tool).args(args).output().expect("tool runs");
+    assert!(out.status.success(), "{tool:?} {args:?} failed");
+    String::from_utf8_lossy(&out.stdout).into_owned() + &String::from_utf8_lossy(&out.stderr)
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+/// A temp dir with a small simulated scan graph and the maps built from it.
+struct Fixture {
+    dir: tempfile::TempDir,
+}
+
+impl Fixture {
+    fn new() -> Fixture {
+        let dir = tempfile::tempdir().unwrap();
+        let f = Fixture { dir };
+        ok(&[
+            "simulate",
+            "--scans",
+            "6",
+            "--beams",
+            "8",
+            "--steps",
+            "120",
+            "-o",
+            f.p("s.graph"),
+        ]);
+        for out in ["a.bt", "a.ot"] {
+            ok(&["build", f.p("s.graph"), "-o", f.p(out), "--res", "0.1"]);
+        }
+        f
+    }
+
+    fn path(&self, name: &str) -> PathBuf {
+        self.dir.path().join(name)
+    }
+
+    fn p(&self, name: &str) -> &str {
+        let p = self.dir.path().join(name);
+        // leak: test-lifetime strings for argument lists
+        Box::leak(p.into_os_string().into_string().unwrap().into_boxed_str())
+    }
+
+    fn write(&self, name: &str, bytes: impl AsRef<[u8]>) -> &str {
+        std::fs::write(self.path(name), bytes).unwrap();
+        self.p(name)
+    }
+}
+
+fn read_tree(p: &str) -> OccupancyTree {
+    let f = std::io::BufReader::new(std::fs::File::open(p).unwrap());
+    if p.ends_with(".bt") {
+        bt::read(f).unwrap()
+    } else {
+        ot::read(f).unwrap().into_occupancy()
+    }
+}
+
+fn json(text: &str) -> serde_json::Value {
+    serde_json::from_str(text.trim()).unwrap_or_else(|e| panic!("{e}: {text}"))
+}
+
+/// Voxels at depth `depth` below the leaves `want` selects.
+fn voxel_count(t: &OccupancyTree, depth: u8, want: impl Fn(f32) -> bool) -> u64 {
+    t.leaves(depth)
+        .filter(|l| want(l.value))
+        .map(|l| 1u64 << (3 * u32::from(depth - l.depth)))
+        .sum()
+}
+
+// ----- help ------------------------------------------------------------------
+
+#[test]
+fn every_subcommand_has_help_with_an_example() {
+    for cmd in [
+        "simulate",
+        "build",
+        "info",
+        "convert",
+        "query",
+        "compare",
+        "crop",
+        "edit",
+        "to-points",
+        "eval",
+        "log2graph",
+        "binvox",
+        "raycast",
+        "render",
+        "mesh",
+    ] {
+        let out = ok(&[cmd, "--help"]);
+        assert!(out.contains("Example: octolinear"), "{cmd}: {out}");
+    }
+}
+
+// ----- compare -------------------------------------------------------------
+
+#[test]
+fn compare_counts_differences_and_kld_like_compare_octrees() {
+    let f = Fixture::new();
+    let same = json(&ok(&["compare", f.p("a.ot"), f.p("a.ot"), "--json"]));
+    assert_eq!(same["occupancy_differs"], 0);
+    assert_eq!(same["logodds_differ"], 0);
+    assert_eq!(same["kld"], 0.0);
+    assert_eq!(same["only_a"], 0);
+    // a map with another sensor model: same voxels, other values
+    ok(&[
+        "build",
+        f.p("s.graph"),
+        "-o",
+        f.p("c.ot"),
+        "--sensor",
+        "0.3",
+        "0.8",
+    ]);
+    let text = ok(&["compare", f.p("a.ot"), f.p("c.ot")]);
+    let j = json(&ok(&["compare", f.p("a.ot"), f.p("c.ot"), "--json"]));
+    assert!(j["logodds_differ"].as_u64().unwrap() > 0);
+    assert!(j["kld"].as_f64().unwrap() > 0.0);
+    let a = read_tree(f.p("a.ot"));
+    assert_eq!(
+        j["voxels_a"].as_u64().unwrap(),
+        voxel_count(&a, 16, |_| true)
+    );
+    if let Some(t) = tool("compare_octrees") {
+        let out = oracle(&t, &[f.p("a.ot"), f.p("c.ot")]);
+        let line = |text: &str, key: &str| {
+            text.lines()
+                .find(|l| l.starts_with(key))
+                .unwrap_or_else(|| panic!("no {key} in {text}"))
+                .to_string()
+        };
+        assert_eq!(line(&text, "KLD:"), line(&out, "KLD:"));
+        let leafs = line(&out, "Expanded num. leafs:");
+        assert!(leafs.ends_with(&format!(" {}", j["voxels_a"])), "{leafs}");
+    }
+    // maps of different extent: voxels only in one
+    ok(&["build", f.p("s.graph"), "-o", f.p("d.ot"), "--scans", "2"]);
+    let j = json(&ok(&["compare", f.p("a.ot"), f.p("d.ot"), "--json"]));
+    assert!(j["only_a"].as_u64().unwrap() > 0);
+    assert_eq!(j["only_b"], 0);
+    // resolution mismatch
+    ok(&[
+        "build",
+        f.p("s.graph"),
+        "-o",
+        f.p("r.bt"),
+        "--res",
+        "0.2",
+        "--scans",
+        "1",
+    ]);
+    fail(
+        &["compare", f.p("a.bt"), f.p("r.bt")],
+        "resolutions don't match",
+    );
+}
+
+// ----- edit / crop -----------------------------------------------------------
+
+#[test]
+fn edit_matches_edit_octree_bytes() {
+    let f = Fixture::new();
+    for (ours, theirs) in [
+        (vec![], vec![]),
+        (vec!["--res", "0.05"], vec!["--res", "0.05"]),
+        (vec!["--scale", "2"], vec!["--scale", "2"]),
+    ] {
+        let mut args = vec!["edit", f.p("a.bt"), f.p("e.bt")];
+        args.extend(&ours);
+        ok(&args);
+        let t = read_tree(f.p("e.bt"));
+        let expect = match ours.first() {
+            Some(&"--res") => 0.05,
+            Some(_) => 0.2,
+            None => 0.1,
+        };
+        assert_eq!(t.resolution(), expect);
+        if let Some(tool) = tool("edit_octree") {
+            let mut args = vec!["-o", f.p("o.bt")];
+            args.extend(&theirs);
+            args.push(f.p("a.bt"));
+            oracle(&tool, &args);
+            assert_eq!(
+                std::fs::read(f.path("e.bt")).unwrap(),
+                std::fs::read(f.path("o.bt")).unwrap(),
+                "edit {ours:?}"
+            );
+        }
+    }
+    // expand keeps the voxels (in .ot); max-likelihood + prune gives the .bt tree
+    ok(&["edit", f.p("a.ot"), f.p("x.ot"), "--expand"]);
+    let (a, x) = (read_tree(f.p("a.ot")), read_tree(f.p("x.ot")));
+    assert!(x.leaves(0).all(|l| l.depth == 16));
+    assert_eq!(voxel_count(&a, 16, |_| true), x.num_leaves() as u64);
+    ok(&[
+        "edit",
+        f.p("x.ot"),
+        f.p("ml.ot"),
+        "--max-likelihood",
+        "--prune",
+    ]);
+    let mut ml = a.clone();
+    ml.to_max_likelihood();
+    ml.prune();
+    let ours = read_tree(f.p("ml.ot"));
+    assert_eq!(ours.num_leaves(), ml.num_leaves());
+
+    fail(
+        &["edit", f.p("a.bt"), f.p("e.bt"), "--res", "-1"],
+        "--res must be a positive",
+    );
+    fail(
+        &["edit", f.p("a.bt"), f.p("e.bt"), "--scale", "0"],
+        "--scale must be a positive",
+    );
+    fail(&["edit", f.p("a.bt"), f.p("e.txt")], "unknown map format");
+}
+
+/// Smallest key of a node with centre key `key` covering `size` keys.
+fn key_min(key: u16, size: i64) -> i64 {
+    i64::from(key) - size / 2
+}
+
+#[test]
+fn crop_keeps_exactly_the_voxels_in_the_box() {
+    let f = Fixture::new();
+    let (lo, hi) = ([-1.0f32, -1.5, 0.2], [2.0f32, 1.0, 1.3]);
+    let args: Vec<String> = lo.iter().chain(&hi).map(|v| v.to_string()).collect();
+    let a = read_tree(f.p("a.ot"));
+    let keys = a.key_space();
+    let kmin = keys.key(Point3::from_array(lo)).unwrap();
+    let kmax = keys.key(Point3::from_array(hi)).unwrap();
+    for out in ["c.ot", "c.bt"] {
+        let mut cmd = vec!["crop", f.p("a.ot"), f.p(out), "--min"];
+        cmd.extend(args[..3].iter().map(String::as_str));
+        cmd.push("--max");
+        cmd.extend(args[3..].iter().map(String::as_str));
+        ok(&cmd);
+    }
+    let c = read_tree(f.p("c.ot"));
+    assert!(c.num_leaves() > 100);
+    // every kept leaf lies in the box and has the source's value
+    for l in c.leaves(0) {
+        let size = 1i64 << (16 - l.depth);
+        for i in 0..3 {
+            let k0 = key_min(l.key.0[i], size);
+            assert!(k0 >= i64::from(kmin.0[i]) && k0 + size - 1 <= i64::from(kmax.0[i]));
+        }
+        let src = a.search(l.key, 16).expect("known in the source");
+        assert_eq!(src.value.to_bits(), l.value.to_bits());
+    }
+    // and every voxel of the source inside the box is kept
+    let inside: u64 = a
+        .leaves(0)
+        .map(|l| {
+            let size = 1i64 << (16 - l.depth);
+            (0..3)
+                .map(|i| {
+                    let k0 = key_min(l.key.0[i], size);
+                    let lo = k0.max(i64::from(kmin.0[i]));
+                    let hi = (k0 + size - 1).min(i64::from(kmax.0[i]));
+                    (hi - lo + 1).max(0) as u64
+                })
+                .product::<u64>()
+        })
+        .sum();
+    assert_eq!(voxel_count(&c, 16, |_| true), inside);
+    // the .bt output is the cropped tree, maximum likelihood
+    let cb = read_tree(f.p("c.bt"));
+    let mut ml = c.clone();
+    ml.to_max_likelihood();
+    ml.prune();
+    let mut x = Vec::new();
+    bt::write(&ml, &mut x).unwrap();
+    assert_eq!(std::fs::read(f.path("c.bt")).unwrap(), x);
+    assert_eq!(cb.num_leaves(), ml.num_leaves());
+
+    fail(
+        &[
+            "crop",
+            f.p("a.ot"),
+            f.p("c.ot"),
+            "--min",
+            "1",
+            "0",
+            "0",
+            "--max",
+            "0",
+            "1",
+            "1",
+        ],
+        "is above --max",
+    );
+    fail(
+        &[
+            "crop",
+            f.p("a.ot"),
+            f.p("c.ot"),
+            "--min",
+            "0",
+            "0",
+            "0",
+            "--max",
+            "1",
+            "nan",
+            "1",
+        ],
+        "--max needs three finite numbers",
+    );
+    fail_usage(
+        &["crop", f.p("a.ot"), f.p("c.ot"), "--min", "0", "0"],
+        "--max",
+    );
+}
+
+// ----- to-points ---------------------------------------------------------------
+
+#[test]
+fn to_points_writes_every_occupied_voxel_centre() {
+    let f = Fixture::new();
+    let a = read_tree(f.p("a.bt"));
+    let sensor = *a.sensor();
+    let occupied = voxel_count(&a, 16, |v| sensor.is_occupied(v));
+    ok(&["to-points", f.p("a.bt"), f.p("p.xyz")]);
+    let pts = octolinear::formats::xyz::read_file(f.path("p.xyz")).unwrap();
+    assert_eq!(pts.len() as u64, occupied);
+    for p in &pts.points {
+        let n = a.search_point(*p, 0).unwrap().unwrap();
+        assert!(a.is_occupied(n.value));
+        // a voxel centre
+        let c = a.key_space().key_to_point(a.key(*p).unwrap());
+        assert_eq!(c, *p);
+    }
+    let free = voxel_count(&a, 16, |v| !sensor.is_occupied(v));
+    ok(&["to-points", f.p("a.bt"), f.p("f.ply"), "--free", "--ascii"]);
+    let ply = std::fs::read_to_string(f.path("f.ply")).unwrap();
+    assert!(ply.contains(&format!("element vertex {free}\n")));
+    assert_eq!(ply.lines().count() as u64, 8 + free);
+    // coarser level: one point per occupied depth-14 node
+    let coarse = voxel_count(&a, 14, |v| sensor.is_occupied(v));
+    assert!(coarse < occupied);
+    ok(&["to-points", f.p("a.bt"), f.p("c.pcd"), "--depth", "14"]);
+    let pcd = std::fs::read_to_string(f.path("c.pcd")).unwrap();
+    assert!(pcd.starts_with("# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\n"));
+    assert!(pcd.contains(&format!("\nPOINTS {coarse}\nDATA ascii\n")));
+    assert_eq!(pcd.lines().count() as u64, 11 + coarse);
+    ok(&["to-points", f.p("a.bt"), f.p("b.ply")]);
+    let b = std::fs::read(f.path("b.ply")).unwrap();
+    let header = b"end_header\n";
+    let at = b.windows(header.len()).position(|w| w == header).unwrap() + header.len();
+    assert_eq!((b.len() - at) as u64, 12 * occupied);
+
+    fail(&["to-points", f.p("a.bt"), f.p("p.obj")], "unknown format");
+    fail(
+        &["to-points", f.p("a.bt"), f.p("p.xyz"), "--depth", "17"],
+        "--depth must be",
+    );
+    fail(
+        &["to-points", f.p("missing.bt"), f.p("p.xyz")],
+        "cannot open",
+    );
+}
+
+// ----- eval ----------------------------------------------------------------------
+
+fn counts_of(line: &str) -> [u64; 3] {
+    let num = |key: &str| -> u64 {
+        let rest = &line[line.find(key).unwrap() + key.len()..];
+        rest.trim_start()
+            .split(|c: char| !c.is_ascii_digit())
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    [num("Voxels correct:"), num("#wrong:"), num("#unknown:")]
+}
+
+#[test]
+fn eval_matches_eval_octree_accuracy() {
+    let f = Fixture::new();
+    for extra in [vec![], vec!["--max-range", "5"]] {
+        let mut args = vec!["eval", f.p("s.graph")];
+        args.extend(&extra);
+        let text = ok(&args);
+        args.push("--json");
+        let j = json(&ok(&args));
+        let fold = &j["folds"][0];
+        assert_eq!(fold["scans"], 1); // scan 5 of 6
+        let ours =
+            [&fold["correct"], &fold["wrong"], &fold["unknown"]].map(|v| v.as_u64().unwrap());
+        assert!(ours[0] > ours[1]);
+        assert_eq!(counts_of(text.lines().next().unwrap()), ours);
+        if let Some(t) = tool("eval_octree_accuracy") {
+            let mut oargs = vec![f.p("s.graph")];
+            if !extra.is_empty() {
+                oargs.extend(["-m", "5"]);
+            }
+            let out = oracle(&t, &oargs);
+            let line = out
+                .lines()
+                .find(|l| l.starts_with("Voxels correct:"))
+                .unwrap();
+            assert_eq!(counts_of(line), ours, "{extra:?}");
+        }
+    }
+    // a given map on all scans; cross-validation covers every scan once
+    let j = json(&ok(&["eval", f.p("a.bt"), f.p("s.graph"), "--json"]));
+    assert_eq!(j["scans"], 6);
+    assert_eq!(j["unknown"], 0); // the map was built from these scans
+    assert!(j["accuracy"].as_f64().unwrap() > 0.9);
+    let j = json(&ok(&["eval", f.p("s.graph"), "--folds", "3", "--json"]));
+    assert_eq!(j["folds"].as_array().unwrap().len(), 3);
+    assert_eq!(j["total"]["scans"], 6);
+
+    fail(&["eval", f.p("s.graph"), "--holdout", "1"], "at least 2");
+    fail(&["eval", f.p("s.graph"), "--res", "-0.1"], "--res must be");
+    fail(
+        &["eval", f.p("a.bt"), f.p("s.graph"), "--folds", "2"],
+        "give only the .graph",
+    );
+    fail(&["eval", f.p("a.bt")], "cannot read");
+}
+
+// ----- log2graph ---------------------------------------------------------------------
+
+#[test]
+fn log2graph_matches_octomap() {
+    let f = Fixture::new();
+    let one = f.write(
+        "one.log",
+        "# one scan\nNODE 0.5 -1 0.25 0.1 0.2 0.3\n1 2 3\n4.5 5 -6\n0.1 0.2 0.3\n",
+    );
+    ok(&["log2graph", one, f.p("one.graph")]);
+    let mut text = String::from("# several\n");
+    for n in 0..5 {
+        text += &format!(
+            "NODE {} {} 0.2 0.01 -0.02 {}\n",
+            n as f32 * 0.5,
+            n as f32 * 0.1,
+            n as f32 * 0.3
+        );
+        for i in 0..40 {
+            text += &format!(
+                "{} {} {}\n",
+                (i as f32) * 0.1 - 2.0,
+                (n * i) as f32 * 0.01,
+                0.5
+            );
+        }
+    }
+    let many = f.write("many.log", &text);
+    ok(&["log2graph", many, f.p("many.graph")]);
+    let g = graph::read_file(f.path("many.graph")).unwrap();
+    assert_eq!((g.nodes.len(), g.edges.len(), g.num_points()), (5, 4, 200));
+    if let Some(t) = tool("log2graph") {
+        oracle(&t, &[one, f.p("one_o.graph")]);
+        assert_eq!(
+            std::fs::read(f.path("one.graph")).unwrap(),
+            std::fs::read(f.path("one_o.graph")).unwrap()
+        );
+        // log2graph leaves node ids uninitialised: compare all else
+        oracle(&t, &[many, f.p("many_o.graph")]);
+        let o = graph::read_file(f.path("many_o.graph")).unwrap();
+        assert_eq!(o.nodes.len(), g.nodes.len());
+        for (a, b) in g.nodes.iter().zip(&o.nodes) {
+            assert_eq!((a.pose, &a.scan), (b.pose, &b.scan));
+        }
+        for (a, b) in g.edges.iter().zip(&o.edges) {
+            assert_eq!((a.constraint, a.weight), (b.constraint, b.weight));
+        }
+    }
+    fail(
+        &["log2graph", f.write("bad.log", "1 2 3\n"), f.p("x.graph")],
+        "point before the first NODE",
+    );
+    fail(
+        &["log2graph", f.p("none.log"), f.p("x.graph")],
+        "cannot open",
+    );
+    fail(
+        &["log2graph", one, "/nonexistent/dir/x.graph"],
+        "cannot write /nonexistent/dir/x.graph",
+    );
+}
+
+// ----- binvox --------------------------------------------------------------------------
+
+fn binvox(dim: [usize; 3], translate: &str, scale: &str, seed: u64) -> Vec<u8> {
+    let mut state = seed;
+    let mut next = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 33) as u32
+    };
+    let n = dim[0] * dim[1] * dim[2];
+    let vals: Vec<u8> = (0..n).map(|_| u8::from(next() % 10 < 3)).collect();
+    let mut out = format!(
+        "#binvox 1\ndim {} {} {}\ntranslate {translate}\nscale {scale}\ndata\n",
+        dim[0], dim[1], dim[2]
+    )
+    .into_bytes();
+    let mut i = 0;
+    while i < n {
+        let mut k = 1;
+        while i + k < n && vals[i + k] == vals[i] && k < 255 {
+            k += 1;
+        }
+        out.extend([vals[i], k as u8]);
+        i += k;
+    }
+    out
+}
+
+#[test]
+fn binvox_matches_binvox2bt_bytes() {
+    let f = Fixture::new();
+    let input = f.write("t.binvox", binvox([12, 10, 8], "-0.37 0.11 1.5", "2.4", 1));
+    let options: [&[&str]; 5] = [
+        &[],
+        &["--mark-free"],
+        &["--rotate"],
+        &["--offset", "1", "2", "-3"],
+        &["--bb", "-0.2", "0", "1.6", "1", "1", "3"],
+    ];
+    for opts in options {
+        let mut args = vec!["binvox", input, "-o", f.p("ours.bt"), "--json"];
+        args.extend(opts);
+        let j = json(&ok(&args));
+        let res = j["resolution"].as_f64().unwrap();
+        assert!((res - f64::from(2.4f32) / 12.0).abs() < 1e-15, "{res}");
+        let t = read_tree(f.p("ours.bt"));
+        assert!(t.num_leaves() > 0);
+        if let Some(tool) = tool("binvox2bt") {
+            let mut oargs = vec!["-o", f.p("theirs.bt")];
+            oargs.extend(opts);
+            oargs.push(input);
+            oracle(&tool, &oargs);
+            assert_eq!(
+                std::fs::read(f.path("ours.bt")).unwrap(),
+                std::fs::read(f.path("theirs.bt")).unwrap(),
+                "{opts:?}"
+            );
+        }
+    }
+    // default output name: input + .bt
+    ok(&["binvox", input]);
+    assert!(f.path("t.binvox.bt").exists());
+
+    let good = binvox([4, 5, 6], "0 0 0", "1", 2);
+    fail(
+        &["binvox", f.write("trunc.binvox", &good[..good.len() - 4])],
+        "data ends after",
+    );
+    fail(
+        &["binvox", f.write("hdr.binvox", "#notbinvox 1\n")],
+        "instead of \"#binvox\"",
+    );
+    fail(
+        &[
+            "binvox",
+            f.write("nodim.binvox", "#binvox 1\nscale 1\ndata\n"),
+        ],
+        "no \"dim\"",
+    );
+    fail(&["binvox", f.p("absent.binvox")], "cannot open");
+    fail(
+        &["binvox", input, "--bb", "1", "0", "0", "0", "1", "1"],
+        "--bb needs",
+    );
+}
+
+// ----- a known scene: one wall ---------------------------------------------------------
+
+/// Points on the plane x = 2.05 for y in [-1, 1], z in [0, 1]: a wall
+/// one voxel thick seen from the origin.
+fn wall(f: &Fixture) -> &str {
+    let mut text = String::new();
+    for iy in 0..=40 {
+        for iz in 0..=20 {
+            text += &format!(
+                "2.05 {} {}\n",
+                -1.0 + 0.05 * f64::from(iy),
+                0.05 * f64::from(iz)
+            );
+        }
+    }
+    let xyz = f.write("wall.xyz", text);
+    ok(&[
+        "build",
+        "--points",
+        xyz,
+        "-o",
+        f.p("wall.bt"),
+        "--res",
+        "0.1",
+    ]);
+    f.p("wall.bt")
+}
+
+#[test]
+fn raycast_reports_outcomes() {
+    let f = Fixture::new();
+    let map = wall(&f);
+    let j = json(&ok(&[
+        "raycast",
+        map,
+        "--origin",
+        "0.05",
+        "0.05",
+        "0.05",
+        "--direction",
+        "1",
+        "0",
+        "0",
+        "--json",
+    ]));
+    assert_eq!(j["outcome"], "occupied");
+    assert_eq!(j["hit"], true);
+    let end = j["end"].as_array().unwrap();
+    assert!((end[0].as_f64().unwrap() - 2.05).abs() < 1e-6);
+    let j = json(&ok(&[
+        "raycast",
+        map,
+        "--origin",
+        "0.05",
+        "0.05",
+        "0.05",
+        "--direction",
+        "-1",
+        "0",
+        "0",
+        "--json",
+    ]));
+    assert_eq!(j["outcome"], "unknown");
+    let j = json(&ok(&[
+        "raycast",
+        map,
+        "--origin",
+        "0.05",
+        "0.05",
+        "0.05",
+        "--direction",
+        "-1",
+        "0",
+        "0",
+        "--ignore-unknown",
+        "--max-range",
+        "3",
+        "--json",
+    ]));
+    assert_eq!(j["outcome"], "max_range");
+    let j = json(&ok(&[
+        "raycast",
+        map,
+        "--origin",
+        "0.05",
+        "0.05",
+        "0.05",
+        "--direction",
+        "1",
+        "0",
+        "0",
+        "--max-range",
+        "1",
+        "--json",
+    ]));
+    assert_eq!(j["outcome"], "max_range");
+    let text = ok(&[
+        "raycast",
+        map,
+        "--origin",
+        "0.05",
+        "0.05",
+        "0.05",
+        "--direction",
+        "1",
+        "0",
+        "0",
+    ]);
+    assert!(text.starts_with("occupied at 2.05 "), "{text}");
+
+    fail(
+        &[
+            "raycast",
+            map,
+            "--origin",
+            "0",
+            "0",
+            "0",
+            "--direction",
+            "0",
+            "0",
+            "0",
+        ],
+        "zero vector",
+    );
+    fail(
+        &[
+            "raycast",
+            map,
+            "--origin",
+            "1e9",
+            "0",
+            "0",
+            "--direction",
+            "1",
+            "0",
+            "0",
+        ],
+        "cannot cast the ray",
+    );
+    fail(
+        &[
+            "raycast",
+            map,
+            "--origin",
+            "0",
+            "0",
+            "0",
+            "--direction",
+            "1",
+            "0",
+            "0",
+            "--max-range",
+            "-2",
+        ],
+        "--max-range",
+    );
+}
+
+fn png_pixels(path: &Path) -> (u32, u32, Vec<u8>) {
+    let d = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut r = d.read_info().unwrap();
+    let mut buf = vec![0; r.output_buffer_size().unwrap()];
+    let info = r.next_frame(&mut buf).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgb);
+    buf.truncate(info.buffer_size());
+    (info.width, info.height, buf)
+}
+
+fn brightness(img: &(u32, u32, Vec<u8>), x: u32, y: u32) -> u32 {
+    let i = 3 * (y * img.0 + x) as usize;
+    img.2[i..i + 3].iter().map(|&c| u32::from(c)).max().unwrap()
+}
+
+#[test]
+fn render_draws_the_wall() {
+    let f = Fixture::new();
+    let map = wall(&f);
+    // top view with free space: frame = all known leaves
+    ok(&[
+        "render",
+        map,
+        "-o",
+        f.p("top.png"),
+        "--free",
+        "--width",
+        "100",
+        "--height",
+        "100",
+    ]);
+    let img = png_pixels(&f.path("top.png"));
+    assert_eq!((img.0, img.1), (100, 100));
+    let info = json(&ok(&["info", map, "--json"]));
+    let (lo, hi) = (&info["bounds_min"], &info["bounds_max"]);
+    let b = |v: &serde_json::Value, i: usize| v[i].as_f64().unwrap();
+    let s = ((b(hi, 0) - b(lo, 0)) / 100.0).max((b(hi, 1) - b(lo, 1)) / 100.0);
+    let (cx, cy) = ((b(lo, 0) + b(hi, 0)) / 2.0, (b(lo, 1) + b(hi, 1)) / 2.0);
+    let pixel = |x: f64, y: f64| -> (u32, u32) {
+        (((x - cx) / s + 50.0) as u32, ((cy - y) / s + 50.0) as u32)
+    };
+    let colour = |x: f64, y: f64| {
+        let (px, py) = pixel(x, y);
+        let i = 3 * (py * 100 + px) as usize;
+        [img.2[i], img.2[i + 1], img.2[i + 2]]
+    };
+    // the wall column is lit in every row it spans
+    for k in 0..20 {
+        let y = -0.95 + 0.1 * f64::from(k);
+        let c = colour(2.05, y);
+        assert!(c.iter().any(|&v| v >= 200), "wall at y={y}: {c:?}");
+    }
+    assert_eq!(colour(1.0, 0.0), [70, 84, 110]); // free
+    assert_eq!(colour(0.3, 0.9), [16, 16, 16]); // unknown
+                                                // without --free only occupied pixels are lit
+    ok(&["render", map, "-o", f.p("occ.png"), "--width", "40"]);
+    let occ = png_pixels(&f.path("occ.png"));
+    assert!(occ.1 > occ.0); // the wall is taller (in y) than wide
+    for y in 0..occ.1 {
+        assert!(brightness(&occ, occ.0 / 2, y) >= 200, "wall row {y}");
+        assert_eq!(brightness(&occ, 0, y), 16);
+        assert_eq!(brightness(&occ, occ.0 - 1, y), 16);
+    }
+
+    // perspective: looking at the wall from the origin
+    ok(&[
+        "render",
+        map,
+        "-o",
+        f.p("p.png"),
+        "--view",
+        "perspective",
+        "--camera",
+        "0",
+        "0",
+        "0.5",
+        "--look-at",
+        "2",
+        "0",
+        "0.5",
+        "--width",
+        "64",
+        "--height",
+        "48",
+    ]);
+    let p = png_pixels(&f.path("p.png"));
+    assert_eq!((p.0, p.1), (64, 48));
+    // a block around the centre hits the wall face-on: bright
+    for y in 20..28 {
+        for x in 24..40 {
+            assert!(brightness(&p, x, y) >= 100, "centre pixel {x},{y} dark");
+        }
+    }
+    // above the wall top (z = 1.1) and beyond its sides: background
+    for x in 0..64 {
+        assert_eq!(brightness(&p, x, 0), 16, "top row {x}");
+        assert_eq!(brightness(&p, x, 47), 16, "bottom row {x}");
+    }
+    for y in 0..48 {
+        assert_eq!(brightness(&p, 0, y), 16);
+        assert_eq!(brightness(&p, 63, y), 16);
+    }
+    // a coarser level draws bigger blocks: the lit area grows
+    let lit_count = |img: &(u32, u32, Vec<u8>)| {
+        (0..img.0 * img.1)
+            .filter(|&i| brightness(img, i % img.0, i / img.0) > 16)
+            .count()
+    };
+    let mut coarse_args = vec![
+        "render",
+        map,
+        "-o",
+        f.p("p12.png"),
+        "--view",
+        "perspective",
+        "--camera",
+        "0",
+        "0",
+        "0.5",
+        "--look-at",
+        "2",
+        "0",
+        "0.5",
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--depth",
+        "12",
+    ];
+    ok(&coarse_args);
+    let c = png_pixels(&f.path("p12.png"));
+    assert!(brightness(&c, 32, 24) >= 100);
+    assert!(
+        lit_count(&c) > lit_count(&p),
+        "{} vs {}",
+        lit_count(&c),
+        lit_count(&p)
+    );
+    coarse_args.push("--free");
+    fail(&coarse_args, "--free applies to --view top only");
+    // auto camera sees something
+    ok(&[
+        "render",
+        map,
+        "-o",
+        f.p("auto.png"),
+        "--view",
+        "perspective",
+        "--width",
+        "48",
+    ]);
+    let a = png_pixels(&f.path("auto.png"));
+    let lit = (0..a.0 * a.1)
+        .filter(|&i| brightness(&a, i % a.0, i / a.0) > 16)
+        .count();
+    assert!(lit > 20, "{lit}");
+
+    fail(&["render", map, "-o", f.p("x.jpg")], "unknown format");
+    fail(
+        &["render", map, "-o", f.p("x.png"), "--width", "0"],
+        "--width and --height",
+    );
+    fail(
+        &[
+            "render",
+            map,
+            "-o",
+            f.p("x.png"),
+            "--view",
+            "perspective",
+            "--fov",
+            "200",
+        ],
+        "--fov",
+    );
+    fail(
+        &[
+            "render",
+            map,
+            "-o",
+            f.p("x.png"),
+            "--view",
+            "perspective",
+            "--camera",
+            "2",
+            "0",
+            "0.5",
+            "--look-at",
+            "2",
+            "0",
+            "0.5",
+        ],
+        "same point",
+    );
+    fail(
+        &["render", map, "-o", "/nonexistent/dir/x.png"],
+        "cannot write",
+    );
+    fail_usage(
+        &["render", map, "-o", f.p("x.png"), "--view", "side"],
+        "side",
+    );
+}
+
+// ----- mesh ----------------------------------------------------------------------
+
+fn ply_counts(path: &Path) -> (u64, u64) {
+    let text = std::fs::read(path).unwrap();
+    let text = String::from_utf8_lossy(&text);
+    let count = |el: &str| -> u64 {
+        let l = text
+            .lines()
+            .find(|l| l.starts_with(&format!("element {el} ")))
+            .unwrap();
+        l.rsplit(' ').next().unwrap().parse().unwrap()
+    };
+    (count("vertex"), count("face"))
+}
+
+#[test]
+fn mesh_exports_cubes_with_hidden_faces_culled() {
+    let f = Fixture::new();
+    let one = f.write("one.xyz", "2.05 0.05 0.05\n");
+    ok(&["build", "--points", one, "-o", f.p("one.bt")]);
+    ok(&["mesh", f.p("one.bt"), "-o", f.p("one.ply"), "--ascii"]);
+    assert_eq!(ply_counts(&f.path("one.ply")), (8, 6));
+    let text = std::fs::read_to_string(f.path("one.ply")).unwrap();
+    let body: Vec<&str> = text.split("end_header\n").nth(1).unwrap().lines().collect();
+    assert_eq!(body.len(), 14);
+    assert!(body[0].starts_with("2 0 0 ")); // corner (2.0, 0.0, 0.0)
+    assert!(body[8].starts_with("4 0 4 6 2"));
+    let two = f.write("two.xyz", "2.05 0.05 0.05\n2.05 0.15 0.05\n");
+    ok(&["build", "--points", two, "-o", f.p("two.bt")]);
+    ok(&["mesh", f.p("two.bt"), "-o", f.p("two.ply")]);
+    assert_eq!(ply_counts(&f.path("two.ply")), (16, 10));
+    ok(&["mesh", f.p("two.bt"), "-o", f.p("all.ply"), "--all-faces"]);
+    assert_eq!(ply_counts(&f.path("all.ply")), (16, 12));
+    // binary size: header + 15 bytes per vertex + 17 per face
+    let b = std::fs::read(f.path("two.ply")).unwrap();
+    let text = String::from_utf8_lossy(&b);
+    let header = text.find("end_header\n").unwrap() + 11;
+    assert_eq!(b.len() - header, 16 * 15 + 10 * 17);
+    // the simulated map
+    ok(&["mesh", f.p("a.bt"), "-o", f.p("a.ply"), "--depth", "15"]);
+    let (v, faces) = ply_counts(&f.path("a.ply"));
+    assert!(v > 0 && faces > 0);
+
+    fail(&["mesh", f.p("a.bt"), "-o", f.p("a.stl")], "unknown format");
+    fail(
+        &["mesh", f.p("a.bt"), "-o", f.p("a.ply"), "--depth", "99"],
+        "--depth must be",
+    );
+}
+
+// ----- build from point cloud files --------------------------------------------------------
+
+/// Points exactly representable in every format (multiples of 1/8).
+fn cloud() -> Vec<[f32; 3]> {
+    let mut v = Vec::new();
+    for i in 0..300u32 {
+        let a = f64::from(i) * 0.37;
+        let r = 2.0 + f64::from(i % 7) * 0.5;
+        let q = |x: f64| ((x * 8.0).round() / 8.0) as f32;
+        v.push([
+            q(r * a.cos()),
+            q(r * a.sin()),
+            q(f64::from(i % 13) * 0.125 - 0.5),
+        ]);
+    }
+    v
+}
+
+fn lzf_compress(input: &[u8]) -> Vec<u8> {
+    fn flush(out: &mut Vec<u8>, lit: &mut Vec<u8>) {
+        for chunk in lit.chunks(32) {
+            out.push((chunk.len() - 1) as u8);
+            out.extend_from_slice(chunk);
+        }
+        lit.clear();
+    }
+    let (mut out, mut lit, mut i) = (Vec::new(), Vec::new(), 0);
+    while i < input.len() {
+        let mut best = (0, 0);
+        for j in i.saturating_sub(8192)..i {
+            let mut l = 0;
+            while i + l < input.len() && l < 264 && input[j + l] == input[i + l] {
+                l += 1;
+            }
+            if l > best.0 {
+                best = (l, i - j - 1);
+            }
+        }
+        if best.0 >= 3 {
+            flush(&mut out, &mut lit);
+            let (len, off) = (best.0 - 2, best.1);
+            if len < 7 {
+                out.push(((len << 5) | (off >> 8)) as u8);
+            } else {
+                out.push(((7 << 5) | (off >> 8)) as u8);
+                out.push((len - 7) as u8);
+            }
+            out.push((off & 0xff) as u8);
+            i += best.0;
+        } else {
+            lit.push(input[i]);
+            i += 1;
+        }
+    }
+    flush(&mut out, &mut lit);
+    out
+}
+
+fn write_cloud_files(f: &Fixture, pts: &[[f32; 3]]) -> Vec<PathBuf> {
+    let n = pts.len();
+    let mut files = Vec::new();
+    let mut add = |name: &str, bytes: Vec<u8>| {
+        f.write(name, bytes);
+        files.push(f.path(name));
+    };
+    let text: String = pts
+        .iter()
+        .map(|p| format!("{} {} {}\n", p[0], p[1], p[2]))
+        .collect();
+    add("c.xyz", text.clone().into_bytes());
+    // PLY ascii with an extra property and a face element after the vertices
+    let mut ply = format!(
+        "ply\nformat ascii 1.0\ncomment test\nelement vertex {n}\nproperty float x\nproperty float y\n\
+         property float z\nproperty uchar red\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+    );
+    for p in pts {
+        ply += &format!("{} {} {} 7\n", p[0], p[1], p[2]);
+    }
+    ply += "3 0 1 2\n";
+    add("c_ascii.ply", ply.into_bytes());
+    // binary little endian, double coordinates, with an element before the vertices
+    let mut b = format!(
+        "ply\nformat binary_little_endian 1.0\nelement camera 1\nproperty list uchar float k\nproperty int id\n\
+         element vertex {n}\nproperty uchar flag\nproperty double x\nproperty double y\nproperty double z\nend_header\n"
+    )
+    .into_bytes();
+    b.push(2);
+    b.extend(1.5f32.to_le_bytes());
+    b.extend(2.5f32.to_le_bytes());
+    b.extend(9i32.to_le_bytes());
+    for p in pts {
+        b.push(1);
+        for c in p {
+            b.extend(f64::from(*c).to_le_bytes());
+        }
+    }
+    add("c_le.ply", b);
+    let mut b = format!(
+        "ply\nformat binary_big_endian 1.0\nelement vertex {n}\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+    )
+    .into_bytes();
+    for p in pts {
+        for c in p {
+            b.extend(c.to_be_bytes());
+        }
+    }
+    add("c_be.ply", b);
+    // PCD: ascii, binary with an extra field, binary_compressed
+    let head = |fields: &str, size: &str, ty: &str, count: &str, data: &str| {
+        format!(
+            "# .PCD v0.7\nVERSION 0.7\nFIELDS {fields}\nSIZE {size}\nTYPE {ty}\nCOUNT {count}\nWIDTH {n}\nHEIGHT 1\n\
+             VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {data}\n"
+        )
+    };
+    add(
+        "c_ascii.pcd",
+        (head("x y z", "4 4 4", "F F F", "1 1 1", "ascii") + &text).into_bytes(),
+    );
+    let mut b = head("x y z rgb", "4 4 4 4", "F F F U", "1 1 1 1", "binary").into_bytes();
+    for p in pts {
+        for c in p {
+            b.extend(c.to_le_bytes());
+        }
+        b.extend(0x00ff_8040u32.to_le_bytes());
+    }
+    add("c_bin.pcd", b);
+    let mut raw = Vec::new();
+    for axis in 0..3 {
+        for p in pts {
+            raw.extend(p[axis].to_le_bytes());
+        }
+    }
+    let comp = lzf_compress(&raw);
+    assert!(comp.len() < raw.len());
+    let mut b = head("x y z", "4 4 4", "F F F", "1 1 1", "binary_compressed").into_bytes();
+    b.extend((comp.len() as u32).to_le_bytes());
+    b.extend((raw.len() as u32).to_le_bytes());
+    b.extend(&comp);
+    add("c_comp.pcd", b);
+    // LAS and LAZ through the las crate
+    for ext in ["las", "laz"] {
+        let mut builder = las::Builder::from((1, 2));
+        let t = las::Transform {
+            scale: 0.125,
+            offset: 0.0,
+        };
+        builder.transforms = las::Vector { x: t, y: t, z: t };
+        let header = builder.into_header().unwrap();
+        let path = f.path(&format!("c.{ext}"));
+        let mut w = las::Writer::from_path(&path, header).unwrap();
+        for p in pts {
+            w.write_point(las::Point {
+                x: f64::from(p[0]),
+                y: f64::from(p[1]),
+                z: f64::from(p[2]),
+                ..Default::default()
+            })
+            .unwrap();
+        }
+        w.close().unwrap();
+        drop(w);
+        files.push(path);
+    }
+    files
+}
+
+#[test]
+fn build_reads_point_cloud_formats_with_poses() {
+    let f = Fixture::new();
+    let pts = cloud();
+    let files = write_cloud_files(&f, &pts);
+    let pose = ["0.5", "-0.25", "0.125", "0", "0.25", "0.5"];
+    // the reference: a .graph with the same scan and pose, via log2graph
+    let mut log = format!("NODE {}\n", pose.join(" "));
+    for p in &pts {
+        log += &format!("{} {} {}\n", p[0], p[1], p[2]);
+    }
+    ok(&["log2graph", f.write("c.log", log), f.p("c.graph")]);
+    ok(&["build", f.p("c.graph"), "-o", f.p("ref.ot")]);
+    let reference = std::fs::read(f.path("ref.ot")).unwrap();
+    for file in &files {
+        let mut args = vec!["build", "--points", s(file), "-o", f.p("p.ot"), "--pose"];
+        args.extend(pose);
+        ok(&args);
+        assert!(
+            std::fs::read(f.path("p.ot")).unwrap() == reference,
+            "{}",
+            file.display()
+        );
+    }
+    // a trajectory: one pose per file, same as a two-node graph
+    let pose2 = ["-1", "0.5", "0", "0.125", "0", "-0.75"];
+    f.write(
+        "traj.txt",
+        format!(
+            "# x y z roll pitch yaw\n{}\n\n{}\n",
+            pose.join(" "),
+            pose2.join(" ")
+        ),
+    );
+    let mut log2 = format!("NODE {}\n", pose.join(" "));
+    for p in &pts {
+        log2 += &format!("{} {} {}\n", p[0], p[1], p[2]);
+    }
+    log2 += &format!("NODE {}\n", pose2.join(" "));
+    for p in &pts[..100] {
+        log2 += &format!("{} {} {}\n", p[0], p[1], p[2]);
+    }
+    let part: String = pts[..100]
+        .iter()
+        .map(|p| format!("{} {} {}\n", p[0], p[1], p[2]))
+        .collect();
+    let second = f.write("part.xyz", part);
+    ok(&["log2graph", f.write("c2.log", log2), f.p("c2.graph")]);
+    ok(&["build", f.p("c2.graph"), "-o", f.p("ref2.bt")]);
+    let j = json(&ok(&[
+        "build",
+        "--points",
+        s(&files[3]),
+        second,
+        "--trajectory",
+        f.p("traj.txt"),
+        "-o",
+        f.p("t.bt"),
+        "--json",
+    ]));
+    assert_eq!(j["scans"], 2);
+    assert_eq!(j["points"], 400);
+    assert_eq!(
+        std::fs::read(f.path("t.bt")).unwrap(),
+        std::fs::read(f.path("ref2.bt")).unwrap()
+    );
+    // without a pose: identity, rays from the origin
+    ok(&["build", "--points", s(&files[0]), "-o", f.p("id.bt")]);
+    let t = read_tree(f.p("id.bt"));
+    let p = Point3::from_array(pts[0]);
+    assert!(t.is_occupied(t.search_point(p, 0).unwrap().unwrap().value));
+
+    // errors
+    fail(
+        &[
+            "build",
+            "--points",
+            s(&files[0]),
+            "-o",
+            f.p("x.bt"),
+            "--trajectory",
+            f.p("traj.txt"),
+        ],
+        "has 2 poses for 1",
+    );
+    fail(
+        &[
+            "build",
+            "--points",
+            f.write("x.obj", "v 1 2 3\n"),
+            "-o",
+            f.p("x.bt"),
+        ],
+        "unknown format",
+    );
+    let ply = std::fs::read(&files[2]).unwrap();
+    fail(
+        &[
+            "build",
+            "--points",
+            f.write("t.ply", &ply[..ply.len() - 5]),
+            "-o",
+            f.p("x.bt"),
+        ],
+        "data ends in vertex",
+    );
+    fail(
+        &[
+            "build",
+            "--points",
+            f.write("h.ply", "ply\nformat ascii 1.0\nelement vertex 1\n"),
+            "-o",
+            f.p("x.bt"),
+        ],
+        "no \"end_header\"",
+    );
+    fail(
+        &[
+            "build",
+            "--points",
+            f.write(
+                "n.ply",
+                "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n1\n",
+            ),
+            "-o",
+            f.p("x.bt"),
+        ],
+        "no y field",
+    );
+    let pcd = std::fs::read(&files[6]).unwrap();
+    fail(
+        &[
+            "build",
+            "--points",
+            f.write("t.pcd", &pcd[..pcd.len() - 7]),
+            "-o",
+            f.p("x.bt"),
+        ],
+        "compressed data is shorter",
+    );
+    let mut bad = pcd.clone();
+    let at = bad.len() - 3;
+    bad[at - 40] = 0xff; // a back reference before the start, or a wrong length
+    let out = run(&[
+        "build",
+        "--points",
+        f.write("b.pcd", &bad),
+        "-o",
+        f.p("x.bt"),
+    ]);
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("panicked"));
+    let bin = std::fs::read(&files[5]).unwrap();
+    fail(
+        &[
+            "build",
+            "--points",
+            f.write("tb.pcd", &bin[..bin.len() - 3]),
+            "-o",
+            f.p("x.bt"),
+        ],
+        "binary data holds",
+    );
+    fail(
+        &[
+            "build",
+            "--points",
+            f.write(
+                "k.pcd",
+                "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 1\nDATA zip\n",
+            ),
+            "-o",
+            f.p("x.bt"),
+        ],
+        "unknown DATA kind",
+    );
+    fail(
+        &[
+            "build",
+            "--points",
+            f.write("t.las", b"LASF-not-really"),
+            "-o",
+            f.p("x.bt"),
+        ],
+        "not a valid .las file",
+    );
+    fail(
+        &["build", "--points", f.p("missing.ply"), "-o", f.p("x.bt")],
+        "cannot open",
+    );
+    fail(
+        &[
+            "build",
+            "--points",
+            s(&files[0]),
+            "-o",
+            f.p("x.bt"),
+            "--pose",
+            "0",
+            "0",
+            "0",
+            "0",
+            "0",
+            "inf",
+        ],
+        "six finite numbers",
+    );
+    fail(
+        &[
+            "build",
+            "--points",
+            s(&files[0]),
+            "-o",
+            f.p("x.bt"),
+            "--trajectory",
+            f.write("tj.txt", "1 2 3\n"),
+        ],
+        "line 1",
+    );
+    fail_usage(
+        &[
+            "build",
+            f.p("s.graph"),
+            "--points",
+            s(&files[0]),
+            "-o",
+            f.p("x.bt"),
+        ],
+        "cannot be used with",
+    );
+    fail_usage(&["build", "-o", f.p("x.bt")], "required");
+}
+
+// ----- errors shared by every map reader and the build flags ------------------------------------
+
+#[test]
+fn user_errors_are_one_line_without_panics() {
+    let f = Fixture::new();
+    let a = f.p("a.bt");
+    // missing files and wrong extensions
+    for cmd in ["info", "to-points", "mesh", "render"] {
+        let mut args = vec![cmd, f.p("missing.bt")];
+        match cmd {
+            "to-points" => args.push(f.p("o.xyz")),
+            "mesh" => args.extend(["-o", f.p("o.ply")]),
+            "render" => args.extend(["-o", f.p("o.png")]),
+            _ => {}
+        }
+        fail(&args, "cannot open");
+    }
+    fail(&["compare", a, f.p("missing.ot")], "cannot open");
+    fail(&["compare", a, f.write("m.map", "x")], "unknown map format");
+    fail(&["convert", a, f.p("out.pcd")], "unknown map format");
+    // truncated and corrupt maps
+    let bytes = std::fs::read(a).unwrap();
+    let cut = f.write("cut.bt", &bytes[..bytes.len() / 2]);
+    fail(&["info", cut], "not a valid .bt map");
+    fail(&["compare", a, cut], "not a valid .bt map");
+    fail(
+        &[
+            "raycast",
+            cut,
+            "--origin",
+            "0",
+            "0",
+            "0",
+            "--direction",
+            "1",
+            "0",
+            "0",
+        ],
+        "not a valid .bt map",
+    );
+    let ot_bytes = std::fs::read(f.path("a.ot")).unwrap();
+    fail(
+        &[
+            "edit",
+            f.write("cut.ot", &ot_bytes[..ot_bytes.len() - 9]),
+            f.p("e.ot"),
+        ],
+        "not a valid .ot map",
+    );
+    fail(
+        &["info", f.write("text.bt", "hello\n")],
+        "not a valid .bt map",
+    );
+    // build flag values
+    let g = f.p("s.graph");
+    fail(
+        &["build", g, "-o", f.p("x.bt"), "--res", "-0.1"],
+        "resolution",
+    );
+    fail(
+        &["build", g, "-o", f.p("x.bt"), "--clamping", "0.1", "1.5"],
+        "clamping",
+    );
+    fail(
+        &["build", g, "-o", f.p("x.bt"), "--sensor", "0.8", "0.3"],
+        "sensor model",
+    );
+    fail(
+        &["build", g, "-o", "/nonexistent/dir/out.bt"],
+        "cannot write /nonexistent/dir/out.bt",
+    );
+    fail(
+        &[
+            "build",
+            f.write("t.graph", &std::fs::read(g).unwrap()[..100]),
+            "-o",
+            f.p("x.bt"),
+        ],
+        "cannot read",
+    );
+    fail_usage(&["build", g, "-o", f.p("x.bt"), "--res", "abc"], "abc");
+    // unwritable outputs everywhere
+    for args in [
+        vec!["edit", a, "/nonexistent/dir/e.bt"],
+        vec![
+            "crop",
+            a,
+            "/nonexistent/dir/e.bt",
+            "--min",
+            "0",
+            "0",
+            "0",
+            "--max",
+            "1",
+            "1",
+            "1",
+        ],
+        vec!["to-points", a, "/nonexistent/dir/p.xyz"],
+        vec!["mesh", a, "-o", "/nonexistent/dir/m.ply"],
+        vec!["convert", a, "/nonexistent/dir/c.ot"],
+    ] {
+        fail(&args, "cannot write /nonexistent/dir/");
+    }
+    // output to a directory path names no file
+    fail(
+        &["convert", a, f.dir.path().to_str().unwrap()],
+        "unknown map format",
+    );
+}
