@@ -127,7 +127,7 @@ pub fn sort_codes(codes: &mut Vec<u64>) {
     let n = codes.len() as u32;
     let mut buf = vec![0u64; codes.len()];
     for (d, hist) in count.iter_mut().enumerate() {
-        if hist.iter().any(|&h| h == n) {
+        if hist.contains(&n) {
             continue; // every code has the same digit here
         }
         let mut sum = 0;

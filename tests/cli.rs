@@ -18,11 +18,7 @@ fn run(args: &[&str]) -> Output {
 /// Runs and requires success; returns stdout.
 fn ok(args: &[&str]) -> String {
     let out = run(args);
-    assert!(
-        out.status.success(),
-        "{args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert!(out.status.success(), "{args:?} failed: {}", String::from_utf8_lossy(&out.stderr));
     String::from_utf8(out.stdout).expect("utf-8 stdout")
 }
 
@@ -77,17 +73,7 @@ impl Fixture {
     fn new() -> Fixture {
         let dir = tempfile::tempdir().unwrap();
         let f = Fixture { dir };
-        ok(&[
-            "simulate",
-            "--scans",
-            "6",
-            "--beams",
-            "8",
-            "--steps",
-            "120",
-            "-o",
-            f.p("s.graph"),
-        ]);
+        ok(&["simulate", "--scans", "6", "--beams", "8", "--steps", "120", "-o", f.p("s.graph")]);
         for out in ["a.bt", "a.ot"] {
             ok(&["build", f.p("s.graph"), "-o", f.p(out), "--res", "0.1"]);
         }
@@ -115,7 +101,7 @@ fn read_tree(p: &str) -> OccupancyTree {
     if p.ends_with(".bt") {
         bt::read(f).unwrap()
     } else {
-        ot::read(f).unwrap().into_occupancy()
+        ot::read(f).unwrap().into_occupancy().unwrap()
     }
 }
 
@@ -125,10 +111,7 @@ fn json(text: &str) -> serde_json::Value {
 
 /// Voxels at depth `depth` below the leaves `want` selects.
 fn voxel_count(t: &OccupancyTree, depth: u8, want: impl Fn(f32) -> bool) -> u64 {
-    t.leaves(depth)
-        .filter(|l| want(l.value))
-        .map(|l| 1u64 << (3 * u32::from(depth - l.depth)))
-        .sum()
+    t.leaves(depth).filter(|l| want(l.value)).map(|l| 1u64 << (3 * u32::from(depth - l.depth))).sum()
 }
 
 // ----- help ------------------------------------------------------------------
@@ -168,31 +151,17 @@ fn compare_counts_differences_and_kld_like_compare_octrees() {
     assert_eq!(same["kld"], 0.0);
     assert_eq!(same["only_a"], 0);
     // a map with another sensor model: same voxels, other values
-    ok(&[
-        "build",
-        f.p("s.graph"),
-        "-o",
-        f.p("c.ot"),
-        "--sensor",
-        "0.3",
-        "0.8",
-    ]);
+    ok(&["build", f.p("s.graph"), "-o", f.p("c.ot"), "--sensor", "0.3", "0.8"]);
     let text = ok(&["compare", f.p("a.ot"), f.p("c.ot")]);
     let j = json(&ok(&["compare", f.p("a.ot"), f.p("c.ot"), "--json"]));
     assert!(j["logodds_differ"].as_u64().unwrap() > 0);
     assert!(j["kld"].as_f64().unwrap() > 0.0);
     let a = read_tree(f.p("a.ot"));
-    assert_eq!(
-        j["voxels_a"].as_u64().unwrap(),
-        voxel_count(&a, 16, |_| true)
-    );
+    assert_eq!(j["voxels_a"].as_u64().unwrap(), voxel_count(&a, 16, |_| true));
     if let Some(t) = tool("compare_octrees") {
         let out = oracle(&t, &[f.p("a.ot"), f.p("c.ot")]);
         let line = |text: &str, key: &str| {
-            text.lines()
-                .find(|l| l.starts_with(key))
-                .unwrap_or_else(|| panic!("no {key} in {text}"))
-                .to_string()
+            text.lines().find(|l| l.starts_with(key)).unwrap_or_else(|| panic!("no {key} in {text}")).to_string()
         };
         assert_eq!(line(&text, "KLD:"), line(&out, "KLD:"));
         let leafs = line(&out, "Expanded num. leafs:");
@@ -204,20 +173,8 @@ fn compare_counts_differences_and_kld_like_compare_octrees() {
     assert!(j["only_a"].as_u64().unwrap() > 0);
     assert_eq!(j["only_b"], 0);
     // resolution mismatch
-    ok(&[
-        "build",
-        f.p("s.graph"),
-        "-o",
-        f.p("r.bt"),
-        "--res",
-        "0.2",
-        "--scans",
-        "1",
-    ]);
-    fail(
-        &["compare", f.p("a.bt"), f.p("r.bt")],
-        "resolutions don't match",
-    );
+    ok(&["build", f.p("s.graph"), "-o", f.p("r.bt"), "--res", "0.2", "--scans", "1"]);
+    fail(&["compare", f.p("a.bt"), f.p("r.bt")], "resolutions don't match");
 }
 
 // ----- edit / crop -----------------------------------------------------------
@@ -225,11 +182,9 @@ fn compare_counts_differences_and_kld_like_compare_octrees() {
 #[test]
 fn edit_matches_edit_octree_bytes() {
     let f = Fixture::new();
-    for (ours, theirs) in [
-        (vec![], vec![]),
-        (vec!["--res", "0.05"], vec!["--res", "0.05"]),
-        (vec!["--scale", "2"], vec!["--scale", "2"]),
-    ] {
+    for (ours, theirs) in
+        [(vec![], vec![]), (vec!["--res", "0.05"], vec!["--res", "0.05"]), (vec!["--scale", "2"], vec!["--scale", "2"])]
+    {
         let mut args = vec!["edit", f.p("a.bt"), f.p("e.bt")];
         args.extend(&ours);
         ok(&args);
@@ -245,11 +200,7 @@ fn edit_matches_edit_octree_bytes() {
             args.extend(&theirs);
             args.push(f.p("a.bt"));
             oracle(&tool, &args);
-            assert_eq!(
-                std::fs::read(f.path("e.bt")).unwrap(),
-                std::fs::read(f.path("o.bt")).unwrap(),
-                "edit {ours:?}"
-            );
+            assert_eq!(std::fs::read(f.path("e.bt")).unwrap(), std::fs::read(f.path("o.bt")).unwrap(), "edit {ours:?}");
         }
     }
     // expand keeps the voxels (in .ot); max-likelihood + prune gives the .bt tree
@@ -257,27 +208,15 @@ fn edit_matches_edit_octree_bytes() {
     let (a, x) = (read_tree(f.p("a.ot")), read_tree(f.p("x.ot")));
     assert!(x.leaves(0).all(|l| l.depth == 16));
     assert_eq!(voxel_count(&a, 16, |_| true), x.num_leaves() as u64);
-    ok(&[
-        "edit",
-        f.p("x.ot"),
-        f.p("ml.ot"),
-        "--max-likelihood",
-        "--prune",
-    ]);
+    ok(&["edit", f.p("x.ot"), f.p("ml.ot"), "--max-likelihood", "--prune"]);
     let mut ml = a.clone();
     ml.to_max_likelihood();
     ml.prune();
     let ours = read_tree(f.p("ml.ot"));
     assert_eq!(ours.num_leaves(), ml.num_leaves());
 
-    fail(
-        &["edit", f.p("a.bt"), f.p("e.bt"), "--res", "-1"],
-        "--res must be a positive",
-    );
-    fail(
-        &["edit", f.p("a.bt"), f.p("e.bt"), "--scale", "0"],
-        "--scale must be a positive",
-    );
+    fail(&["edit", f.p("a.bt"), f.p("e.bt"), "--res", "-1"], "--res must be a positive");
+    fail(&["edit", f.p("a.bt"), f.p("e.bt"), "--scale", "0"], "--scale must be a positive");
     fail(&["edit", f.p("a.bt"), f.p("e.txt")], "unknown map format");
 }
 
@@ -340,42 +279,12 @@ fn crop_keeps_exactly_the_voxels_in_the_box() {
     assert_eq!(std::fs::read(f.path("c.bt")).unwrap(), x);
     assert_eq!(cb.num_leaves(), ml.num_leaves());
 
+    fail(&["crop", f.p("a.ot"), f.p("c.ot"), "--min", "1", "0", "0", "--max", "0", "1", "1"], "is above --max");
     fail(
-        &[
-            "crop",
-            f.p("a.ot"),
-            f.p("c.ot"),
-            "--min",
-            "1",
-            "0",
-            "0",
-            "--max",
-            "0",
-            "1",
-            "1",
-        ],
-        "is above --max",
-    );
-    fail(
-        &[
-            "crop",
-            f.p("a.ot"),
-            f.p("c.ot"),
-            "--min",
-            "0",
-            "0",
-            "0",
-            "--max",
-            "1",
-            "nan",
-            "1",
-        ],
+        &["crop", f.p("a.ot"), f.p("c.ot"), "--min", "0", "0", "0", "--max", "1", "nan", "1"],
         "--max needs three finite numbers",
     );
-    fail_usage(
-        &["crop", f.p("a.ot"), f.p("c.ot"), "--min", "0", "0"],
-        "--max",
-    );
+    fail_usage(&["crop", f.p("a.ot"), f.p("c.ot"), "--min", "0", "0"], "--max");
 }
 
 // ----- to-points ---------------------------------------------------------------
@@ -416,14 +325,8 @@ fn to_points_writes_every_occupied_voxel_centre() {
     assert_eq!((b.len() - at) as u64, 12 * occupied);
 
     fail(&["to-points", f.p("a.bt"), f.p("p.obj")], "unknown format");
-    fail(
-        &["to-points", f.p("a.bt"), f.p("p.xyz"), "--depth", "17"],
-        "--depth must be",
-    );
-    fail(
-        &["to-points", f.p("missing.bt"), f.p("p.xyz")],
-        "cannot open",
-    );
+    fail(&["to-points", f.p("a.bt"), f.p("p.xyz"), "--depth", "17"], "--depth must be");
+    fail(&["to-points", f.p("missing.bt"), f.p("p.xyz")], "cannot open");
 }
 
 // ----- eval ----------------------------------------------------------------------
@@ -431,12 +334,7 @@ fn to_points_writes_every_occupied_voxel_centre() {
 fn counts_of(line: &str) -> [u64; 3] {
     let num = |key: &str| -> u64 {
         let rest = &line[line.find(key).unwrap() + key.len()..];
-        rest.trim_start()
-            .split(|c: char| !c.is_ascii_digit())
-            .next()
-            .unwrap()
-            .parse()
-            .unwrap()
+        rest.trim_start().split(|c: char| !c.is_ascii_digit()).next().unwrap().parse().unwrap()
     };
     [num("Voxels correct:"), num("#wrong:"), num("#unknown:")]
 }
@@ -452,8 +350,7 @@ fn eval_matches_eval_octree_accuracy() {
         let j = json(&ok(&args));
         let fold = &j["folds"][0];
         assert_eq!(fold["scans"], 1); // scan 5 of 6
-        let ours =
-            [&fold["correct"], &fold["wrong"], &fold["unknown"]].map(|v| v.as_u64().unwrap());
+        let ours = [&fold["correct"], &fold["wrong"], &fold["unknown"]].map(|v| v.as_u64().unwrap());
         assert!(ours[0] > ours[1]);
         assert_eq!(counts_of(text.lines().next().unwrap()), ours);
         if let Some(t) = tool("eval_octree_accuracy") {
@@ -462,10 +359,7 @@ fn eval_matches_eval_octree_accuracy() {
                 oargs.extend(["-m", "5"]);
             }
             let out = oracle(&t, &oargs);
-            let line = out
-                .lines()
-                .find(|l| l.starts_with("Voxels correct:"))
-                .unwrap();
+            let line = out.lines().find(|l| l.starts_with("Voxels correct:")).unwrap();
             assert_eq!(counts_of(line), ours, "{extra:?}");
         }
     }
@@ -480,10 +374,7 @@ fn eval_matches_eval_octree_accuracy() {
 
     fail(&["eval", f.p("s.graph"), "--holdout", "1"], "at least 2");
     fail(&["eval", f.p("s.graph"), "--res", "-0.1"], "--res must be");
-    fail(
-        &["eval", f.p("a.bt"), f.p("s.graph"), "--folds", "2"],
-        "give only the .graph",
-    );
+    fail(&["eval", f.p("a.bt"), f.p("s.graph"), "--folds", "2"], "give only the .graph");
     fail(&["eval", f.p("a.bt")], "cannot read");
 }
 
@@ -492,26 +383,13 @@ fn eval_matches_eval_octree_accuracy() {
 #[test]
 fn log2graph_matches_octomap() {
     let f = Fixture::new();
-    let one = f.write(
-        "one.log",
-        "# one scan\nNODE 0.5 -1 0.25 0.1 0.2 0.3\n1 2 3\n4.5 5 -6\n0.1 0.2 0.3\n",
-    );
+    let one = f.write("one.log", "# one scan\nNODE 0.5 -1 0.25 0.1 0.2 0.3\n1 2 3\n4.5 5 -6\n0.1 0.2 0.3\n");
     ok(&["log2graph", one, f.p("one.graph")]);
     let mut text = String::from("# several\n");
     for n in 0..5 {
-        text += &format!(
-            "NODE {} {} 0.2 0.01 -0.02 {}\n",
-            n as f32 * 0.5,
-            n as f32 * 0.1,
-            n as f32 * 0.3
-        );
+        text += &format!("NODE {} {} 0.2 0.01 -0.02 {}\n", n as f32 * 0.5, n as f32 * 0.1, n as f32 * 0.3);
         for i in 0..40 {
-            text += &format!(
-                "{} {} {}\n",
-                (i as f32) * 0.1 - 2.0,
-                (n * i) as f32 * 0.01,
-                0.5
-            );
+            text += &format!("{} {} {}\n", (i as f32) * 0.1 - 2.0, (n * i) as f32 * 0.01, 0.5);
         }
     }
     let many = f.write("many.log", &text);
@@ -520,10 +398,7 @@ fn log2graph_matches_octomap() {
     assert_eq!((g.nodes.len(), g.edges.len(), g.num_points()), (5, 4, 200));
     if let Some(t) = tool("log2graph") {
         oracle(&t, &[one, f.p("one_o.graph")]);
-        assert_eq!(
-            std::fs::read(f.path("one.graph")).unwrap(),
-            std::fs::read(f.path("one_o.graph")).unwrap()
-        );
+        assert_eq!(std::fs::read(f.path("one.graph")).unwrap(), std::fs::read(f.path("one_o.graph")).unwrap());
         // log2graph leaves node ids uninitialised: compare all else
         oracle(&t, &[many, f.p("many_o.graph")]);
         let o = graph::read_file(f.path("many_o.graph")).unwrap();
@@ -535,18 +410,9 @@ fn log2graph_matches_octomap() {
             assert_eq!((a.constraint, a.weight), (b.constraint, b.weight));
         }
     }
-    fail(
-        &["log2graph", f.write("bad.log", "1 2 3\n"), f.p("x.graph")],
-        "point before the first NODE",
-    );
-    fail(
-        &["log2graph", f.p("none.log"), f.p("x.graph")],
-        "cannot open",
-    );
-    fail(
-        &["log2graph", one, "/nonexistent/dir/x.graph"],
-        "cannot write /nonexistent/dir/x.graph",
-    );
+    fail(&["log2graph", f.write("bad.log", "1 2 3\n"), f.p("x.graph")], "point before the first NODE");
+    fail(&["log2graph", f.p("none.log"), f.p("x.graph")], "cannot open");
+    fail(&["log2graph", one, "/nonexistent/dir/x.graph"], "cannot write /nonexistent/dir/x.graph");
 }
 
 // ----- binvox --------------------------------------------------------------------------
@@ -554,18 +420,14 @@ fn log2graph_matches_octomap() {
 fn binvox(dim: [usize; 3], translate: &str, scale: &str, seed: u64) -> Vec<u8> {
     let mut state = seed;
     let mut next = || {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         (state >> 33) as u32
     };
     let n = dim[0] * dim[1] * dim[2];
     let vals: Vec<u8> = (0..n).map(|_| u8::from(next() % 10 < 3)).collect();
-    let mut out = format!(
-        "#binvox 1\ndim {} {} {}\ntranslate {translate}\nscale {scale}\ndata\n",
-        dim[0], dim[1], dim[2]
-    )
-    .into_bytes();
+    let mut out =
+        format!("#binvox 1\ndim {} {} {}\ntranslate {translate}\nscale {scale}\ndata\n", dim[0], dim[1], dim[2])
+            .into_bytes();
     let mut i = 0;
     while i < n {
         let mut k = 1;
@@ -614,26 +476,11 @@ fn binvox_matches_binvox2bt_bytes() {
     assert!(f.path("t.binvox.bt").exists());
 
     let good = binvox([4, 5, 6], "0 0 0", "1", 2);
-    fail(
-        &["binvox", f.write("trunc.binvox", &good[..good.len() - 4])],
-        "data ends after",
-    );
-    fail(
-        &["binvox", f.write("hdr.binvox", "#notbinvox 1\n")],
-        "instead of \"#binvox\"",
-    );
-    fail(
-        &[
-            "binvox",
-            f.write("nodim.binvox", "#binvox 1\nscale 1\ndata\n"),
-        ],
-        "no \"dim\"",
-    );
+    fail(&["binvox", f.write("trunc.binvox", &good[..good.len() - 4])], "data ends after");
+    fail(&["binvox", f.write("hdr.binvox", "#notbinvox 1\n")], "instead of \"#binvox\"");
+    fail(&["binvox", f.write("nodim.binvox", "#binvox 1\nscale 1\ndata\n")], "no \"dim\"");
     fail(&["binvox", f.p("absent.binvox")], "cannot open");
-    fail(
-        &["binvox", input, "--bb", "1", "0", "0", "0", "1", "1"],
-        "--bb needs",
-    );
+    fail(&["binvox", input, "--bb", "1", "0", "0", "0", "1", "1"], "--bb needs");
 }
 
 // ----- a known scene: one wall ---------------------------------------------------------
@@ -644,23 +491,11 @@ fn wall(f: &Fixture) -> &str {
     let mut text = String::new();
     for iy in 0..=40 {
         for iz in 0..=20 {
-            text += &format!(
-                "2.05 {} {}\n",
-                -1.0 + 0.05 * f64::from(iy),
-                0.05 * f64::from(iz)
-            );
+            text += &format!("2.05 {} {}\n", -1.0 + 0.05 * f64::from(iy), 0.05 * f64::from(iz));
         }
     }
     let xyz = f.write("wall.xyz", text);
-    ok(&[
-        "build",
-        "--points",
-        xyz,
-        "-o",
-        f.p("wall.bt"),
-        "--res",
-        "0.1",
-    ]);
+    ok(&["build", "--points", xyz, "-o", f.p("wall.bt"), "--res", "0.1"]);
     f.p("wall.bt")
 }
 
@@ -668,36 +503,12 @@ fn wall(f: &Fixture) -> &str {
 fn raycast_reports_outcomes() {
     let f = Fixture::new();
     let map = wall(&f);
-    let j = json(&ok(&[
-        "raycast",
-        map,
-        "--origin",
-        "0.05",
-        "0.05",
-        "0.05",
-        "--direction",
-        "1",
-        "0",
-        "0",
-        "--json",
-    ]));
+    let j = json(&ok(&["raycast", map, "--origin", "0.05", "0.05", "0.05", "--direction", "1", "0", "0", "--json"]));
     assert_eq!(j["outcome"], "occupied");
     assert_eq!(j["hit"], true);
     let end = j["end"].as_array().unwrap();
     assert!((end[0].as_f64().unwrap() - 2.05).abs() < 1e-6);
-    let j = json(&ok(&[
-        "raycast",
-        map,
-        "--origin",
-        "0.05",
-        "0.05",
-        "0.05",
-        "--direction",
-        "-1",
-        "0",
-        "0",
-        "--json",
-    ]));
+    let j = json(&ok(&["raycast", map, "--origin", "0.05", "0.05", "0.05", "--direction", "-1", "0", "0", "--json"]));
     assert_eq!(j["outcome"], "unknown");
     let j = json(&ok(&[
         "raycast",
@@ -732,65 +543,13 @@ fn raycast_reports_outcomes() {
         "--json",
     ]));
     assert_eq!(j["outcome"], "max_range");
-    let text = ok(&[
-        "raycast",
-        map,
-        "--origin",
-        "0.05",
-        "0.05",
-        "0.05",
-        "--direction",
-        "1",
-        "0",
-        "0",
-    ]);
+    let text = ok(&["raycast", map, "--origin", "0.05", "0.05", "0.05", "--direction", "1", "0", "0"]);
     assert!(text.starts_with("occupied at 2.05 "), "{text}");
 
+    fail(&["raycast", map, "--origin", "0", "0", "0", "--direction", "0", "0", "0"], "zero vector");
+    fail(&["raycast", map, "--origin", "1e9", "0", "0", "--direction", "1", "0", "0"], "cannot cast the ray");
     fail(
-        &[
-            "raycast",
-            map,
-            "--origin",
-            "0",
-            "0",
-            "0",
-            "--direction",
-            "0",
-            "0",
-            "0",
-        ],
-        "zero vector",
-    );
-    fail(
-        &[
-            "raycast",
-            map,
-            "--origin",
-            "1e9",
-            "0",
-            "0",
-            "--direction",
-            "1",
-            "0",
-            "0",
-        ],
-        "cannot cast the ray",
-    );
-    fail(
-        &[
-            "raycast",
-            map,
-            "--origin",
-            "0",
-            "0",
-            "0",
-            "--direction",
-            "1",
-            "0",
-            "0",
-            "--max-range",
-            "-2",
-        ],
+        &["raycast", map, "--origin", "0", "0", "0", "--direction", "1", "0", "0", "--max-range", "-2"],
         "--max-range",
     );
 }
@@ -815,17 +574,7 @@ fn render_draws_the_wall() {
     let f = Fixture::new();
     let map = wall(&f);
     // top view with free space: frame = all known leaves
-    ok(&[
-        "render",
-        map,
-        "-o",
-        f.p("top.png"),
-        "--free",
-        "--width",
-        "100",
-        "--height",
-        "100",
-    ]);
+    ok(&["render", map, "-o", f.p("top.png"), "--free", "--width", "100", "--height", "100"]);
     let img = png_pixels(&f.path("top.png"));
     assert_eq!((img.0, img.1), (100, 100));
     let info = json(&ok(&["info", map, "--json"]));
@@ -833,9 +582,7 @@ fn render_draws_the_wall() {
     let b = |v: &serde_json::Value, i: usize| v[i].as_f64().unwrap();
     let s = ((b(hi, 0) - b(lo, 0)) / 100.0).max((b(hi, 1) - b(lo, 1)) / 100.0);
     let (cx, cy) = ((b(lo, 0) + b(hi, 0)) / 2.0, (b(lo, 1) + b(hi, 1)) / 2.0);
-    let pixel = |x: f64, y: f64| -> (u32, u32) {
-        (((x - cx) / s + 50.0) as u32, ((cy - y) / s + 50.0) as u32)
-    };
+    let pixel = |x: f64, y: f64| -> (u32, u32) { (((x - cx) / s + 50.0) as u32, ((cy - y) / s + 50.0) as u32) };
     let colour = |x: f64, y: f64| {
         let (px, py) = pixel(x, y);
         let i = 3 * (py * 100 + px) as usize;
@@ -898,11 +645,8 @@ fn render_draws_the_wall() {
         assert_eq!(brightness(&p, 63, y), 16);
     }
     // a coarser level draws bigger blocks: the lit area grows
-    let lit_count = |img: &(u32, u32, Vec<u8>)| {
-        (0..img.0 * img.1)
-            .filter(|&i| brightness(img, i % img.0, i / img.0) > 16)
-            .count()
-    };
+    let lit_count =
+        |img: &(u32, u32, Vec<u8>)| (0..img.0 * img.1).filter(|&i| brightness(img, i % img.0, i / img.0) > 16).count();
     let mut coarse_args = vec![
         "render",
         map,
@@ -928,49 +672,18 @@ fn render_draws_the_wall() {
     ok(&coarse_args);
     let c = png_pixels(&f.path("p12.png"));
     assert!(brightness(&c, 32, 24) >= 100);
-    assert!(
-        lit_count(&c) > lit_count(&p),
-        "{} vs {}",
-        lit_count(&c),
-        lit_count(&p)
-    );
+    assert!(lit_count(&c) > lit_count(&p), "{} vs {}", lit_count(&c), lit_count(&p));
     coarse_args.push("--free");
     fail(&coarse_args, "--free applies to --view top only");
     // auto camera sees something
-    ok(&[
-        "render",
-        map,
-        "-o",
-        f.p("auto.png"),
-        "--view",
-        "perspective",
-        "--width",
-        "48",
-    ]);
+    ok(&["render", map, "-o", f.p("auto.png"), "--view", "perspective", "--width", "48"]);
     let a = png_pixels(&f.path("auto.png"));
-    let lit = (0..a.0 * a.1)
-        .filter(|&i| brightness(&a, i % a.0, i / a.0) > 16)
-        .count();
+    let lit = (0..a.0 * a.1).filter(|&i| brightness(&a, i % a.0, i / a.0) > 16).count();
     assert!(lit > 20, "{lit}");
 
     fail(&["render", map, "-o", f.p("x.jpg")], "unknown format");
-    fail(
-        &["render", map, "-o", f.p("x.png"), "--width", "0"],
-        "--width and --height",
-    );
-    fail(
-        &[
-            "render",
-            map,
-            "-o",
-            f.p("x.png"),
-            "--view",
-            "perspective",
-            "--fov",
-            "200",
-        ],
-        "--fov",
-    );
+    fail(&["render", map, "-o", f.p("x.png"), "--width", "0"], "--width and --height");
+    fail(&["render", map, "-o", f.p("x.png"), "--view", "perspective", "--fov", "200"], "--fov");
     fail(
         &[
             "render",
@@ -990,14 +703,8 @@ fn render_draws_the_wall() {
         ],
         "same point",
     );
-    fail(
-        &["render", map, "-o", "/nonexistent/dir/x.png"],
-        "cannot write",
-    );
-    fail_usage(
-        &["render", map, "-o", f.p("x.png"), "--view", "side"],
-        "side",
-    );
+    fail(&["render", map, "-o", "/nonexistent/dir/x.png"], "cannot write");
+    fail_usage(&["render", map, "-o", f.p("x.png"), "--view", "side"], "side");
 }
 
 // ----- mesh ----------------------------------------------------------------------
@@ -1006,10 +713,7 @@ fn ply_counts(path: &Path) -> (u64, u64) {
     let text = std::fs::read(path).unwrap();
     let text = String::from_utf8_lossy(&text);
     let count = |el: &str| -> u64 {
-        let l = text
-            .lines()
-            .find(|l| l.starts_with(&format!("element {el} ")))
-            .unwrap();
+        let l = text.lines().find(|l| l.starts_with(&format!("element {el} "))).unwrap();
         l.rsplit(' ').next().unwrap().parse().unwrap()
     };
     (count("vertex"), count("face"))
@@ -1044,10 +748,7 @@ fn mesh_exports_cubes_with_hidden_faces_culled() {
     assert!(v > 0 && faces > 0);
 
     fail(&["mesh", f.p("a.bt"), "-o", f.p("a.stl")], "unknown format");
-    fail(
-        &["mesh", f.p("a.bt"), "-o", f.p("a.ply"), "--depth", "99"],
-        "--depth must be",
-    );
+    fail(&["mesh", f.p("a.bt"), "-o", f.p("a.ply"), "--depth", "99"], "--depth must be");
 }
 
 // ----- build from point cloud files --------------------------------------------------------
@@ -1059,11 +760,7 @@ fn cloud() -> Vec<[f32; 3]> {
         let a = f64::from(i) * 0.37;
         let r = 2.0 + f64::from(i % 7) * 0.5;
         let q = |x: f64| ((x * 8.0).round() / 8.0) as f32;
-        v.push([
-            q(r * a.cos()),
-            q(r * a.sin()),
-            q(f64::from(i % 13) * 0.125 - 0.5),
-        ]);
+        v.push([q(r * a.cos()), q(r * a.sin()), q(f64::from(i % 13) * 0.125 - 0.5)]);
     }
     v
 }
@@ -1115,10 +812,7 @@ fn write_cloud_files(f: &Fixture, pts: &[[f32; 3]]) -> Vec<PathBuf> {
         f.write(name, bytes);
         files.push(f.path(name));
     };
-    let text: String = pts
-        .iter()
-        .map(|p| format!("{} {} {}\n", p[0], p[1], p[2]))
-        .collect();
+    let text: String = pts.iter().map(|p| format!("{} {} {}\n", p[0], p[1], p[2])).collect();
     add("c.xyz", text.clone().into_bytes());
     // PLY ascii with an extra property and a face element after the vertices
     let mut ply = format!(
@@ -1164,10 +858,7 @@ fn write_cloud_files(f: &Fixture, pts: &[[f32; 3]]) -> Vec<PathBuf> {
              VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {data}\n"
         )
     };
-    add(
-        "c_ascii.pcd",
-        (head("x y z", "4 4 4", "F F F", "1 1 1", "ascii") + &text).into_bytes(),
-    );
+    add("c_ascii.pcd", (head("x y z", "4 4 4", "F F F", "1 1 1", "ascii") + &text).into_bytes());
     let mut b = head("x y z rgb", "4 4 4 4", "F F F U", "1 1 1 1", "binary").into_bytes();
     for p in pts {
         for c in p {
@@ -1192,10 +883,7 @@ fn write_cloud_files(f: &Fixture, pts: &[[f32; 3]]) -> Vec<PathBuf> {
     // LAS and LAZ through the las crate
     for ext in ["las", "laz"] {
         let mut builder = las::Builder::from((1, 2));
-        let t = las::Transform {
-            scale: 0.125,
-            offset: 0.0,
-        };
+        let t = las::Transform { scale: 0.125, offset: 0.0 };
         builder.transforms = las::Vector { x: t, y: t, z: t };
         let header = builder.into_header().unwrap();
         let path = f.path(&format!("c.{ext}"));
@@ -1234,22 +922,11 @@ fn build_reads_point_cloud_formats_with_poses() {
         let mut args = vec!["build", "--points", s(file), "-o", f.p("p.ot"), "--pose"];
         args.extend(pose);
         ok(&args);
-        assert!(
-            std::fs::read(f.path("p.ot")).unwrap() == reference,
-            "{}",
-            file.display()
-        );
+        assert!(std::fs::read(f.path("p.ot")).unwrap() == reference, "{}", file.display());
     }
     // a trajectory: one pose per file, same as a two-node graph
     let pose2 = ["-1", "0.5", "0", "0.125", "0", "-0.75"];
-    f.write(
-        "traj.txt",
-        format!(
-            "# x y z roll pitch yaw\n{}\n\n{}\n",
-            pose.join(" "),
-            pose2.join(" ")
-        ),
-    );
+    f.write("traj.txt", format!("# x y z roll pitch yaw\n{}\n\n{}\n", pose.join(" "), pose2.join(" ")));
     let mut log2 = format!("NODE {}\n", pose.join(" "));
     for p in &pts {
         log2 += &format!("{} {} {}\n", p[0], p[1], p[2]);
@@ -1258,10 +935,7 @@ fn build_reads_point_cloud_formats_with_poses() {
     for p in &pts[..100] {
         log2 += &format!("{} {} {}\n", p[0], p[1], p[2]);
     }
-    let part: String = pts[..100]
-        .iter()
-        .map(|p| format!("{} {} {}\n", p[0], p[1], p[2]))
-        .collect();
+    let part: String = pts[..100].iter().map(|p| format!("{} {} {}\n", p[0], p[1], p[2])).collect();
     let second = f.write("part.xyz", part);
     ok(&["log2graph", f.write("c2.log", log2), f.p("c2.graph")]);
     ok(&["build", f.p("c2.graph"), "-o", f.p("ref2.bt")]);
@@ -1278,10 +952,7 @@ fn build_reads_point_cloud_formats_with_poses() {
     ]));
     assert_eq!(j["scans"], 2);
     assert_eq!(j["points"], 400);
-    assert_eq!(
-        std::fs::read(f.path("t.bt")).unwrap(),
-        std::fs::read(f.path("ref2.bt")).unwrap()
-    );
+    assert_eq!(std::fs::read(f.path("t.bt")).unwrap(), std::fs::read(f.path("ref2.bt")).unwrap());
     // without a pose: identity, rays from the origin
     ok(&["build", "--points", s(&files[0]), "-o", f.p("id.bt")]);
     let t = read_tree(f.p("id.bt"));
@@ -1289,57 +960,19 @@ fn build_reads_point_cloud_formats_with_poses() {
     assert!(t.is_occupied(t.search_point(p, 0).unwrap().unwrap().value));
 
     // errors
-    fail(
-        &[
-            "build",
-            "--points",
-            s(&files[0]),
-            "-o",
-            f.p("x.bt"),
-            "--trajectory",
-            f.p("traj.txt"),
-        ],
-        "has 2 poses for 1",
-    );
-    fail(
-        &[
-            "build",
-            "--points",
-            f.write("x.obj", "v 1 2 3\n"),
-            "-o",
-            f.p("x.bt"),
-        ],
-        "unknown format",
-    );
+    fail(&["build", "--points", s(&files[0]), "-o", f.p("x.bt"), "--trajectory", f.p("traj.txt")], "has 2 poses for 1");
+    fail(&["build", "--points", f.write("x.obj", "v 1 2 3\n"), "-o", f.p("x.bt")], "unknown format");
     let ply = std::fs::read(&files[2]).unwrap();
+    fail(&["build", "--points", f.write("t.ply", &ply[..ply.len() - 5]), "-o", f.p("x.bt")], "data ends in vertex");
     fail(
-        &[
-            "build",
-            "--points",
-            f.write("t.ply", &ply[..ply.len() - 5]),
-            "-o",
-            f.p("x.bt"),
-        ],
-        "data ends in vertex",
-    );
-    fail(
-        &[
-            "build",
-            "--points",
-            f.write("h.ply", "ply\nformat ascii 1.0\nelement vertex 1\n"),
-            "-o",
-            f.p("x.bt"),
-        ],
+        &["build", "--points", f.write("h.ply", "ply\nformat ascii 1.0\nelement vertex 1\n"), "-o", f.p("x.bt")],
         "no \"end_header\"",
     );
     fail(
         &[
             "build",
             "--points",
-            f.write(
-                "n.ply",
-                "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n1\n",
-            ),
+            f.write("n.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n1\n"),
             "-o",
             f.p("x.bt"),
         ],
@@ -1347,104 +980,37 @@ fn build_reads_point_cloud_formats_with_poses() {
     );
     let pcd = std::fs::read(&files[6]).unwrap();
     fail(
-        &[
-            "build",
-            "--points",
-            f.write("t.pcd", &pcd[..pcd.len() - 7]),
-            "-o",
-            f.p("x.bt"),
-        ],
+        &["build", "--points", f.write("t.pcd", &pcd[..pcd.len() - 7]), "-o", f.p("x.bt")],
         "compressed data is shorter",
     );
     let mut bad = pcd.clone();
     let at = bad.len() - 3;
     bad[at - 40] = 0xff; // a back reference before the start, or a wrong length
-    let out = run(&[
-        "build",
-        "--points",
-        f.write("b.pcd", &bad),
-        "-o",
-        f.p("x.bt"),
-    ]);
+    let out = run(&["build", "--points", f.write("b.pcd", &bad), "-o", f.p("x.bt")]);
     assert!(!String::from_utf8_lossy(&out.stderr).contains("panicked"));
     let bin = std::fs::read(&files[5]).unwrap();
+    fail(&["build", "--points", f.write("tb.pcd", &bin[..bin.len() - 3]), "-o", f.p("x.bt")], "binary data holds");
     fail(
         &[
             "build",
             "--points",
-            f.write("tb.pcd", &bin[..bin.len() - 3]),
-            "-o",
-            f.p("x.bt"),
-        ],
-        "binary data holds",
-    );
-    fail(
-        &[
-            "build",
-            "--points",
-            f.write(
-                "k.pcd",
-                "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 1\nDATA zip\n",
-            ),
+            f.write("k.pcd", "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 1\nDATA zip\n"),
             "-o",
             f.p("x.bt"),
         ],
         "unknown DATA kind",
     );
+    fail(&["build", "--points", f.write("t.las", b"LASF-not-really"), "-o", f.p("x.bt")], "not a valid .las file");
+    fail(&["build", "--points", f.p("missing.ply"), "-o", f.p("x.bt")], "cannot open");
     fail(
-        &[
-            "build",
-            "--points",
-            f.write("t.las", b"LASF-not-really"),
-            "-o",
-            f.p("x.bt"),
-        ],
-        "not a valid .las file",
-    );
-    fail(
-        &["build", "--points", f.p("missing.ply"), "-o", f.p("x.bt")],
-        "cannot open",
-    );
-    fail(
-        &[
-            "build",
-            "--points",
-            s(&files[0]),
-            "-o",
-            f.p("x.bt"),
-            "--pose",
-            "0",
-            "0",
-            "0",
-            "0",
-            "0",
-            "inf",
-        ],
+        &["build", "--points", s(&files[0]), "-o", f.p("x.bt"), "--pose", "0", "0", "0", "0", "0", "inf"],
         "six finite numbers",
     );
     fail(
-        &[
-            "build",
-            "--points",
-            s(&files[0]),
-            "-o",
-            f.p("x.bt"),
-            "--trajectory",
-            f.write("tj.txt", "1 2 3\n"),
-        ],
+        &["build", "--points", s(&files[0]), "-o", f.p("x.bt"), "--trajectory", f.write("tj.txt", "1 2 3\n")],
         "line 1",
     );
-    fail_usage(
-        &[
-            "build",
-            f.p("s.graph"),
-            "--points",
-            s(&files[0]),
-            "-o",
-            f.p("x.bt"),
-        ],
-        "cannot be used with",
-    );
+    fail_usage(&["build", f.p("s.graph"), "--points", s(&files[0]), "-o", f.p("x.bt")], "cannot be used with");
     fail_usage(&["build", "-o", f.p("x.bt")], "required");
 }
 
@@ -1473,78 +1039,22 @@ fn user_errors_are_one_line_without_panics() {
     let cut = f.write("cut.bt", &bytes[..bytes.len() / 2]);
     fail(&["info", cut], "not a valid .bt map");
     fail(&["compare", a, cut], "not a valid .bt map");
-    fail(
-        &[
-            "raycast",
-            cut,
-            "--origin",
-            "0",
-            "0",
-            "0",
-            "--direction",
-            "1",
-            "0",
-            "0",
-        ],
-        "not a valid .bt map",
-    );
+    fail(&["raycast", cut, "--origin", "0", "0", "0", "--direction", "1", "0", "0"], "not a valid .bt map");
     let ot_bytes = std::fs::read(f.path("a.ot")).unwrap();
-    fail(
-        &[
-            "edit",
-            f.write("cut.ot", &ot_bytes[..ot_bytes.len() - 9]),
-            f.p("e.ot"),
-        ],
-        "not a valid .ot map",
-    );
-    fail(
-        &["info", f.write("text.bt", "hello\n")],
-        "not a valid .bt map",
-    );
+    fail(&["edit", f.write("cut.ot", &ot_bytes[..ot_bytes.len() - 9]), f.p("e.ot")], "not a valid .ot map");
+    fail(&["info", f.write("text.bt", "hello\n")], "not a valid .bt map");
     // build flag values
     let g = f.p("s.graph");
-    fail(
-        &["build", g, "-o", f.p("x.bt"), "--res", "-0.1"],
-        "resolution",
-    );
-    fail(
-        &["build", g, "-o", f.p("x.bt"), "--clamping", "0.1", "1.5"],
-        "clamping",
-    );
-    fail(
-        &["build", g, "-o", f.p("x.bt"), "--sensor", "0.8", "0.3"],
-        "sensor model",
-    );
-    fail(
-        &["build", g, "-o", "/nonexistent/dir/out.bt"],
-        "cannot write /nonexistent/dir/out.bt",
-    );
-    fail(
-        &[
-            "build",
-            f.write("t.graph", &std::fs::read(g).unwrap()[..100]),
-            "-o",
-            f.p("x.bt"),
-        ],
-        "cannot read",
-    );
+    fail(&["build", g, "-o", f.p("x.bt"), "--res", "-0.1"], "resolution");
+    fail(&["build", g, "-o", f.p("x.bt"), "--clamping", "0.1", "1.5"], "clamping");
+    fail(&["build", g, "-o", f.p("x.bt"), "--sensor", "0.8", "0.3"], "sensor model");
+    fail(&["build", g, "-o", "/nonexistent/dir/out.bt"], "cannot write /nonexistent/dir/out.bt");
+    fail(&["build", f.write("t.graph", &std::fs::read(g).unwrap()[..100]), "-o", f.p("x.bt")], "cannot read");
     fail_usage(&["build", g, "-o", f.p("x.bt"), "--res", "abc"], "abc");
     // unwritable outputs everywhere
     for args in [
         vec!["edit", a, "/nonexistent/dir/e.bt"],
-        vec![
-            "crop",
-            a,
-            "/nonexistent/dir/e.bt",
-            "--min",
-            "0",
-            "0",
-            "0",
-            "--max",
-            "1",
-            "1",
-            "1",
-        ],
+        vec!["crop", a, "/nonexistent/dir/e.bt", "--min", "0", "0", "0", "--max", "1", "1", "1"],
         vec!["to-points", a, "/nonexistent/dir/p.xyz"],
         vec!["mesh", a, "-o", "/nonexistent/dir/m.ply"],
         vec!["convert", a, "/nonexistent/dir/c.ot"],
@@ -1552,8 +1062,5 @@ fn user_errors_are_one_line_without_panics() {
         fail(&args, "cannot write /nonexistent/dir/");
     }
     // output to a directory path names no file
-    fail(
-        &["convert", a, f.dir.path().to_str().unwrap()],
-        "unknown map format",
-    );
+    fail(&["convert", a, f.dir.path().to_str().unwrap()], "unknown map format");
 }

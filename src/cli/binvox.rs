@@ -70,12 +70,8 @@ impl Cursor<'_> {
     }
 
     fn number<T: std::str::FromStr>(&mut self, what: &str) -> Result<T> {
-        let t = self
-            .token()
-            .with_context(|| format!("header ends before the {what}"))?;
-        t.parse()
-            .ok()
-            .with_context(|| format!("header: {what} {t:?} is not a number"))
+        let t = self.token().with_context(|| format!("header ends before the {what}"))?;
+        t.parse().ok().with_context(|| format!("header: {what} {t:?} is not a number"))
     }
 }
 
@@ -84,10 +80,7 @@ pub fn parse(bytes: &[u8]) -> Result<Binvox> {
     let mut c = Cursor { b: bytes, i: 0 };
     match c.token() {
         Some("#binvox") => {}
-        other => bail!(
-            "first token is {:?} instead of \"#binvox\"",
-            other.unwrap_or("")
-        ),
+        other => bail!("first token is {:?} instead of \"#binvox\"", other.unwrap_or("")),
     }
     let _version: i64 = c.number("version")?;
     let (mut dim, mut translate, mut scale) = (None, [0f32; 3], 1f32);
@@ -97,13 +90,7 @@ pub fn parse(bytes: &[u8]) -> Result<Binvox> {
         };
         match t {
             "data" => break,
-            "dim" => {
-                dim = Some([
-                    c.number("dimension")?,
-                    c.number("dimension")?,
-                    c.number("dimension")?,
-                ])
-            }
+            "dim" => dim = Some([c.number("dimension")?, c.number("dimension")?, c.number("dimension")?]),
             "translate" => {
                 for v in &mut translate {
                     *v = c.number("translation")?;
@@ -126,12 +113,7 @@ pub fn parse(bytes: &[u8]) -> Result<Binvox> {
     }
     // the byte after "data" (its line feed) is skipped
     let data = bytes.get(c.i + 1..).unwrap_or_default().to_vec();
-    Ok(Binvox {
-        dim,
-        translate,
-        scale,
-        data,
-    })
+    Ok(Binvox { dim, translate, scale, data })
 }
 
 #[derive(Default)]
@@ -141,13 +123,7 @@ struct Counts {
 }
 
 /// Adds one grid to the tree (creating it at the grid's resolution).
-fn insert(
-    tree: &mut Option<OccupancyTree>,
-    bv: &Binvox,
-    a: &Args,
-    path: &Path,
-    counts: &mut Counts,
-) -> Result<()> {
+fn insert(tree: &mut Option<OccupancyTree>, bv: &Binvox, a: &Args, path: &Path, counts: &mut Counts) -> Result<()> {
     let [depth, height, width] = bv.dim;
     let size = depth
         .checked_mul(height)
@@ -164,17 +140,11 @@ fn insert(
     let (mut index, mut pairs) = (0usize, bv.data.chunks_exact(2));
     while index < size {
         let Some(&[value, count]) = pairs.next() else {
-            bail!(
-                "{}: data ends after {index} of {size} voxels",
-                path.display()
-            );
+            bail!("{}: data ends after {index} of {size} voxels", path.display());
         };
         let end = index + usize::from(count);
         if end > size {
-            bail!(
-                "{}: run-length data covers more than the {size} voxels of the grid",
-                path.display()
-            );
+            bail!("{}: run-length data covers more than the {size} voxels of the grid", path.display());
         }
         for j in index..end {
             let y = j % width;
@@ -191,7 +161,7 @@ fn insert(
             if let Some(o) = offset {
                 p += o;
             }
-            let inside = a.bb.as_ref().map_or(true, |b| {
+            let inside = a.bb.as_ref().is_none_or(|b| {
                 let c = p.to_array().map(f64::from);
                 (0..3).all(|i| c[i] <= b[3 + i] && c[i] >= b[i])
             });
@@ -227,8 +197,7 @@ pub fn run(a: Args) -> Result<()> {
     let mut tree = None;
     let mut counts = Counts::default();
     for path in &a.inputs {
-        let bytes =
-            std::fs::read(path).with_context(|| format!("cannot open {}", path.display()))?;
+        let bytes = std::fs::read(path).with_context(|| format!("cannot open {}", path.display()))?;
         let bv = parse(&bytes).with_context(|| format!("{}: not a binvox file", path.display()))?;
         insert(&mut tree, &bv, &a, path, &mut counts)?;
     }

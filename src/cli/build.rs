@@ -83,35 +83,22 @@ fn sensor_model(a: &Args) -> Result<SensorModel> {
     if let Some(c) = &a.clamping {
         (p.clamping_min, p.clamping_max) = (c[0], c[1]);
         if !(0.0..=1.0).contains(&c[0]) || !(0.0..=1.0).contains(&c[1]) || c[0] >= c[1] {
-            bail!(
-                "clamping values must satisfy 0 <= MIN < MAX <= 1, got {} {}",
-                c[0],
-                c[1]
-            );
+            bail!("clamping values must satisfy 0 <= MIN < MAX <= 1, got {} {}", c[0], c[1]);
         }
     }
     if let Some(s) = &a.sensor {
         (p.miss, p.hit) = (s[0], s[1]);
         if !(0.0..=1.0).contains(&s[0]) || !(0.0..=1.0).contains(&s[1]) || s[0] >= s[1] {
-            bail!(
-                "sensor model must satisfy 0 <= MISS < HIT <= 1, got {} {}",
-                s[0],
-                s[1]
-            );
+            bail!("sensor model must satisfy 0 <= MISS < HIT <= 1, got {} {}", s[0], s[1]);
         }
     }
-    Ok(SensorModel::from_probabilities(&SensorProbabilities {
-        ..p
-    })?)
+    Ok(SensorModel::from_probabilities(&SensorProbabilities { ..p })?)
 }
 
 /// graph2tree's `outputStatistics`, as numbers.
 fn statistics(tree: &OccupancyTree) -> serde_json::Value {
     let sensor = tree.sensor();
-    let thresholded = tree
-        .nodes(0)
-        .filter(|n| sensor.is_at_threshold(n.value))
-        .count();
+    let thresholded = tree.nodes(0).filter(|n| sensor.is_at_threshold(n.value)).count();
     let size = tree.bounds(BoundsRule::CenterHalfSize).size();
     serde_json::json!({
         "nodes": tree.size(),
@@ -139,11 +126,7 @@ fn print_statistics(title: &str, s: &serde_json::Value) {
         s["memory_bytes"],
         mb(&s["memory_bytes"])
     );
-    println!(
-        "Full grid: {} byte ({:.6} MB)",
-        s["full_grid_bytes"],
-        mb(&s["full_grid_bytes"])
-    );
+    println!("Full grid: {} byte ({:.6} MB)", s["full_grid_bytes"], mb(&s["full_grid_bytes"]));
     let m = &s["metric_size"];
     println!("Size: {} x {} x {} m^3\n", m[0], m[1], m[2]);
 }
@@ -155,12 +138,7 @@ fn point_files(a: &Args) -> Result<ScanGraph> {
         (None, Some(t)) => {
             let poses = input::read_trajectory(t)?;
             if poses.len() != a.points.len() {
-                bail!(
-                    "{} has {} poses for {} --points files",
-                    t.display(),
-                    poses.len(),
-                    a.points.len()
-                );
+                bail!("{} has {} poses for {} --points files", t.display(), poses.len(), a.points.len());
             }
             poses
         }
@@ -209,8 +187,7 @@ pub fn run(a: Args) -> Result<()> {
         let report = if a.simple {
             tree.insert_point_cloud_rays(&cloud.points, origin, InnerNodes::Update)
         } else {
-            tree.insert_point_cloud(&cloud.points, origin, &opts)
-                .with_context(|| format!("scan {}", node.id))?
+            tree.insert_point_cloud(&cloud.points, origin, &opts).with_context(|| format!("scan {}", node.id))?
         };
         non_finite += report.non_finite;
         if a.compress_ml {
@@ -250,10 +227,7 @@ pub fn run(a: Args) -> Result<()> {
             println!("Skipped {non_finite} points with NaN or infinite coordinates");
         }
         println!("time to insert scans: {seconds} sec");
-        println!(
-            "time to insert 100.000 points took: {} sec (avg)\n",
-            seconds / (points as f64 / 100000.0)
-        );
+        println!("time to insert 100.000 points took: {} sec (avg)\n", seconds / (points as f64 / 100000.0));
         print_statistics("Pruned tree (lossless compression)", &full);
         print_statistics("Pruned max-likelihood tree (lossy compression)", &ml_stats);
         println!("Map written to {}", a.output.display());

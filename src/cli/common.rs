@@ -81,11 +81,7 @@ pub fn point_arg(v: &[f64], flag: &str) -> Result<octolinear::Point3> {
     if v.len() != 3 || v.iter().any(|c| !c.is_finite()) {
         bail!("{flag} needs three finite numbers, got {v:?}");
     }
-    Ok(octolinear::Point3::new(
-        v[0] as f32,
-        v[1] as f32,
-        v[2] as f32,
-    ))
+    Ok(octolinear::Point3::new(v[0] as f32, v[1] as f32, v[2] as f32))
 }
 
 /// Checks a `--depth` value (1..=16; 0 means 16 as in OctoMap's iterators).
@@ -106,20 +102,12 @@ pub fn write_output(
 
 /// The lower-case extension of a path, or an error naming the choices.
 pub fn extension(path: &Path, choices: &[&str]) -> Result<String> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-        .unwrap_or_default();
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
     if choices.contains(&ext.as_str()) {
         Ok(ext)
     } else {
         let list: Vec<String> = choices.iter().map(|c| format!(".{c}")).collect();
-        bail!(
-            "{}: unknown format (expected {})",
-            path.display(),
-            list.join(", ")
-        )
+        bail!("{}: unknown format (expected {})", path.display(), list.join(", "))
     }
 }
 

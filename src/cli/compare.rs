@@ -119,8 +119,7 @@ impl Walk {
                 }
                 if va.to_bits() != vb.to_bits() {
                     c.logodds_differ += count;
-                    c.max_abs_logodds_difference =
-                        c.max_abs_logodds_difference.max((va - vb).abs());
+                    c.max_abs_logodds_difference = c.max_abs_logodds_difference.max((va - vb).abs());
                 }
                 let (p1, p2) = (probability(f64::from(va)), probability(f64::from(vb)));
                 if (p1 > 0.001 && p2 < 0.001) || (p1 < 0.999 && p2 > 0.999) {
@@ -155,22 +154,13 @@ impl Walk {
 /// Compares two trees of the same resolution.
 pub fn compare(a: &OccupancyTree, b: &OccupancyTree) -> Result<Comparison> {
     if (a.resolution() - b.resolution()).abs() > 1e-6 {
-        bail!(
-            "tree resolutions don't match: {} and {}",
-            a.resolution(),
-            b.resolution()
-        );
+        bail!("tree resolutions don't match: {} and {}", a.resolution(), b.resolution());
     }
     fn side(t: &OccupancyTree) -> Side<'_> {
         t.root().map_or(Side::Unknown, Side::of)
     }
     let sides = (side(a), side(b));
-    let mut w = Walk {
-        sa: *a.sensor(),
-        sb: *b.sensor(),
-        c: Comparison::default(),
-        nan: None,
-    };
+    let mut w = Walk { sa: *a.sensor(), sb: *b.sensor(), c: Comparison::default(), nan: None };
     w.region(sides.0, sides.1, 0);
     if let Some((p1, p2)) = w.nan {
         bail!("KLD is NaN for occupancy probabilities {p1} and {p2}");
@@ -205,10 +195,7 @@ pub fn run(a: Args) -> Result<()> {
         "Occupancy differs: {} voxels ({} occupied in A and free in B, {} free in A and occupied in B)",
         c.occupancy_differs, c.occupied_a_free_b, c.free_a_occupied_b
     );
-    println!(
-        "Log-odds differ: {} voxels (max |difference| {})",
-        c.logodds_differ, c.max_abs_logodds_difference
-    );
+    println!("Log-odds differ: {} voxels (max |difference| {})", c.logodds_differ, c.max_abs_logodds_difference);
     if c.only_a + c.only_b > 0 {
         println!("Note: the maps know different voxels; the KLD covers the common ones only");
     }

@@ -83,22 +83,11 @@ pub fn key_box(keys: &KeySpace, min: Point3, max: Point3) -> Result<KeyBox> {
     let (lo, hi) = (min.to_array(), max.to_array());
     for i in 0..3 {
         if lo[i] > hi[i] {
-            bail!(
-                "crop box: --min {:?} is above --max {:?} on axis {}",
-                lo,
-                hi,
-                ["x", "y", "z"][i]
-            );
+            bail!("crop box: --min {:?} is above --max {:?} on axis {}", lo, hi, ["x", "y", "z"][i]);
         }
     }
-    let key = |c: f32| -> u16 {
-        keys.coord_to_key(f64::from(c))
-            .unwrap_or(if c < 0.0 { 0 } else { u16::MAX })
-    };
-    Ok(KeyBox {
-        min: Key(lo.map(key)),
-        max: Key(hi.map(key)),
-    })
+    let key = |c: f32| -> u16 { keys.coord_to_key(f64::from(c)).unwrap_or(if c < 0.0 { 0 } else { u16::MAX }) };
+    Ok(KeyBox { min: Key(lo.map(key)), max: Key(hi.map(key)) })
 }
 
 /// A node of the source, real or the virtual child of a pruned leaf.
@@ -111,13 +100,7 @@ enum Src<'a> {
 /// Appends the pre-order (value, child mask) of the part of a node inside
 /// `kb`; `min` is the node's smallest key, `depth` its depth. Returns the
 /// kept node's value, `None` when nothing of it is inside.
-fn crop_node(
-    src: Src<'_>,
-    min: [u32; 3],
-    depth: u8,
-    kb: &KeyBox,
-    out: &mut Vec<(f32, u8)>,
-) -> Option<f32> {
+fn crop_node(src: Src<'_>, min: [u32; 3], depth: u8, kb: &KeyBox, out: &mut Vec<(f32, u8)>) -> Option<f32> {
     let size = 1u32 << (16 - u32::from(depth));
     let mut inside = true;
     for (i, &a) in min.iter().enumerate() {
@@ -180,17 +163,12 @@ fn copy_preorder(n: NodeRef<'_>, out: &mut Vec<(f32, u8)>) {
 }
 
 /// Builds a tree from pre-order (value, mask) pairs.
-fn from_preorder(
-    nodes: &[(f32, u8)],
-    resolution: f64,
-    sensor: SensorModel,
-) -> Result<OccupancyTree> {
+fn from_preorder(nodes: &[(f32, u8)], resolution: f64, sensor: SensorModel) -> Result<OccupancyTree> {
     let mut b = PreorderBuilder::new();
     for (i, &(v, m)) in nodes.iter().enumerate() {
         b.push(v, m, i as u64)?;
     }
-    b.finish(resolution, sensor)?
-        .context("internal error: incomplete pre-order")
+    b.finish(resolution, sensor)?.context("internal error: incomplete pre-order")
 }
 
 /// The part of `tree` inside `kb`, as a new tree.
@@ -236,11 +214,7 @@ pub fn run(a: Args) -> Result<()> {
     }
     if let Some(r) = new_res {
         // edit_octree: --scale multiplies the resolution read from the file
-        let r = if a.scale.is_some() {
-            tree.resolution() * r
-        } else {
-            r
-        };
+        let r = if a.scale.is_some() { tree.resolution() * r } else { r };
         tree = with_resolution(&tree, r)?;
     }
     if a.expand {
@@ -253,12 +227,7 @@ pub fn run(a: Args) -> Result<()> {
         tree.prune();
     }
     save_map(&tree, &a.output)?;
-    eprintln!(
-        "wrote {} ({} nodes, resolution {})",
-        a.output.display(),
-        tree.size(),
-        tree.resolution()
-    );
+    eprintln!("wrote {} ({} nodes, resolution {})", a.output.display(), tree.size(), tree.resolution());
     Ok(())
 }
 
@@ -266,10 +235,7 @@ pub fn run_crop(a: CropArgs) -> Result<()> {
     run(Args {
         input: a.input,
         output: a.output,
-        crop: CropBox {
-            min: Some(a.min),
-            max: Some(a.max),
-        },
+        crop: CropBox { min: Some(a.min), max: Some(a.max) },
         res: None,
         scale: None,
         expand: false,

@@ -111,9 +111,8 @@ pub fn evaluate(
             continue;
         }
         let (cloud, origin) = node.graph2tree();
-        let (update, _) = tree
-            .compute_update(&cloud.points, origin, &opts)
-            .with_context(|| format!("scan {}", node.id))?;
+        let (update, _) =
+            tree.compute_update(&cloud.points, origin, &opts).with_context(|| format!("scan {}", node.id))?;
         acc.scans += 1;
         acc.points += cloud.len();
         let mut count = |set: &octolinear::scan::KeySet, occupied: bool| {
@@ -144,8 +143,7 @@ fn build(
     for (i, node) in g.nodes[..n].iter().enumerate() {
         if which(i) {
             let (cloud, origin) = node.graph2tree();
-            tree.insert_point_cloud(&cloud.points, origin, &opts)
-                .with_context(|| format!("scan {}", node.id))?;
+            tree.insert_point_cloud(&cloud.points, origin, &opts).with_context(|| format!("scan {}", node.id))?;
         }
     }
     Ok(tree)
@@ -170,8 +168,7 @@ pub fn run(a: Args) -> Result<()> {
         }
     }
     let graph_path = a.inputs.last().expect("one input at least");
-    let g = graph::read_file(graph_path)
-        .with_context(|| format!("cannot read {}", graph_path.display()))?;
+    let g = graph::read_file(graph_path).with_context(|| format!("cannot read {}", graph_path.display()))?;
     let n = a.scans.unwrap_or(g.nodes.len()).min(g.nodes.len());
     if a.inputs.len() == 2 {
         if a.holdout.is_some() || a.folds.is_some() {

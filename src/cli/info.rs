@@ -71,10 +71,7 @@ pub fn run(a: Args) -> Result<()> {
     if !m.tree.is_empty() {
         println!("bounds:      {} .. {}", s["bounds_min"], s["bounds_max"]);
     }
-    println!(
-        "memory:      {} bytes here, {} bytes in OctoMap",
-        s["memory_bytes"], s["octomap_memory_bytes"]
-    );
+    println!("memory:      {} bytes here, {} bytes in OctoMap", s["memory_bytes"], s["octomap_memory_bytes"]);
     let hist: Vec<String> = s["leaves_per_depth"]
         .as_array()
         .into_iter()
@@ -118,15 +115,12 @@ pub struct QueryArgs {
 pub fn query(a: QueryArgs) -> Result<()> {
     use std::io::Write;
     let m = load_map(&a.map)?;
-    let pts =
-        xyz::read_file(&a.points).with_context(|| format!("cannot read {}", a.points.display()))?;
+    let pts = xyz::read_file(&a.points).with_context(|| format!("cannot read {}", a.points.display()))?;
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
     for p in &pts.points {
         let (state, bits) = match m.tree.search_point(*p, 0) {
-            Ok(Some(f)) if m.tree.is_occupied(f.value) => {
-                ("occupied", format!("{:08x}", f.value.to_bits()))
-            }
+            Ok(Some(f)) if m.tree.is_occupied(f.value) => ("occupied", format!("{:08x}", f.value.to_bits())),
             Ok(Some(f)) => ("free", format!("{:08x}", f.value.to_bits())),
             Ok(None) | Err(_) => ("unknown", String::new()),
         };

@@ -14,8 +14,7 @@ pub fn read_points(path: &Path) -> Result<PointCloud> {
     match ext.as_str() {
         "las" | "laz" => return read_las(path).with_context(ctx),
         "xyz" | "txt" => {
-            let f = std::fs::File::open(path)
-                .with_context(|| format!("cannot open {}", path.display()))?;
+            let f = std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
             return xyz::read(std::io::BufReader::new(f)).with_context(ctx);
         }
         _ => {}
@@ -89,11 +88,7 @@ impl Scalar {
         macro_rules! get {
             ($t:ty, $n:expr) => {{
                 let a: [u8; $n] = b[..$n].try_into().expect("length checked");
-                (if little {
-                    <$t>::from_le_bytes(a)
-                } else {
-                    <$t>::from_be_bytes(a)
-                }) as f64
+                (if little { <$t>::from_le_bytes(a) } else { <$t>::from_be_bytes(a) }) as f64
             }};
         }
         match self {
@@ -117,14 +112,8 @@ fn header_lines<'a>(bytes: &'a [u8], end: &str, max_lines: usize) -> Result<(Vec
     let mut lines = Vec::new();
     let mut at = 0;
     while at < bytes.len() && lines.len() < max_lines {
-        let stop = bytes[at..]
-            .iter()
-            .position(|&b| b == b'\n')
-            .map_or(bytes.len(), |p| at + p);
-        let line = std::str::from_utf8(&bytes[at..stop])
-            .context("header is not text")?
-            .trim_end_matches('\r')
-            .trim();
+        let stop = bytes[at..].iter().position(|&b| b == b'\n').map_or(bytes.len(), |p| at + p);
+        let line = std::str::from_utf8(&bytes[at..stop]).context("header is not text")?.trim_end_matches('\r').trim();
         at = (stop + 1).min(bytes.len());
         let done = line.split_whitespace().next() == Some(end);
         lines.push(line);
@@ -136,12 +125,7 @@ fn header_lines<'a>(bytes: &'a [u8], end: &str, max_lines: usize) -> Result<(Vec
 }
 
 fn xyz_index(names: &[&str]) -> Result<[usize; 3]> {
-    let find = |n: &str| {
-        names
-            .iter()
-            .position(|&x| x == n)
-            .with_context(|| format!("no {n} field"))
-    };
+    let find = |n: &str| names.iter().position(|&x| x == n).with_context(|| format!("no {n} field"));
     Ok([find("x")?, find("y")?, find("z")?])
 }
 
@@ -185,40 +169,23 @@ pub fn read_ply(bytes: &[u8]) -> Result<PointCloud> {
                 })
             }
             Some("element") => {
-                let (Some(name), Some(count)) = (t.get(1), t.get(2).and_then(|c| c.parse().ok()))
-                else {
+                let (Some(name), Some(count)) = (t.get(1), t.get(2).and_then(|c| c.parse().ok())) else {
                     bail!("{}", bad());
                 };
-                elements.push(PlyElement {
-                    name: name.to_string(),
-                    count,
-                    props: Vec::new(),
-                });
+                elements.push(PlyElement { name: name.to_string(), count, props: Vec::new() });
             }
             Some("property") => {
-                let e = elements
-                    .last_mut()
-                    .with_context(|| format!("{}: property before any element", bad()))?;
+                let e = elements.last_mut().with_context(|| format!("{}: property before any element", bad()))?;
                 let p = if t.get(1) == Some(&"list") {
-                    match (
-                        t.get(2).and_then(|s| Scalar::ply(s)),
-                        t.get(3).and_then(|s| Scalar::ply(s)),
-                        t.get(4),
-                    ) {
-                        (Some(c), Some(s), Some(name)) => PlyProperty {
-                            name: name.to_string(),
-                            scalar: s,
-                            list: Some(c),
-                        },
+                    match (t.get(2).and_then(|s| Scalar::ply(s)), t.get(3).and_then(|s| Scalar::ply(s)), t.get(4)) {
+                        (Some(c), Some(s), Some(name)) => {
+                            PlyProperty { name: name.to_string(), scalar: s, list: Some(c) }
+                        }
                         _ => bail!("{}: bad list property", bad()),
                     }
                 } else {
                     match (t.get(1).and_then(|s| Scalar::ply(s)), t.get(2)) {
-                        (Some(s), Some(name)) => PlyProperty {
-                            name: name.to_string(),
-                            scalar: s,
-                            list: None,
-                        },
+                        (Some(s), Some(name)) => PlyProperty { name: name.to_string(), scalar: s, list: None },
                         _ => bail!("{}: bad property", bad()),
                     }
                 };
@@ -229,10 +196,7 @@ pub fn read_ply(bytes: &[u8]) -> Result<PointCloud> {
         }
     }
     let format = format.context("header has no format line")?;
-    let vi = elements
-        .iter()
-        .position(|e| e.name == "vertex")
-        .context("no vertex element")?;
+    let vi = elements.iter().position(|e| e.name == "vertex").context("no vertex element")?;
     let names: Vec<&str> = elements[vi].props.iter().map(|p| p.name.as_str()).collect();
     let idx = xyz_index(&names)?;
     if idx.iter().any(|&i| elements[vi].props[i].list.is_some()) {
@@ -248,12 +212,10 @@ pub fn read_ply(bytes: &[u8]) -> Result<PointCloud> {
                     let mut values = Vec::with_capacity(e.props.len());
                     for p in &e.props {
                         let mut next = || -> Result<f64> {
-                            let t = tokens.next().with_context(|| {
-                                format!("data ends in {} {row} of {}", e.name, e.count)
-                            })?;
-                            t.parse::<f64>()
-                                .ok()
-                                .with_context(|| format!("{} {row}: {t:?} is not a number", e.name))
+                            let t = tokens
+                                .next()
+                                .with_context(|| format!("data ends in {} {row} of {}", e.name, e.count))?;
+                            t.parse::<f64>().ok().with_context(|| format!("{} {row}: {t:?} is not a number", e.name))
                         };
                         let v = next()?;
                         if p.list.is_some() {
@@ -314,9 +276,7 @@ pub fn lzf_decompress(input: &[u8], out_len: usize) -> Result<Vec<u8>> {
         i += 1;
         if ctrl < 32 {
             let n = ctrl + 1;
-            let lit = input
-                .get(i..i + n)
-                .context("LZF literal runs past the input")?;
+            let lit = input.get(i..i + n).context("LZF literal runs past the input")?;
             out.extend_from_slice(lit);
             i += n;
         } else {
@@ -343,10 +303,7 @@ pub fn lzf_decompress(input: &[u8], out_len: usize) -> Result<Vec<u8>> {
         }
     }
     if out.len() != out_len {
-        bail!(
-            "LZF data decompresses to {} bytes, expected {out_len}",
-            out.len()
-        );
+        bail!("LZF data decompresses to {} bytes, expected {out_len}", out.len());
     }
     Ok(out)
 }
@@ -362,13 +319,7 @@ pub fn read_pcd(bytes: &[u8]) -> Result<PointCloud> {
             continue;
         };
         let nums = |what: &str| -> Result<Vec<usize>> {
-            rest.iter()
-                .map(|s| {
-                    s.parse()
-                        .ok()
-                        .with_context(|| format!("{what}: {s:?} is not a count"))
-                })
-                .collect()
+            rest.iter().map(|s| s.parse().ok().with_context(|| format!("{what}: {s:?} is not a count"))).collect()
         };
         match key {
             "FIELDS" => fields = rest.to_vec(),
@@ -385,11 +336,7 @@ pub fn read_pcd(bytes: &[u8]) -> Result<PointCloud> {
     if counts.is_empty() {
         counts = vec![1; fields.len()];
     }
-    if fields.is_empty()
-        || sizes.len() != fields.len()
-        || types.len() != fields.len()
-        || counts.len() != fields.len()
-    {
+    if fields.is_empty() || sizes.len() != fields.len() || types.len() != fields.len() || counts.len() != fields.len() {
         bail!("FIELDS, SIZE, TYPE and COUNT do not match");
     }
     let n = match (points, width, height) {
@@ -423,9 +370,7 @@ pub fn read_pcd(bytes: &[u8]) -> Result<PointCloud> {
             }
             let mut rows = text.lines().filter(|l| !l.trim().is_empty());
             for row in 0..n {
-                let line = rows
-                    .next()
-                    .with_context(|| format!("data ends after {row} of {n} points"))?;
+                let line = rows.next().with_context(|| format!("data ends after {row} of {n} points"))?;
                 let t: Vec<&str> = line.split_whitespace().collect();
                 let v = idx.map(|i| t.get(token_of[i]).map(|s| s.parse::<f64>()));
                 match v {
@@ -436,22 +381,15 @@ pub fn read_pcd(bytes: &[u8]) -> Result<PointCloud> {
         }
         "binary" => {
             let need = n.checked_mul(stride).context("size overflows")?;
-            let d = bytes.get(data..data + need).with_context(|| {
-                format!(
-                    "binary data holds {} bytes, {n} points need {need}",
-                    bytes.len() - data
-                )
-            })?;
+            let d = bytes
+                .get(data..data + need)
+                .with_context(|| format!("binary data holds {} bytes, {n} points need {need}", bytes.len() - data))?;
             for row in d.chunks_exact(stride) {
-                cloud.push(point(
-                    idx.map(|i| scalars[i].decode(&row[offsets[i]..], true)),
-                ));
+                cloud.push(point(idx.map(|i| scalars[i].decode(&row[offsets[i]..], true))));
             }
         }
         "binary_compressed" => {
-            let head = bytes
-                .get(data..data + 8)
-                .context("compressed data has no size words")?;
+            let head = bytes.get(data..data + 8).context("compressed data has no size words")?;
             let comp = u32::from_le_bytes(head[..4].try_into().expect("4 bytes")) as usize;
             let raw = u32::from_le_bytes(head[4..].try_into().expect("4 bytes")) as usize;
             let need = n.checked_mul(stride).context("size overflows")?;
@@ -501,21 +439,13 @@ pub fn pose(v: &[f64]) -> Result<Pose6D> {
     if v.len() != 6 || v.iter().any(|c| !c.is_finite()) {
         bail!("a pose needs six finite numbers (x y z roll pitch yaw), got {v:?}");
     }
-    Ok(Pose6D::from_euler(
-        v[0] as f32,
-        v[1] as f32,
-        v[2] as f32,
-        v[3],
-        v[4],
-        v[5],
-    ))
+    Ok(Pose6D::from_euler(v[0] as f32, v[1] as f32, v[2] as f32, v[3], v[4], v[5]))
 }
 
 /// A trajectory file: one pose `x y z roll pitch yaw` per line (blank
 /// lines and lines starting with `#` skipped).
 pub fn read_trajectory(path: &Path) -> Result<Vec<Pose6D>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     let mut poses = Vec::new();
     for (n, line) in text.lines().enumerate() {
         let line = line.trim();
@@ -523,13 +453,7 @@ pub fn read_trajectory(path: &Path) -> Result<Vec<Pose6D>> {
             continue;
         }
         let v: Result<Vec<f64>, _> = line.split_whitespace().map(str::parse).collect();
-        let v = v.ok().with_context(|| {
-            format!(
-                "{} line {}: {line:?} is not six numbers",
-                path.display(),
-                n + 1
-            )
-        })?;
+        let v = v.ok().with_context(|| format!("{} line {}: {line:?} is not six numbers", path.display(), n + 1))?;
         poses.push(pose(&v).with_context(|| format!("{} line {}", path.display(), n + 1))?);
     }
     Ok(poses)

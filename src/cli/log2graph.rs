@@ -21,16 +21,10 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let file = std::fs::File::open(&a.input)
-        .with_context(|| format!("cannot open {}", a.input.display()))?;
+    let file = std::fs::File::open(&a.input).with_context(|| format!("cannot open {}", a.input.display()))?;
     let g = log::read(std::io::BufReader::with_capacity(1 << 16, file))
         .with_context(|| format!("{}: not a valid scan log", a.input.display()))?;
     write_output(&a.output, |w| graph::write(&g, w))?;
-    eprintln!(
-        "wrote {} scans, {} points to {}",
-        g.nodes.len(),
-        g.num_points(),
-        a.output.display()
-    );
+    eprintln!("wrote {} scans, {} points to {}", g.nodes.len(), g.num_points(), a.output.display());
     Ok(())
 }

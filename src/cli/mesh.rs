@@ -53,10 +53,7 @@ pub struct CubeMesh {
 
 pub fn cubes(tree: &OccupancyTree, depth: u8, all_faces: bool) -> CubeMesh {
     let sensor = *tree.sensor();
-    let occupied: Vec<_> = tree
-        .leaves(depth)
-        .filter(|l| sensor.is_occupied(l.value))
-        .collect();
+    let occupied: Vec<_> = tree.leaves(depth).filter(|l| sensor.is_occupied(l.value)).collect();
     let (zlo, zhi) = occupied.iter().fold((f64::MAX, f64::MIN), |(lo, hi), l| {
         let (z, h) = (l.center()[2], l.size() / 2.0);
         (lo.min(z - h), hi.max(z + h))
@@ -104,25 +101,14 @@ pub fn run(a: Args) -> Result<()> {
     if m.vertices.is_empty() {
         eprintln!("note: the map has no occupied voxels; writing an empty mesh");
     }
-    u32::try_from(m.vertices.len())
-        .ok()
-        .context("too many vertices for PLY")?;
+    u32::try_from(m.vertices.len()).ok().context("too many vertices for PLY")?;
     write_output(&a.output, |w| write_ply(&m, a.ascii, w))?;
-    eprintln!(
-        "wrote {} vertices, {} faces to {}",
-        m.vertices.len(),
-        m.faces.len(),
-        a.output.display()
-    );
+    eprintln!("wrote {} vertices, {} faces to {}", m.vertices.len(), m.faces.len(), a.output.display());
     Ok(())
 }
 
 fn write_ply(m: &CubeMesh, ascii: bool, mut w: impl Write) -> std::io::Result<()> {
-    let format = if ascii {
-        "ascii"
-    } else {
-        "binary_little_endian"
-    };
+    let format = if ascii { "ascii" } else { "binary_little_endian" };
     write!(
         w,
         "ply\nformat {format} 1.0\ncomment written by octolinear\nelement vertex {}\n\
@@ -135,16 +121,7 @@ fn write_ply(m: &CubeMesh, ascii: bool, mut w: impl Write) -> std::io::Result<()
     for (p, c) in &m.vertices {
         if ascii {
             use octolinear::formats::xyz::format_f32 as f;
-            writeln!(
-                w,
-                "{} {} {} {} {} {}",
-                f(p.x),
-                f(p.y),
-                f(p.z),
-                c[0],
-                c[1],
-                c[2]
-            )?;
+            writeln!(w, "{} {} {} {} {} {}", f(p.x), f(p.y), f(p.z), c[0], c[1], c[2])?;
         } else {
             for v in p.to_array() {
                 w.write_all(&v.to_le_bytes())?;

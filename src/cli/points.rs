@@ -42,14 +42,7 @@ pub fn for_each_voxel(
     want: impl Fn(f32) -> bool,
     mut f: impl FnMut(Key, Point3, f32),
 ) {
-    fn expand(
-        tree: &OccupancyTree,
-        key: Key,
-        d: u8,
-        depth: u8,
-        v: f32,
-        f: &mut impl FnMut(Key, Point3, f32),
-    ) {
+    fn expand(tree: &OccupancyTree, key: Key, d: u8, depth: u8, v: f32, f: &mut impl FnMut(Key, Point3, f32)) {
         if d == depth {
             f(key, tree.key_space().key_to_point_at_depth(key, d), v);
             return;
@@ -72,12 +65,7 @@ pub fn run(a: Args) -> Result<()> {
     let sensor = *tree.sensor();
     let free = a.free;
     let mut points = Vec::new();
-    for_each_voxel(
-        &tree,
-        depth,
-        |v| sensor.is_occupied(v) != free,
-        |_, p, _| points.push(p),
-    );
+    for_each_voxel(&tree, depth, |v| sensor.is_occupied(v) != free, |_, p, _| points.push(p));
     if points.len() > u32::MAX as usize {
         bail!("{} points are too many for one file", points.len());
     }
@@ -104,23 +92,13 @@ fn write_pcd(points: &[Point3], mut w: impl Write) -> std::io::Result<()> {
          WIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 0 0 0 1\nPOINTS {n}\nDATA ascii\n"
     )?;
     for p in points {
-        writeln!(
-            w,
-            "{} {} {}",
-            format_g6(f64::from(p.x)),
-            format_g6(f64::from(p.y)),
-            format_g6(f64::from(p.z))
-        )?;
+        writeln!(w, "{} {} {}", format_g6(f64::from(p.x)), format_g6(f64::from(p.y)), format_g6(f64::from(p.z)))?;
     }
     Ok(())
 }
 
 fn write_ply(points: &[Point3], ascii: bool, mut w: impl Write) -> std::io::Result<()> {
-    let format = if ascii {
-        "ascii"
-    } else {
-        "binary_little_endian"
-    };
+    let format = if ascii { "ascii" } else { "binary_little_endian" };
     write!(
         w,
         "ply\nformat {format} 1.0\ncomment written by octolinear\nelement vertex {}\n\

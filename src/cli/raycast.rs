@@ -42,14 +42,7 @@ pub fn run(a: Args) -> Result<()> {
     }
     let tree = load_map(&a.map)?.tree;
     let outcome = tree
-        .cast_ray(
-            origin,
-            direction,
-            CastOptions {
-                ignore_unknown: a.ignore_unknown,
-                max_range: a.max_range,
-            },
-        )
+        .cast_ray(origin, direction, CastOptions { ignore_unknown: a.ignore_unknown, max_range: a.max_range })
         .context("cannot cast the ray")?;
     let name = match outcome {
         CastOutcome::Occupied { .. } => "occupied",
@@ -66,10 +59,7 @@ pub fn run(a: Args) -> Result<()> {
         });
         println!("{out}");
     } else {
-        println!(
-            "{name} at {} {} {} (distance {distance:.4} m)",
-            end.x, end.y, end.z
-        );
+        println!("{name} at {} {} {} (distance {distance:.4} m)", end.x, end.y, end.z);
     }
     Ok(())
 }

@@ -62,29 +62,16 @@ const MAX_SIDE: u32 = 16384;
 
 /// Blue (low) .. cyan .. green .. yellow .. red (high).
 pub fn height_colour(t: f64) -> [f64; 3] {
-    const STOPS: [[f64; 3]; 5] = [
-        [30.0, 90.0, 255.0],
-        [0.0, 210.0, 230.0],
-        [40.0, 220.0, 60.0],
-        [250.0, 230.0, 30.0],
-        [255.0, 50.0, 20.0],
-    ];
-    let t = if t.is_finite() {
-        t.clamp(0.0, 1.0)
-    } else {
-        0.5
-    } * 4.0;
+    const STOPS: [[f64; 3]; 5] =
+        [[30.0, 90.0, 255.0], [0.0, 210.0, 230.0], [40.0, 220.0, 60.0], [250.0, 230.0, 30.0], [255.0, 50.0, 20.0]];
+    let t = if t.is_finite() { t.clamp(0.0, 1.0) } else { 0.5 } * 4.0;
     let i = (t.floor() as usize).min(3);
     let f = t - i as f64;
     [0, 1, 2].map(|c| STOPS[i][c] * (1.0 - f) + STOPS[i + 1][c] * f)
 }
 
 /// Bounds of the leaves `want` selects, at `depth`.
-fn leaf_bounds(
-    tree: &OccupancyTree,
-    depth: u8,
-    want: impl Fn(f32) -> bool,
-) -> Option<([f64; 3], [f64; 3])> {
+fn leaf_bounds(tree: &OccupancyTree, depth: u8, want: impl Fn(f32) -> bool) -> Option<([f64; 3], [f64; 3])> {
     let mut b: Option<([f64; 3], [f64; 3])> = None;
     for leaf in tree.leaves(depth) {
         if !want(leaf.value) {
@@ -103,18 +90,12 @@ fn leaf_bounds(
 fn top_view(tree: &OccupancyTree, a: &Args, depth: u8) -> Result<(u32, u32, Vec<u8>)> {
     let sensor = *tree.sensor();
     let occupied = leaf_bounds(tree, depth, |v| sensor.is_occupied(v));
-    let frame = if a.free {
-        leaf_bounds(tree, depth, |_| true)
-    } else {
-        occupied
-    };
+    let frame = if a.free { leaf_bounds(tree, depth, |_| true) } else { occupied };
     let (lo, hi) = frame.context("the map has no occupied voxels to draw")?;
     let (zlo, zhi) = occupied.map_or((lo[2], hi[2]), |(l, h)| (l[2], h[2]));
     let (dx, dy) = (hi[0] - lo[0], hi[1] - lo[1]);
     let w = a.width;
-    let h = a.height.unwrap_or_else(|| {
-        ((f64::from(w) * dy / dx).round() as u32).clamp(1, (4 * w).min(MAX_SIDE))
-    });
+    let h = a.height.unwrap_or_else(|| ((f64::from(w) * dy / dx).round() as u32).clamp(1, (4 * w).min(MAX_SIDE)));
     let s = (dx / f64::from(w)).max(dy / f64::from(h));
     let (cx, cy) = ((lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0);
     let (ox, oy) = (cx - s * f64::from(w) / 2.0, cy + s * f64::from(h) / 2.0);
@@ -170,11 +151,7 @@ fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 }
 
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }
 
 fn normalised(a: [f64; 3]) -> Option<[f64; 3]> {
@@ -224,8 +201,8 @@ fn perspective(tree: &OccupancyTree, a: &Args, depth: u8) -> Result<(u32, u32, V
         bail!("--fov must be between 0 and 180 degrees, got {}", a.fov);
     }
     let sensor = *tree.sensor();
-    let (lo, hi) = leaf_bounds(tree, 16, |v| sensor.is_occupied(v))
-        .context("the map has no occupied voxels to draw")?;
+    let (lo, hi) =
+        leaf_bounds(tree, 16, |v| sensor.is_occupied(v)).context("the map has no occupied voxels to draw")?;
     let centre = [0, 1, 2].map(|i| (lo[i] + hi[i]) / 2.0);
     let diag = sub(hi, lo).iter().map(|d| d * d).sum::<f64>().sqrt();
     let target = match &a.look_at {
@@ -239,8 +216,7 @@ fn perspective(tree: &OccupancyTree, a: &Args, depth: u8) -> Result<(u32, u32, V
             [0, 1, 2].map(|i| target[i] + d[i] * diag * 1.1)
         }
     };
-    let forward =
-        normalised(sub(target, eye)).context("--camera and --look-at are the same point")?;
+    let forward = normalised(sub(target, eye)).context("--camera and --look-at are the same point")?;
     let right = normalised(cross(forward, [0.0, 0.0, 1.0]))
         .or_else(|| normalised(cross(forward, [0.0, 1.0, 0.0])))
         .expect("one of two axes is not parallel");
@@ -256,57 +232,52 @@ fn perspective(tree: &OccupancyTree, a: &Args, depth: u8) -> Result<(u32, u32, V
     let far = sub(centre, eye).iter().map(|d| d * d).sum::<f64>().sqrt() + span;
     let (zlo, zhi) = (lo[2], hi[2]);
     let mut img = vec![0u8; w as usize * h as usize * 3];
-    img.par_chunks_mut(w as usize * 3)
-        .enumerate()
-        .for_each(|(row, line)| {
-            let v = (1.0 - 2.0 * (row as f64 + 0.5) / f64::from(h)) * tan;
-            for col in 0..w as usize {
-                let u = (2.0 * (col as f64 + 0.5) / f64::from(w) - 1.0) * tan * aspect;
-                let d = [0, 1, 2].map(|i| forward[i] + u * right[i] + v * up[i]);
-                let dir = Point3::new(d[0] as f32, d[1] as f32, d[2] as f32);
-                let Some(unit) = normalised(d) else {
-                    line[col * 3..col * 3 + 3].copy_from_slice(&UNKNOWN);
-                    continue;
-                };
-                // slab test against the bounds: where the ray enters and leaves
-                let (mut t0, mut t1) = (0.0f64, f64::MAX);
-                for i in 0..3 {
-                    let inv = 1.0 / unit[i];
-                    let (a, b) = ((blo[i] - eye[i]) * inv, (bhi[i] - eye[i]) * inv);
-                    t0 = t0.max(a.min(b));
-                    t1 = t1.min(a.max(b));
-                }
-                let cast = if t0 <= t1 {
-                    let start = Point3::new(
-                        (eye[0] + unit[0] * t0) as f32,
-                        (eye[1] + unit[1] * t0) as f32,
-                        (eye[2] + unit[2] * t0) as f32,
-                    );
-                    let opts = CastOptions {
-                        ignore_unknown: true,
-                        max_range: Some(t1 - t0 + pad),
-                    };
-                    tree.cast_ray(start, dir, opts).ok()
-                } else {
-                    None
-                };
-                let px = match cast {
-                    Some(CastOutcome::Occupied { end }) => {
-                        let unit = dir.normalized();
-                        let entry = tree.ray_intersection(origin, unit, end, 0.0).unwrap_or(end);
-                        let off = (entry - end).to_array().map(f32::abs);
-                        let axis = (0..3).fold(0, |m, i| if off[i] > off[m] { i } else { m });
-                        let facing = f64::from(unit.to_array()[axis].abs());
-                        let dist = (entry - origin).norm();
-                        let shade = (0.45 + 0.55 * facing) * (1.0 - 0.35 * (dist / far).min(1.0));
-                        let t = (f64::from(end.z) - zlo) / (zhi - zlo);
-                        height_colour(t).map(|c| (c * shade).round() as u8)
-                    }
-                    _ => UNKNOWN,
-                };
-                line[col * 3..col * 3 + 3].copy_from_slice(&px);
+    img.par_chunks_mut(w as usize * 3).enumerate().for_each(|(row, line)| {
+        let v = (1.0 - 2.0 * (row as f64 + 0.5) / f64::from(h)) * tan;
+        for col in 0..w as usize {
+            let u = (2.0 * (col as f64 + 0.5) / f64::from(w) - 1.0) * tan * aspect;
+            let d = [0, 1, 2].map(|i| forward[i] + u * right[i] + v * up[i]);
+            let dir = Point3::new(d[0] as f32, d[1] as f32, d[2] as f32);
+            let Some(unit) = normalised(d) else {
+                line[col * 3..col * 3 + 3].copy_from_slice(&UNKNOWN);
+                continue;
+            };
+            // slab test against the bounds: where the ray enters and leaves
+            let (mut t0, mut t1) = (0.0f64, f64::MAX);
+            for i in 0..3 {
+                let inv = 1.0 / unit[i];
+                let (a, b) = ((blo[i] - eye[i]) * inv, (bhi[i] - eye[i]) * inv);
+                t0 = t0.max(a.min(b));
+                t1 = t1.min(a.max(b));
             }
-        });
+            let cast = if t0 <= t1 {
+                let start = Point3::new(
+                    (eye[0] + unit[0] * t0) as f32,
+                    (eye[1] + unit[1] * t0) as f32,
+                    (eye[2] + unit[2] * t0) as f32,
+                );
+                let opts = CastOptions { ignore_unknown: true, max_range: Some(t1 - t0 + pad) };
+                tree.cast_ray(start, dir, opts).ok()
+            } else {
+                None
+            };
+            let px = match cast {
+                Some(CastOutcome::Occupied { end }) => {
+                    let unit = dir.normalized();
+                    let entry = tree.ray_intersection(origin, unit, end, 0.0).unwrap_or(end);
+                    let off = (entry - end).to_array().map(f32::abs);
+                    let axis = (0..3).fold(0, |m, i| if off[i] > off[m] { i } else { m });
+                    let facing = f64::from(unit.to_array()[axis].abs());
+                    let dist = (entry - origin).norm();
+                    let shade = (0.45 + 0.55 * facing) * (1.0 - 0.35 * (dist / far).min(1.0));
+                    let t = (f64::from(end.z) - zlo) / (zhi - zlo);
+                    height_colour(t).map(|c| (c * shade).round() as u8)
+                }
+                _ => UNKNOWN,
+            };
+            line[col * 3..col * 3 + 3].copy_from_slice(&px);
+        }
+    });
     Ok((w, h, img))
 }
 
@@ -326,9 +297,7 @@ pub fn run(a: Args) -> Result<()> {
         enc.set_color(png::ColorType::Rgb);
         enc.set_depth(png::BitDepth::Eight);
         let mut writer = enc.write_header().map_err(std::io::Error::other)?;
-        writer
-            .write_image_data(&img)
-            .map_err(std::io::Error::other)?;
+        writer.write_image_data(&img).map_err(std::io::Error::other)?;
         writer.finish().map_err(std::io::Error::other)
     })?;
     eprintln!("wrote {w}x{h} image to {}", a.output.display());

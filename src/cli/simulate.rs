@@ -66,13 +66,7 @@ pub fn run(a: Args) -> Result<()> {
         cfg.dropout = d;
     }
     let g = simulate(kind, a.scans, a.seed, &cfg)?;
-    graph::write_file(&g, &a.output)
-        .with_context(|| format!("cannot write {}", a.output.display()))?;
-    eprintln!(
-        "wrote {} scans, {} points to {}",
-        g.nodes.len(),
-        g.num_points(),
-        a.output.display()
-    );
+    graph::write_file(&g, &a.output).with_context(|| format!("cannot write {}", a.output.display()))?;
+    eprintln!("wrote {} scans, {} points to {}", g.nodes.len(), g.num_points(), a.output.display());
     Ok(())
 }
