@@ -211,6 +211,19 @@ impl ScanUpdate {
         (keys(free), keys(occupied))
     }
 
+    /// The sets as sorted Morton codes, each set freed before its codes
+    /// are sorted (lower peak memory than [`Self::sorted_codes`]).
+    pub fn into_sorted_codes(self) -> (Vec<u64>, Vec<u64>) {
+        let drain = |set: KeySet| {
+            let mut codes: Vec<u64> = set.into_iter().map(|c| c.0).collect();
+            crate::morton::sort_codes(&mut codes);
+            codes
+        };
+        let ScanUpdate { free, occupied } = self;
+        let free = drain(free);
+        (free, drain(occupied))
+    }
+
     /// The sets as sorted Morton codes.
     pub fn sorted_codes(&self) -> (Vec<u64>, Vec<u64>) {
         (sorted_codes(&self.free), sorted_codes(&self.occupied))
@@ -233,7 +246,7 @@ impl OccupancyTree {
         opts: &ScanOptions,
     ) -> Result<ScanReport, ScanError> {
         let (update, report) = self.compute_update(points, origin, opts)?;
-        let (free, occupied) = update.sorted_codes();
+        let (free, occupied) = update.into_sorted_codes();
         let sensor = *self.sensor();
         self.update_batch(&free, sensor.miss, opts.inner);
         self.update_batch(&occupied, sensor.hit, opts.inner);

@@ -5,6 +5,7 @@ use super::common::{progress, save_map, MapFormat};
 use super::input;
 use anyhow::{bail, Context, Result};
 use octolinear::formats::graph;
+use octolinear::formats::{bt, write_atomically};
 use octolinear::scan::OutOfMap;
 use octolinear::sensor::{SensorModel, SensorProbabilities};
 use octolinear::{BoundsRule, InnerNodes, OccupancyTree, Pose6D, ScanGraph, ScanOptions};
@@ -163,7 +164,7 @@ pub fn run(a: Args) -> Result<()> {
             bail!("--max-range must be a finite number, got {r}");
         }
     }
-    let (g, input) = match &a.input {
+    let (mut g, input) = match &a.input {
         Some(input) => (
             graph::read_file(input).with_context(|| format!("cannot read {}", input.display()))?,
             input.display().to_string(),
@@ -182,8 +183,10 @@ pub fn run(a: Args) -> Result<()> {
     };
     let bar = progress(n as u64, "inserting scans");
     let (mut non_finite, start) = (0, Instant::now());
-    for node in &g.nodes[..n] {
+    g.nodes.truncate(n);
+    for mut node in std::mem::take(&mut g.nodes) {
         let (cloud, origin) = node.graph2tree();
+        node.scan = Default::default(); // release each scan once transformed
         let report = if a.simple {
             tree.insert_point_cloud_rays(&cloud.points, origin, InnerNodes::Update)
         } else {
@@ -198,20 +201,22 @@ pub fn run(a: Args) -> Result<()> {
     }
     let seconds = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
-    drop(g);
+    // one tree throughout (no copies): peak memory is the tree, compacted
+    // in place, plus a scan's key sets
     tree.compact();
-
     let full = statistics(&tree);
-    let mut ml = tree.clone();
-    ml.to_max_likelihood();
-    ml.prune();
-    ml.compact();
-    let ml_stats = statistics(&ml);
-    let written = match format {
-        MapFormat::Ot => &tree,
-        MapFormat::Bt => &ml,
-    };
-    save_map(written, &a.output)?;
+    if format == MapFormat::Ot {
+        save_map(&tree, &a.output)?;
+    }
+    tree.to_max_likelihood();
+    tree.prune();
+    tree.compact();
+    let ml_stats = statistics(&tree);
+    if format == MapFormat::Bt {
+        // already maximum likelihood and pruned: what writeBinary writes
+        write_atomically(&a.output, |w| bt::write_const(&tree, w))
+            .with_context(|| format!("cannot write {}", a.output.display()))?;
+    }
     if a.json {
         let out = serde_json::json!({
             "input": input, "output": a.output, "scans": n, "points": points,
