@@ -403,3 +403,84 @@ impl OccupancyTree {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scan() -> Vec<Point3> {
+        vec![
+            Point3::new(1.0, 0.0, 0.0),
+            Point3::new(f32::NAN, 0.0, 0.0),
+            Point3::new(0.0, f32::INFINITY, 0.0),
+            Point3::new(5000.0, 0.0, 0.0), // outside a 0.1 m map (±3276.8 m)
+            Point3::new(0.0, 2.0, 0.0),
+        ]
+    }
+
+    #[test]
+    fn non_finite_points_are_skipped_and_counted() {
+        let mut t = OccupancyTree::new(0.1).unwrap();
+        let r = t.insert_point_cloud(&scan(), Point3::default(), &ScanOptions::default()).unwrap();
+        assert_eq!(r.points, 5);
+        assert_eq!(r.non_finite, 2);
+        assert_eq!(r.occupied_updates, 2, "the far point has no key and is not marked");
+        assert!(t.is_occupied(t.search_point(Point3::new(1.0, 0.0, 0.0), 0).unwrap().unwrap().value));
+    }
+
+    #[test]
+    fn out_of_map_points_follow_the_chosen_policy() {
+        let origin = Point3::default();
+        let mut t = OccupancyTree::new(0.1).unwrap();
+        let opts = ScanOptions { out_of_map: OutOfMap::Error, ..Default::default() };
+        let err = t.insert_point_cloud(&scan(), origin, &opts).unwrap_err();
+        assert!(matches!(err, ScanError::PointOutOfMap { index: 3, .. }), "{err}");
+        assert!(t.is_empty(), "a refused scan changes nothing");
+
+        let opts = ScanOptions { out_of_map: OutOfMap::Skip, ..Default::default() };
+        let r = t.insert_point_cloud(&scan(), origin, &opts).unwrap();
+        assert_eq!((r.non_finite, r.out_of_map, r.occupied_updates), (2, 1, 2));
+
+        // with a max range OctoMap still frees the cut ray towards the far point
+        let mut a = OccupancyTree::new(0.1).unwrap();
+        let mut b = OccupancyTree::new(0.1).unwrap();
+        let far = [Point3::new(5000.0, 0.0, 0.0)];
+        let octomap = ScanOptions { max_range: Some(3.0), ..Default::default() };
+        let skip = ScanOptions { out_of_map: OutOfMap::Skip, ..octomap };
+        a.insert_point_cloud(&far, origin, &octomap).unwrap();
+        b.insert_point_cloud(&far, origin, &skip).unwrap();
+        assert!(a.num_leaves() > 0);
+        assert!(b.is_empty());
+    }
+
+    #[test]
+    fn a_non_finite_origin_is_refused() {
+        let mut t = OccupancyTree::new(0.1).unwrap();
+        let err = t.insert_point_cloud(&scan(), Point3::new(f32::NAN, 0.0, 0.0), &ScanOptions::default());
+        assert!(matches!(err, Err(ScanError::Origin { .. })));
+    }
+
+    #[test]
+    fn thread_count_does_not_change_the_tree() {
+        let g = crate::simulate::simulate(
+            crate::simulate::SceneKind::Indoor,
+            3,
+            5,
+            &crate::simulate::LidarConfig::indoor(),
+        )
+        .unwrap();
+        let mut bytes = Vec::new();
+        for threads in [1, 2, 8] {
+            let mut t = OccupancyTree::new(0.05).unwrap();
+            for n in &g.nodes {
+                let (cloud, origin) = n.graph2tree();
+                let opts = ScanOptions { threads: Some(threads), ..Default::default() };
+                t.insert_point_cloud(&cloud.points, origin, &opts).unwrap();
+            }
+            let mut out = Vec::new();
+            crate::formats::ot::write(&t, &mut out).unwrap();
+            bytes.push(out);
+        }
+        assert!(bytes[0] == bytes[1] && bytes[1] == bytes[2]);
+    }
+}

@@ -71,9 +71,21 @@ pub struct Args {
     /// Threads for ray casting (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
+    /// End points outside the map: `octomap` (what OctoMap does: no key, no
+    /// update; with --discretize they wrap around), `skip` (drop and count
+    /// them) or `error` (refuse the scan).
+    #[arg(long, value_enum, default_value = "octomap")]
+    out_of_map: OutOfMapArg,
     /// Print the statistics as one JSON object instead of text.
     #[arg(long)]
     json: bool,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum OutOfMapArg {
+    Octomap,
+    Skip,
+    Error,
 }
 
 /// Sensor model as graph2tree sets it: OctoMap's defaults read back from a
@@ -178,11 +190,15 @@ pub fn run(a: Args) -> Result<()> {
         discretize: a.discretize,
         inner: InnerNodes::Update,
         bbx: None,
-        out_of_map: OutOfMap::OctoMap,
+        out_of_map: match a.out_of_map {
+            OutOfMapArg::Octomap => OutOfMap::OctoMap,
+            OutOfMapArg::Skip => OutOfMap::Skip,
+            OutOfMapArg::Error => OutOfMap::Error,
+        },
         threads: a.threads,
     };
     let bar = progress(n as u64, "inserting scans");
-    let (mut non_finite, start) = (0, Instant::now());
+    let (mut non_finite, mut skipped_out_of_map, start) = (0, 0, Instant::now());
     g.nodes.truncate(n);
     for mut node in std::mem::take(&mut g.nodes) {
         let (cloud, origin) = node.graph2tree();
@@ -193,6 +209,7 @@ pub fn run(a: Args) -> Result<()> {
             tree.insert_point_cloud(&cloud.points, origin, &opts).with_context(|| format!("scan {}", node.id))?
         };
         non_finite += report.non_finite;
+        skipped_out_of_map += report.out_of_map;
         if a.compress_ml {
             tree.to_max_likelihood();
             tree.prune();
@@ -221,6 +238,7 @@ pub fn run(a: Args) -> Result<()> {
         let out = serde_json::json!({
             "input": input, "output": a.output, "scans": n, "points": points,
             "non_finite_points_skipped": non_finite,
+            "out_of_map_points_skipped": skipped_out_of_map,
             "insert_seconds": seconds,
             "points_per_second": points as f64 / seconds.max(1e-12),
             "tree": full, "max_likelihood_tree": ml_stats,
@@ -230,6 +248,9 @@ pub fn run(a: Args) -> Result<()> {
         println!("Data points in graph: {points} ({n} scans)");
         if non_finite > 0 {
             println!("Skipped {non_finite} points with NaN or infinite coordinates");
+        }
+        if skipped_out_of_map > 0 {
+            println!("Skipped {skipped_out_of_map} points outside the map");
         }
         println!("time to insert scans: {seconds} sec");
         println!("time to insert 100.000 points took: {} sec (avg)\n", seconds / (points as f64 / 100000.0));
