@@ -17,6 +17,7 @@
 //! # Ok(()) }
 //! ```
 
+pub mod ablation;
 pub mod formats;
 pub mod geometry;
 pub mod key;
