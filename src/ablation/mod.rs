@@ -195,3 +195,12 @@ pub(crate) fn child_key(key: Key, pos: usize, depth: u8) -> Key {
 
 /// Depth of a voxel.
 pub(crate) const MAX_DEPTH: u8 = TREE_DEPTH;
+
+/// The sensor model `graph2tree` (and OctoMap's `with_graph2tree_default`
+/// in the oracle) uses: OctoMap's defaults read back as probabilities with
+/// a 0.5 threshold, then set again.
+pub fn graph2tree_sensor() -> SensorModel {
+    let mut p = SensorModel::default().probabilities();
+    p.occupancy_threshold = 0.5;
+    SensorModel::from_probabilities(&p).expect("OctoMap's defaults are valid")
+}
