@@ -42,6 +42,7 @@ struct Opts {
     quick: bool,
     scenes: Vec<SceneKind>,
     resolutions: Vec<f64>,
+    outdoor_resolutions: Vec<f64>,
     indoor_scans: usize,
     outdoor_scans: usize,
     queries: usize,
@@ -58,8 +59,9 @@ impl Opts {
             quick: false,
             scenes: vec![SceneKind::Indoor, SceneKind::Outdoor],
             resolutions: vec![0.05, 0.1, 0.2],
+            outdoor_resolutions: vec![0.1, 0.2, 0.4],
             indoor_scans: 24,
-            outdoor_scans: 12,
+            outdoor_scans: 6,
             queries: 1_000_000,
             rays: 20_000,
             reps: 3,
@@ -74,13 +76,18 @@ impl Opts {
                 "--quick" => {
                     o.quick = true;
                     o.resolutions = vec![0.1, 0.2];
+                    o.outdoor_resolutions = vec![0.2, 0.4];
                     o.indoor_scans = 6;
-                    o.outdoor_scans = 4;
+                    o.outdoor_scans = 3;
                     o.queries = 200_000;
                     o.rays = 4_000;
                     o.reps = 2;
                 }
                 "--res" => o.resolutions = val("--res").split(',').map(|r| r.parse().expect("--res a,b,c")).collect(),
+                "--outdoor-res" => {
+                    o.outdoor_resolutions =
+                        val("--outdoor-res").split(',').map(|r| r.parse().expect("--outdoor-res a,b,c")).collect()
+                }
                 "--indoor-scans" => o.indoor_scans = val("--indoor-scans").parse().expect("--indoor-scans N"),
                 "--outdoor-scans" => o.outdoor_scans = val("--outdoor-scans").parse().expect("--outdoor-scans N"),
                 "--queries" => o.queries = val("--queries").parse().expect("--queries N"),
@@ -101,7 +108,7 @@ impl Opts {
                 "--no-oracle" => o.oracle = false,
                 "--help" | "-h" => {
                     println!(
-                        "cargo bench --bench ablation [-- OPTIONS]\n  --quick            small run (0.1, 0.2 m; 6/4 scans)\n  --res 0.05,0.1,0.2 resolutions\n  --scenes indoor,outdoor\n  --indoor-scans N / --outdoor-scans N\n  --queries N  --rays N  --reps N  --seed N\n  --out DIR          where ablation.md and ablation/*.svg go (default: docs/)\n  --no-oracle        skip OctoMap even when the oracle is built"
+                        "cargo bench --bench ablation [-- OPTIONS]\n  --quick            small run (indoor 0.1, 0.2 m, 6 scans; outdoor 0.2, 0.4 m, 3 scans)\n  --res 0.05,0.1,0.2 indoor resolutions\n  --outdoor-res 0.1,0.2,0.4 outdoor resolutions\n  --scenes indoor,outdoor\n  --indoor-scans N / --outdoor-scans N\n  --queries N  --rays N  --reps N  --seed N\n  --out DIR          where ablation.md and ablation/*.svg go (default: docs/)\n  --no-oracle        skip OctoMap even when the oracle is built"
                     );
                     std::process::exit(0);
                 }
@@ -109,6 +116,13 @@ impl Opts {
             }
         }
         o
+    }
+
+    fn resolutions(&self, kind: SceneKind) -> &[f64] {
+        match kind {
+            SceneKind::Indoor => &self.resolutions,
+            SceneKind::Outdoor => &self.outdoor_resolutions,
+        }
     }
 
     fn scans(&self, kind: SceneKind) -> usize {
@@ -561,7 +575,7 @@ fn main() {
         let path = tmp.join(format!("{}.scans", scene_name(scene)));
         write_scans(&path, &scans);
         let max_range = lidar(scene).max_range.min(50.0);
-        for &res in &o.resolutions {
+        for &res in o.resolutions(scene) {
             eprintln!("{} at {res} m", scene_name(scene));
             let stats = spawn(&exe, "stats", &path, res, &o, max_range);
             let layouts = LAYOUTS.iter().map(|(id, _, _)| spawn(&exe, id, &path, res, &o, max_range)).collect();
@@ -608,10 +622,16 @@ fn write_report(o: &Opts, ds: &[Dataset], elapsed: f64) {
     w(&mut md, "");
     let rows: Vec<Vec<String>> = report::machine_description().into_iter().map(|(k, v)| vec![k, v]).collect();
     w(&mut md, &table(&["what", "value"], &[false, false], &rows));
-    w(&mut md, &format!("OctoMap oracle: {}", match (o.oracle, octolinear_oracle::octomap_version()) {
-        (true, Some(v)) => format!("liboctomap {v}, linked in-process through `octolinear-oracle`"),
-        _ => "not available (OctoMap columns omitted)".into(),
-    }));
+    w(
+        &mut md,
+        &format!(
+            "OctoMap oracle: {}",
+            match (o.oracle, octolinear_oracle::octomap_version()) {
+                (true, Some(v)) => format!("liboctomap {v}, linked in-process through `octolinear-oracle`"),
+                _ => "not available (OctoMap columns omitted)".into(),
+            }
+        ),
+    );
     w(&mut md, "");
     w(&mut md, "## Setup");
     w(&mut md, "");
@@ -620,11 +640,13 @@ fn write_report(o: &Opts, ds: &[Dataset], elapsed: f64) {
         &format!(
             "* Data: the procedural simulator (`simulate::simulate`, seed {}), indoor scene with the \
              VLP-16-like `LidarConfig::indoor()` ({} scans) and outdoor scene with `LidarConfig::outdoor()` \
-             ({} scans, 100 m range), each scan put in the world frame as graph2tree does; resolutions {}.",
+             ({} scans, 100 m range), each scan put in the world frame as graph2tree does; resolutions {} indoors \
+             and {} outdoors (the outdoor maps are far larger: 100 m rays).",
             o.seed,
             o.indoor_scans,
             o.outdoor_scans,
-            o.resolutions.iter().map(|r| format!("{r} m")).collect::<Vec<_>>().join(", ")
+            o.resolutions.iter().map(|r| format!("{r} m")).collect::<Vec<_>>().join(", "),
+            o.outdoor_resolutions.iter().map(|r| format!("{r} m")).collect::<Vec<_>>().join(", ")
         ),
     );
     w(
@@ -926,7 +948,7 @@ fn write_report(o: &Opts, ds: &[Dataset], elapsed: f64) {
         }
         match &d.octomap {
             Some(om) => {
-                ins.push(format!("{} ({} per point)", secs(f(&om["insert_s"])), ns_per(f(&om["insert_s"]), pts)));
+                ins.push(format!("{} ({} ns/point)", secs(f(&om["insert_s"])), ns_per(f(&om["insert_s"]), pts)));
                 sea.push(ns_per(f(&om["search_s"]), u(&om["search_n"]) as usize));
                 it.push(ns_per(f(&om["iter_s"]), u(&om["leaves"]) as usize));
                 ray.push(format!("{:.2}", f(&om["ray_s"]) * 1e6 / f(&om["rays"]).max(1.0)));
@@ -938,7 +960,7 @@ fn write_report(o: &Opts, ds: &[Dataset], elapsed: f64) {
             }
         }
         let api = &d.stats["api"];
-        ins.push(format!("{} ({} per point)", secs(f(&api["insert_s"])), ns_per(f(&api["insert_s"]), pts)));
+        ins.push(format!("{} ({} ns/point)", secs(f(&api["insert_s"])), ns_per(f(&api["insert_s"]), pts)));
         for r in [&mut sea, &mut it, &mut ray] {
             r.push(String::new());
         }
@@ -976,8 +998,8 @@ fn write_report(o: &Opts, ds: &[Dataset], elapsed: f64) {
     // --- plots
     w(&mut md, "## Memory over the scan sequence (the paper's Fig. 14)");
     w(&mut md, "");
-    let finest = o.resolutions.iter().copied().fold(f64::MAX, f64::min);
     for &scene in &o.scenes {
+        let finest = o.resolutions(scene).iter().copied().fold(f64::MAX, f64::min);
         let Some(d) = ds.iter().find(|d| d.scene == scene && d.res == finest) else { continue };
         let mut series = Vec::new();
         for (i, (_, label, _)) in LAYOUTS.iter().enumerate() {
@@ -988,7 +1010,7 @@ fn write_report(o: &Opts, ds: &[Dataset], elapsed: f64) {
                 .as_array()
                 .map(|a| a.iter().enumerate().map(|(k, v)| ((k + 1) as f64, f(v) / 1048576.0)).collect())
                 .unwrap_or_default();
-            series.push(Series { name: format!("{label} (requested)"), points: pts, dashed: false });
+            series.push(Series { name: label.to_string(), points: pts, dashed: false });
         }
         let pts = d.layouts[layout_index("pointer")]["series_heap"]
             .as_array()
@@ -1075,9 +1097,11 @@ fn write_report(o: &Opts, ds: &[Dataset], elapsed: f64) {
     }
     w(
         &mut md,
-        "Solid lines are measured (requested bytes for the Rust layouts, glibc heap for OctoMap); dashed lines are \
-         formulas or file sizes. *arena, per key* and *split8* are left out of the plots: their curves coincide \
-         with *arena, batch* and *block8* (see the tables).",
+        "Solid lines: measured bytes — requested bytes (counting allocator) for the Rust layouts, glibc heap for \
+         OctoMap. Dashed lines: the pointer layout's glibc heap, OctoMap's `memoryUsage()`, the paper's model for \
+         the unpruned tree, the full grid and the `.bt` file size. *arena, batch + compact* is compacted once, after \
+         the last scan (the last point of its curve over scans). *arena, per key* and *split8* are left out of the \
+         plots: their curves coincide with *arena, batch* and *block8* (see the tables).",
     );
     w(&mut md, "");
     w(&mut md, "## What is not here");

@@ -7,7 +7,7 @@
 use octolinear::ablation::alloc::{self, CountingAlloc};
 use octolinear::ablation::pointer::PointerTree;
 use octolinear::ablation::variants::{ArenaBatch, ArenaCompact, ArenaPerKey, Block8, Split8};
-use octolinear::ablation::{build, graph2tree_sensor, leaf_dump, tree_leaf_dump, LeafRecord, Layout, ScanKeys};
+use octolinear::ablation::{build, graph2tree_sensor, leaf_dump, tree_leaf_dump, Layout, LeafRecord, ScanKeys};
 use octolinear::simulate::{simulate, LidarConfig, SceneKind, SplitMix64};
 use octolinear::{InnerNodes, Key, OccupancyTree, Point3, ScanOptions, SensorModel};
 

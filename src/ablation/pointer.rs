@@ -69,23 +69,23 @@ impl PointerTree {
     }
 }
 
-/// `updateNodeRecurs`: descend (creating or expanding), update the voxel,
-/// then prune or take the children's maximum on the way back up.
-fn update_recurs(
-    node: &mut Node,
-    node_just_created: bool,
-    depth: u8,
+/// What one update carries down the recursion.
+struct Update<'a> {
     key: Key,
     delta: f32,
-    sensor: &SensorModel,
+    sensor: &'a SensorModel,
     prune: bool,
-    size: &mut usize,
-) {
+    size: &'a mut usize,
+}
+
+/// `updateNodeRecurs`: descend (creating or expanding), update the voxel,
+/// then prune or take the children's maximum on the way back up.
+fn update_recurs(node: &mut Node, node_just_created: bool, depth: u8, u: &mut Update<'_>) {
     if depth == MAX_DEPTH {
-        node.value = sensor.apply(node.value, delta);
+        node.value = u.sensor.apply(node.value, u.delta);
         return;
     }
-    let pos = key.child_index(depth);
+    let pos = u.key.child_index(depth);
     let exists = node.children.as_ref().is_some_and(|c| c[pos].is_some());
     let mut created = false;
     if !exists {
@@ -93,21 +93,21 @@ fn update_recurs(
             // a pruned leaf: expand into eight children holding its value
             let v = node.value;
             node.children = Some(Box::new(std::array::from_fn(|_| Some(Node::leaf(v)))));
-            *size += 8;
+            *u.size += 8;
         } else {
-            let ch = node.children.get_or_insert_with(|| Box::new(Default::default()));
+            let ch = node.children.get_or_insert_with(Box::default);
             ch[pos] = Some(Node::leaf(0.0));
-            *size += 1;
+            *u.size += 1;
             created = true;
         }
     }
     let child = node.children.as_mut().and_then(|c| c[pos].as_mut()).expect("child exists");
-    update_recurs(child, created, depth + 1, key, delta, sensor, prune, size);
+    update_recurs(child, created, depth + 1, u);
 
-    if prune && prunable(node) {
+    if u.prune && prunable(node) {
         let ch = node.children.take().expect("prunable node has children");
         node.value = ch[0].as_ref().expect("all children").value;
-        *size -= 8;
+        *u.size -= 8;
     } else {
         node.value = max_child(node);
     }
@@ -152,7 +152,8 @@ impl Layout for PointerTree {
             self.size += 1;
         }
         let root = self.root.get_or_insert_with(|| Node::leaf(0.0));
-        update_recurs(root, created, 0, key, delta, sensor, self.prune, &mut self.size);
+        let mut u = Update { key, delta, sensor, prune: self.prune, size: &mut self.size };
+        update_recurs(root, created, 0, &mut u);
     }
 
     fn search(&self, key: Key) -> Option<f32> {

@@ -88,7 +88,7 @@ const PALETTE: [&str; 10] =
 
 /// Readable tick positions over `[lo, hi]`.
 fn linear_ticks(lo: f64, hi: f64) -> Vec<f64> {
-    if !(hi > lo) {
+    if hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater) {
         return vec![lo];
     }
     let raw = (hi - lo) / 6.0;
@@ -124,7 +124,7 @@ fn tick_label(v: f64) -> String {
     let a = v.abs();
     if a == 0.0 {
         "0".into()
-    } else if a >= 1e4 || a < 1e-2 {
+    } else if !(1e-2..1e4).contains(&a) {
         let e = a.log10().floor() as i32;
         let m = v / 10f64.powi(e);
         if (m - m.round()).abs() < 1e-9 {
@@ -145,14 +145,15 @@ fn esc(s: &str) -> String {
 }
 
 impl Chart {
-    /// The chart as an SVG document (800 × 480).
+    /// The chart as an SVG document (880 × 480).
     pub fn to_svg(&self) -> String {
-        let (w, h) = (800.0, 480.0);
-        let (left, right, top, bottom) = (80.0, 210.0, 40.0, 60.0);
+        let (w, h) = (880.0, 480.0);
+        let (left, right, top, bottom) = (80.0, 250.0, 40.0, 60.0);
         let (pw, ph) = (w - left - right, h - top - bottom);
-        let pts = self.series.iter().flat_map(|s| s.points.iter()).filter(|p| {
-            p.0.is_finite() && p.1.is_finite() && (!self.log_x || p.0 > 0.0) && (!self.log_y || p.1 > 0.0)
-        });
+        let pts =
+            self.series.iter().flat_map(|s| s.points.iter()).filter(|p| {
+                p.0.is_finite() && p.1.is_finite() && (!self.log_x || p.0 > 0.0) && (!self.log_y || p.1 > 0.0)
+            });
         let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
         for p in pts {
             x0 = x0.min(p.0);
@@ -211,13 +212,23 @@ impl Chart {
         for t in &xt {
             let x = sx(*t);
             let _ = writeln!(s, r##"<line x1="{x:.1}" y1="{top}" x2="{x:.1}" y2="{}" stroke="#e5e5e5"/>"##, top + ph);
-            let _ = writeln!(s, r#"<text x="{x:.1}" y="{}" text-anchor="middle">{}</text>"#, top + ph + 16.0, tick_label(*t));
+            let _ = writeln!(
+                s,
+                r#"<text x="{x:.1}" y="{}" text-anchor="middle">{}</text>"#,
+                top + ph + 16.0,
+                tick_label(*t)
+            );
         }
         for t in &yt {
             let y = sy(*t);
             let _ = writeln!(s, r##"<line x1="{left}" y1="{y:.1}" x2="{}" y2="{y:.1}" stroke="#e5e5e5"/>"##, left + pw);
-            let _ =
-                writeln!(s, r#"<text x="{}" y="{:.1}" text-anchor="end">{}</text>"#, left - 6.0, y + 4.0, tick_label(*t));
+            let _ = writeln!(
+                s,
+                r#"<text x="{}" y="{:.1}" text-anchor="end">{}</text>"#,
+                left - 6.0,
+                y + 4.0,
+                tick_label(*t)
+            );
         }
         let _ = writeln!(s, r#"<rect x="{left}" y="{top}" width="{pw}" height="{ph}" fill="none" stroke="black"/>"#);
         let _ = writeln!(
