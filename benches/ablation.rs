@@ -557,6 +557,7 @@ fn main() {
     assert!(alloc::is_counting(), "the counting allocator is not installed");
     let exe = std::env::current_exe().expect("own path");
     let started = Instant::now();
+    let load_start = loadavg();
     let tmp = std::env::temp_dir().join(format!("octolinear-ablation-{}", std::process::id()));
     std::fs::create_dir_all(&tmp).unwrap();
     let mut datasets = Vec::new();
@@ -585,7 +586,14 @@ fn main() {
     }
     let _ = std::fs::remove_dir_all(&tmp);
     let elapsed = started.elapsed().as_secs_f64();
-    write_report(&o, &datasets, elapsed);
+    write_report(&o, &datasets, elapsed, [load_start, loadavg()]);
+}
+
+/// The 1/5/15-minute load averages (`/proc/loadavg`).
+fn loadavg() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" / "))
+        .unwrap_or_else(|_| "unknown".into())
 }
 
 // ----- the report ------------------------------------------------------------------
@@ -598,7 +606,7 @@ fn layout_index(id: &str) -> usize {
     LAYOUTS.iter().position(|l| l.0 == id).unwrap()
 }
 
-fn write_report(o: &Opts, ds: &[Dataset], elapsed: f64) {
+fn write_report(o: &Opts, ds: &[Dataset], elapsed: f64, load: [String; 2]) {
     let plots = o.out.join("ablation");
     std::fs::create_dir_all(&plots).unwrap();
     let mut md = String::new();
@@ -620,7 +628,9 @@ fn write_report(o: &Opts, ds: &[Dataset], elapsed: f64) {
     w(&mut md, "");
     w(&mut md, "## Machine");
     w(&mut md, "");
-    let rows: Vec<Vec<String>> = report::machine_description().into_iter().map(|(k, v)| vec![k, v]).collect();
+    let mut rows: Vec<Vec<String>> = report::machine_description().into_iter().map(|(k, v)| vec![k, v]).collect();
+    rows.push(vec!["load average 1/5/15 min, run start".into(), load[0].clone()]);
+    rows.push(vec!["load average 1/5/15 min, run end".into(), load[1].clone()]);
     w(&mut md, &table(&["what", "value"], &[false, false], &rows));
     w(
         &mut md,
@@ -917,7 +927,9 @@ fn write_report(o: &Opts, ds: &[Dataset], elapsed: f64) {
              last columns). Search: {} `search(key)` queries (half occupied voxels, half uniform in the \
              map's box), best of {}. Iteration: all leaves, best of {}. Rays: {} casts through the trait \
              (`ablation::cast_ray`, unknown cells ignored, max range min(sensor range, 50 m)); OctoMap runs its own \
-             `castRay` with the same arguments. Times in ns per item.",
+             `castRay` with the same arguments. Times in ns per item; *arena, batch + compact* includes the \
+             compaction. The machine is shared (see the load averages above): with a load above its core count, \
+             timings carry tens of percent of noise, and the memory figures none.",
             d_threads(ds),
             count(o.queries as u64),
             o.reps,
