@@ -17,6 +17,7 @@
 //! # Ok(()) }
 //! ```
 
+pub mod ablation;
 pub mod collection;
 pub mod formats;
 pub mod geometry;
