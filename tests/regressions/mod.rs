@@ -1,7 +1,7 @@
 //! Kept reproducers of differences between octolinear and OctoMap found by
 //! `tests/differential.rs`. When a random case differs, the panic message
 //! (and a file in `target/tmp/`) holds a shrunk `#[test] fn regression_...`
-//! that calls [`check_regression`]: paste it below. Values are written as
+//! that calls [`check_regression`]: paste it below (and `cargo fmt`). Values are written as
 //! bit patterns (`p(x, y, z)` points, `f(..)` floats, `d(..)` doubles) so the
 //! case is exact. Mark a case `#[ignore = "known bug: ..."]` until it is fixed.
 #![allow(unused_imports, clippy::unreadable_literal)]
@@ -12,6 +12,12 @@ use super::{check_regression, d, f, p, Config, Op, Sensor};
 // DDA ties between x and y at every step) at resolution 0.5.
 #[test]
 fn regression_example_diagonal_tie() {
+    if !octolinear_oracle::require_or_skip("regression_example_diagonal_tie") {
+        return;
+    }
+    if !octolinear_oracle::require_or_skip("regression_example_diagonal_tie") {
+        return;
+    }
     let cfg = Config {
         res: d(0x3fe0000000000000), /* 0.5 */
         sensor: None,
