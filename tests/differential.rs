@@ -2,13 +2,15 @@
 //! `liboctomap` through `octolinear-oracle`).
 //!
 //! Every test builds the same tree in both libraries from seeded random
-//! operations and compares, after each mutating step, the `.ot` bytes, the
-//! `writeBinaryConst` bytes and (when enabled) the change-detection sets;
-//! `writeBinary`, `computeRayKeys`, `castRay` and `search` are compared as
-//! operations of their own. A differing case is shrunk (operations, then the
-//! points of each scan, dropped while it still differs the same way) and the
-//! panic message carries a test function that can be pasted into
+//! operations and compares, after each mutating step (single-voxel updates:
+//! every fourth), the `.ot` bytes, the `writeBinaryConst` bytes and (when
+//! enabled) the change-detection sets; `writeBinary`, `computeRayKeys`,
+//! `castRay`, `search` and reading `.ot`/`.bt` back are compared as operations
+//! of their own. A differing case is shrunk (points, then operations dropped,
+//! then options and configuration simplified, while it still differs the same
+//! way) and the panic message carries a test function that can be pasted into
 //! `tests/regressions/mod.rs` (it is also written to `CARGO_TARGET_TMPDIR`).
+//! `slowest_random_cases` (ignored) reports where the run time goes.
 //!
 //! Knobs: `OCTOLINEAR_DIFF_SEED` (base seed, default fixed),
 //! `OCTOLINEAR_DIFF_SCALE` (multiplies the number of random cases) and
