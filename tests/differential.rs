@@ -138,11 +138,7 @@ impl Op {
     fn mutates(&self) -> bool {
         !matches!(
             self,
-            Op::RayKeys { .. }
-                | Op::CastRay { .. }
-                | Op::Search { .. }
-                | Op::SearchPoint { .. }
-                | Op::RoundTrip
+            Op::RayKeys { .. } | Op::CastRay { .. } | Op::Search { .. } | Op::SearchPoint { .. } | Op::RoundTrip
         )
     }
 
@@ -157,14 +153,7 @@ impl Op {
     fn simplifications(&self) -> Vec<Op> {
         let mut out = Vec::new();
         match self {
-            Op::Scan {
-                origin,
-                points,
-                max_range,
-                discretize,
-                lazy,
-                threads,
-            } => {
+            Op::Scan { origin, points, max_range, discretize, lazy, threads } => {
                 let scan = |max_range, discretize, lazy, threads| Op::Scan {
                     origin: *origin,
                     points: points.clone(),
@@ -186,51 +175,19 @@ impl Op {
                     out.push(scan(*max_range, *discretize, *lazy, None));
                 }
             }
-            Op::Rays {
-                origin,
-                points,
-                lazy: true,
-            } => out.push(Op::Rays {
-                origin: *origin,
-                points: points.clone(),
-                lazy: false,
-            }),
-            Op::UpdateKey {
-                key,
-                occupied,
-                lazy: true,
-            } => out.push(Op::UpdateKey {
-                key: *key,
-                occupied: *occupied,
-                lazy: false,
-            }),
-            Op::UpdatePoint {
-                p,
-                occupied,
-                lazy: true,
-            } => out.push(Op::UpdatePoint {
-                p: *p,
-                occupied: *occupied,
-                lazy: false,
-            }),
-            Op::UpdateDelta {
-                key,
-                delta,
-                lazy: true,
-            } => out.push(Op::UpdateDelta {
-                key: *key,
-                delta: *delta,
-                lazy: false,
-            }),
-            Op::SetValue {
-                key,
-                value,
-                lazy: true,
-            } => out.push(Op::SetValue {
-                key: *key,
-                value: *value,
-                lazy: false,
-            }),
+            Op::Rays { origin, points, lazy: true } => {
+                out.push(Op::Rays { origin: *origin, points: points.clone(), lazy: false })
+            }
+            Op::UpdateKey { key, occupied, lazy: true } => {
+                out.push(Op::UpdateKey { key: *key, occupied: *occupied, lazy: false })
+            }
+            Op::UpdatePoint { p, occupied, lazy: true } => {
+                out.push(Op::UpdatePoint { p: *p, occupied: *occupied, lazy: false })
+            }
+            Op::UpdateDelta { key, delta, lazy: true } => {
+                out.push(Op::UpdateDelta { key: *key, delta: *delta, lazy: false })
+            }
+            Op::SetValue { key, value, lazy: true } => out.push(Op::SetValue { key: *key, value: *value, lazy: false }),
             _ => {}
         }
         out
@@ -267,12 +224,7 @@ fn pt(a: [f32; 3]) -> Point3 {
 }
 
 fn code_p(a: [f32; 3]) -> String {
-    format!(
-        "p(0x{:08x}, 0x{:08x}, 0x{:08x})",
-        a[0].to_bits(),
-        a[1].to_bits(),
-        a[2].to_bits()
-    )
+    format!("p(0x{:08x}, 0x{:08x}, 0x{:08x})", a[0].to_bits(), a[1].to_bits(), a[2].to_bits())
 }
 
 fn code_d(v: f64) -> String {
@@ -296,14 +248,7 @@ impl Op {
     fn code(&self) -> String {
         let mut s = String::new();
         match self {
-            Op::Scan {
-                origin,
-                points,
-                max_range,
-                discretize,
-                lazy,
-                threads,
-            } => {
+            Op::Scan { origin, points, max_range, discretize, lazy, threads } => {
                 let _ = write!(
                     s,
                     "Op::Scan {{\n            origin: {}, // {origin:?}\n            points: ",
@@ -316,11 +261,7 @@ impl Op {
                     code_d(*max_range)
                 );
             }
-            Op::Rays {
-                origin,
-                points,
-                lazy,
-            } => {
+            Op::Rays { origin, points, lazy } => {
                 let _ = write!(
                     s,
                     "Op::Rays {{\n            origin: {}, // {origin:?}\n            points: ",
@@ -330,15 +271,8 @@ impl Op {
                 let _ = write!(s, ",\n            lazy: {lazy},\n        }}");
             }
             Op::UpdateInner => s.push_str("Op::UpdateInner"),
-            Op::UpdateKey {
-                key,
-                occupied,
-                lazy,
-            } => {
-                let _ = write!(
-                    s,
-                    "Op::UpdateKey {{ key: {key:?}, occupied: {occupied}, lazy: {lazy} }}"
-                );
+            Op::UpdateKey { key, occupied, lazy } => {
+                let _ = write!(s, "Op::UpdateKey {{ key: {key:?}, occupied: {occupied}, lazy: {lazy} }}");
             }
             Op::UpdatePoint { p, occupied, lazy } => {
                 let _ = write!(
@@ -348,18 +282,10 @@ impl Op {
                 );
             }
             Op::UpdateDelta { key, delta, lazy } => {
-                let _ = write!(
-                    s,
-                    "Op::UpdateDelta {{ key: {key:?}, delta: {}, lazy: {lazy} }}",
-                    code_f(*delta)
-                );
+                let _ = write!(s, "Op::UpdateDelta {{ key: {key:?}, delta: {}, lazy: {lazy} }}", code_f(*delta));
             }
             Op::SetValue { key, value, lazy } => {
-                let _ = write!(
-                    s,
-                    "Op::SetValue {{ key: {key:?}, value: {}, lazy: {lazy} }}",
-                    code_f(*value)
-                );
+                let _ = write!(s, "Op::SetValue {{ key: {key:?}, value: {}, lazy: {lazy} }}", code_f(*value));
             }
             Op::Prune => s.push_str("Op::Prune"),
             Op::Expand => s.push_str("Op::Expand"),
@@ -374,12 +300,7 @@ impl Op {
                     code_p(*end)
                 );
             }
-            Op::CastRay {
-                origin,
-                dir,
-                ignore_unknown,
-                max_range,
-            } => {
+            Op::CastRay { origin, dir, ignore_unknown, max_range } => {
                 let _ = write!(
                     s,
                     "Op::CastRay {{ origin: {} /* {origin:?} */, dir: {} /* {dir:?} */, ignore_unknown: {ignore_unknown}, max_range: {} }}",
@@ -392,11 +313,7 @@ impl Op {
                 let _ = write!(s, "Op::Search {{ key: {key:?}, depth: {depth} }}");
             }
             Op::SearchPoint { p, depth } => {
-                let _ = write!(
-                    s,
-                    "Op::SearchPoint {{ p: {} /* {p:?} */, depth: {depth} }}",
-                    code_p(*p)
-                );
+                let _ = write!(s, "Op::SearchPoint {{ p: {} /* {p:?} */, depth: {depth} }}", code_p(*p));
             }
             Op::RoundTrip => s.push_str("Op::RoundTrip"),
         }
@@ -409,10 +326,7 @@ fn reproducer(name: &str, cfg: &Config, ops: &[Op], failure: &Failure) -> String
     let _ = writeln!(s, "// {}: {}", failure.kind, first_line(&failure.what));
     let _ = writeln!(s, "#[test]");
     let _ = writeln!(s, "fn {name}() {{");
-    let _ = writeln!(
-        s,
-        "    if !octolinear_oracle::require_or_skip(\"{name}\") {{\n        return;\n    }}"
-    );
+    let _ = writeln!(s, "    if !octolinear_oracle::require_or_skip(\"{name}\") {{\n        return;\n    }}");
     let _ = writeln!(s, "    let cfg = Config {{");
     let _ = writeln!(s, "        res: {},", code_d(cfg.res));
     match cfg.sensor {
@@ -511,10 +425,7 @@ fn quiet_octomap() {
 fn new_pair(cfg: &Config) -> Pair {
     quiet_octomap();
     let (ours, mut theirs) = match cfg.sensor {
-        None => (
-            OccupancyTree::new(cfg.res).unwrap(),
-            OracleTree::new(cfg.res).unwrap(),
-        ),
+        None => (OccupancyTree::new(cfg.res).unwrap(), OracleTree::new(cfg.res).unwrap()),
         Some(s) => {
             let model = SensorModel::from_probabilities(&SensorProbabilities {
                 hit: s.hit,
@@ -526,12 +437,7 @@ fn new_pair(cfg: &Config) -> Pair {
             .expect("valid sensor model");
             let mut t = OracleTree::with_sensor(
                 cfg.res,
-                &SensorParams {
-                    prob_hit: s.hit,
-                    prob_miss: s.miss,
-                    clamp_min: s.clamp_min,
-                    clamp_max: s.clamp_max,
-                },
+                &SensorParams { prob_hit: s.hit, prob_miss: s.miss, clamp_min: s.clamp_min, clamp_max: s.clamp_max },
             )
             .unwrap();
             t.set_occupancy_thres(s.threshold);
@@ -543,35 +449,21 @@ fn new_pair(cfg: &Config) -> Pair {
         ours.set_change_detection(true);
         theirs.enable_change_detection(true);
     }
-    Pair {
-        ours,
-        theirs,
-        change_detection: cfg.change_detection,
-    }
+    Pair { ours, theirs, change_detection: cfg.change_detection }
 }
 
 /// First position where two byte strings differ.
 fn first_diff(a: &[u8], b: &[u8]) -> usize {
-    a.iter()
-        .zip(b)
-        .position(|(x, y)| x != y)
-        .unwrap_or(a.len().min(b.len()))
+    a.iter().zip(b).position(|(x, y)| x != y).unwrap_or(a.len().min(b.len()))
 }
 
 /// Describes how the two trees differ: the first differing node of a full
 /// pre-order dump (key, depth, leaf flag, log-odds).
 fn node_diff(pair: &Pair) -> String {
-    let ours: Vec<([u16; 3], u8, bool, u32)> = pair
-        .ours
-        .nodes(0)
-        .map(|n| (n.key.0, n.depth, n.is_leaf, n.value.to_bits()))
-        .collect();
-    let theirs: Vec<([u16; 3], u8, bool, u32)> = pair
-        .theirs
-        .nodes(0)
-        .iter()
-        .map(|n| (n.key, n.depth, n.is_leaf, n.logodds.to_bits()))
-        .collect();
+    let ours: Vec<([u16; 3], u8, bool, u32)> =
+        pair.ours.nodes(0).map(|n| (n.key.0, n.depth, n.is_leaf, n.value.to_bits())).collect();
+    let theirs: Vec<([u16; 3], u8, bool, u32)> =
+        pair.theirs.nodes(0).iter().map(|n| (n.key, n.depth, n.is_leaf, n.logodds.to_bits())).collect();
     let show = |n: Option<&([u16; 3], u8, bool, u32)>| match n {
         None => "(none)".to_string(),
         Some(&(k, dep, leaf, v)) => format!(
@@ -628,12 +520,7 @@ fn compare_state(pair: &Pair) -> Result<(), (&'static str, String)> {
         ));
     }
     if pair.change_detection {
-        let a: Vec<([u16; 3], bool)> = pair
-            .ours
-            .changed_keys()
-            .into_iter()
-            .map(|(k, b)| (k.0, b))
-            .collect();
+        let a: Vec<([u16; 3], bool)> = pair.ours.changed_keys().into_iter().map(|(k, b)| (k.0, b)).collect();
         let b = pair.theirs.changed_keys();
         if a != b {
             let i = a.iter().zip(&b).position(|(x, y)| x != y);
@@ -664,9 +551,7 @@ fn expanded_leaves(t: &OccupancyTree) -> u64 {
 const NAN3: [f32; 3] = [f32::NAN; 3];
 
 fn same_point(a: [f32; 3], b: [f32; 3]) -> bool {
-    a.iter()
-        .zip(&b)
-        .all(|(x, y)| x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()))
+    a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()))
 }
 
 /// Applies one op to both trees and compares. `Ok(false)`: the oracle
@@ -680,17 +565,8 @@ fn apply(pair: &mut Pair, op: &Op) -> Result<bool, (&'static str, String)> {
         }
     };
     match op {
-        Op::Scan {
-            origin,
-            points,
-            max_range,
-            discretize,
-            lazy,
-            threads,
-        } => {
-            let r = pair
-                .theirs
-                .insert_point_cloud(points, *origin, *max_range, *lazy, *discretize);
+        Op::Scan { origin, points, max_range, discretize, lazy, threads } => {
+            let r = pair.theirs.insert_point_cloud(points, *origin, *max_range, *lazy, *discretize);
             if !refused(r)? {
                 return Ok(false);
             }
@@ -706,45 +582,27 @@ fn apply(pair: &mut Pair, op: &Op) -> Result<bool, (&'static str, String)> {
                 .insert_point_cloud(&pts, pt(*origin), &opts)
                 .map_err(|e| ("error", format!("octolinear refused the scan: {e}")))?;
         }
-        Op::Rays {
-            origin,
-            points,
-            lazy,
-        } => {
-            let r = pair
-                .theirs
-                .insert_point_cloud_rays(points, *origin, -1.0, *lazy);
+        Op::Rays { origin, points, lazy } => {
+            let r = pair.theirs.insert_point_cloud_rays(points, *origin, -1.0, *lazy);
             if !refused(r)? {
                 return Ok(false);
             }
             let pts: Vec<Point3> = points.iter().map(|&q| pt(q)).collect();
-            pair.ours
-                .insert_point_cloud_rays(&pts, pt(*origin), inner(*lazy));
+            pair.ours.insert_point_cloud_rays(&pts, pt(*origin), inner(*lazy));
         }
         Op::UpdateInner => {
             pair.ours.update_inner_occupancy();
             pair.theirs.update_inner_occupancy();
         }
-        Op::UpdateKey {
-            key,
-            occupied,
-            lazy,
-        } => {
-            pair.ours
-                .update_occupancy(Key(*key), *occupied, inner(*lazy));
+        Op::UpdateKey { key, occupied, lazy } => {
+            pair.ours.update_occupancy(Key(*key), *occupied, inner(*lazy));
             pair.theirs.update_node_key(*key, *occupied, *lazy);
         }
         Op::UpdatePoint { p, occupied, lazy } => {
-            let a = pair
-                .ours
-                .update_point(pt(*p), *occupied, inner(*lazy))
-                .is_ok();
+            let a = pair.ours.update_point(pt(*p), *occupied, inner(*lazy)).is_ok();
             let b = pair.theirs.update_node(*p, *occupied, *lazy);
             if a != b {
-                return Err((
-                    "update_point",
-                    format!("updateNode(point) accepted: octolinear {a} OctoMap {b}"),
-                ));
+                return Err(("update_point", format!("updateNode(point) accepted: octolinear {a} OctoMap {b}")));
             }
         }
         Op::UpdateDelta { key, delta, lazy } => {
@@ -818,15 +676,8 @@ fn apply(pair: &mut Pair, op: &Op) -> Result<bool, (&'static str, String)> {
                 ));
             }
         }
-        Op::CastRay {
-            origin,
-            dir,
-            ignore_unknown,
-            max_range,
-        } => {
-            let b = pair
-                .theirs
-                .cast_ray(*origin, *dir, *ignore_unknown, *max_range);
+        Op::CastRay { origin, dir, ignore_unknown, max_range } => {
+            let b = pair.theirs.cast_ray(*origin, *dir, *ignore_unknown, *max_range);
             let opts = CastOptions {
                 ignore_unknown: *ignore_unknown,
                 // both spellings of "no limit" (OctoMap: any value <= 0)
@@ -839,10 +690,7 @@ fn apply(pair: &mut Pair, op: &Op) -> Result<bool, (&'static str, String)> {
             if a.0 != b.0 || !same_point(a.1, b.1) {
                 return Err((
                     "cast_ray",
-                    format!(
-                        "castRay differs: octolinear ({}, {:?}) OctoMap ({}, {:?})",
-                        a.0, a.1, b.0, b.1
-                    ),
+                    format!("castRay differs: octolinear ({}, {:?}) OctoMap ({}, {:?})", a.0, a.1, b.0, b.1),
                 ));
             }
         }
@@ -860,22 +708,19 @@ fn apply(pair: &mut Pair, op: &Op) -> Result<bool, (&'static str, String)> {
             let ot_ours = ot_bytes(&pair.ours);
             let back = ot::read(&ot_ours[..])
                 .map_err(|e| ("roundtrip", format!("octolinear cannot read its .ot: {e}")))?
-                .into_occupancy();
+                .into_occupancy()
+                .ok_or(("roundtrip", "octolinear read its .ot back as a counting tree".to_string()))?;
             let again = ot_bytes(&back);
             if again != ot_ours {
                 return Err((
                     "roundtrip",
-                    format!(
-                        ".ot read+write changes the bytes (first at {})",
-                        first_diff(&again, &ot_ours)
-                    ),
+                    format!(".ot read+write changes the bytes (first at {})", first_diff(&again, &ot_ours)),
                 ));
             }
             let bt = bt_const_bytes(&pair.ours);
-            let ours_bt = bt::read(&bt[..])
-                .map_err(|e| ("roundtrip", format!("octolinear cannot read its .bt: {e}")))?;
-            let theirs_bt = OracleTree::read_bt(&bt)
-                .ok_or(("roundtrip", "OctoMap cannot read the .bt".to_string()))?;
+            let ours_bt =
+                bt::read(&bt[..]).map_err(|e| ("roundtrip", format!("octolinear cannot read its .bt: {e}")))?;
+            let theirs_bt = OracleTree::read_bt(&bt).ok_or(("roundtrip", "OctoMap cannot read the .bt".to_string()))?;
             let a = ot_bytes(&ours_bt);
             let b = theirs_bt.write_ot().unwrap();
             if a != b {
@@ -900,13 +745,7 @@ fn compare_search(
     b: Option<octolinear_oracle::SearchResult>,
 ) -> Result<(), (&'static str, String)> {
     let sensor = pair.ours.sensor();
-    let a = a.map(|f| {
-        (
-            f.value.to_bits(),
-            sensor.is_occupied(f.value),
-            sensor.is_at_threshold(f.value),
-        )
-    });
+    let a = a.map(|f| (f.value.to_bits(), sensor.is_occupied(f.value), sensor.is_at_threshold(f.value)));
     let b = b.map(|r| (r.logodds.to_bits(), r.occupied, r.at_threshold));
     if a != b {
         return Err((
@@ -926,24 +765,18 @@ fn run_case(cfg: &Config, ops: &[Op]) -> Result<usize, Failure> {
     let mut skipped = 0;
     for (step, op) in ops.iter().enumerate() {
         // single-voxel updates are compared in batches of four
-        let batched = matches!(
-            op,
-            Op::UpdateKey { .. }
-                | Op::UpdatePoint { .. }
-                | Op::UpdateDelta { .. }
-                | Op::SetValue { .. }
-        ) && step % 4 != 3
-            && step + 1 != ops.len();
-        let r = catch_unwind(AssertUnwindSafe(
-            || -> Result<(), (&'static str, String)> {
-                let applied = apply(&mut pair, op)?;
-                skipped += usize::from(!applied);
-                if applied && op.mutates() && !batched {
-                    compare_state(&pair)?;
-                }
-                Ok(())
-            },
-        ));
+        let batched =
+            matches!(op, Op::UpdateKey { .. } | Op::UpdatePoint { .. } | Op::UpdateDelta { .. } | Op::SetValue { .. })
+                && step % 4 != 3
+                && step + 1 != ops.len();
+        let r = catch_unwind(AssertUnwindSafe(|| -> Result<(), (&'static str, String)> {
+            let applied = apply(&mut pair, op)?;
+            skipped += usize::from(!applied);
+            if applied && op.mutates() && !batched {
+                compare_state(&pair)?;
+            }
+            Ok(())
+        }));
         let r = match r {
             Ok(r) => r,
             Err(e) => {
@@ -953,11 +786,7 @@ fn run_case(cfg: &Config, ops: &[Op]) -> Result<usize, Failure> {
                     .or_else(|| e.downcast_ref::<&str>().map(|s| s.to_string()))
                     .unwrap_or_default();
                 // the pair may be inconsistent now: stop here
-                return Err(Failure {
-                    step,
-                    kind: "panic",
-                    what: format!("panic: {msg}"),
-                });
+                return Err(Failure { step, kind: "panic", what: format!("panic: {msg}") });
             }
         };
         if let Err((kind, what)) = r {
@@ -975,12 +804,7 @@ type Runner = dyn Fn(&Config, &[Op]) -> Result<usize, Failure>;
 /// chunks), then tries simpler options (no max range, discretize, lazy or
 /// threads) and a simpler configuration (no change detection, default
 /// sensor); repeats until nothing changes (at most 4000 runs).
-fn shrink(
-    cfg: &Config,
-    mut ops: Vec<Op>,
-    mut fail: Failure,
-    run: &Runner,
-) -> (Config, Vec<Op>, Failure, usize) {
+fn shrink(cfg: &Config, mut ops: Vec<Op>, mut fail: Failure, run: &Runner) -> (Config, Vec<Op>, Failure, usize) {
     const MAX_RUNS: usize = 4000;
     let mut cfg = cfg.clone();
     let mut runs = 0usize;
@@ -1057,16 +881,10 @@ fn shrink(
         // simpler configuration
         let mut simpler_cfgs = Vec::new();
         if cfg.change_detection {
-            simpler_cfgs.push(Config {
-                change_detection: false,
-                ..cfg.clone()
-            });
+            simpler_cfgs.push(Config { change_detection: false, ..cfg.clone() });
         }
         if cfg.sensor.is_some() {
-            simpler_cfgs.push(Config {
-                sensor: None,
-                ..cfg.clone()
-            });
+            simpler_cfgs.push(Config { sensor: None, ..cfg.clone() });
         }
         for c in simpler_cfgs {
             if let Some(f) = try_case(&c, &ops, &mut runs) {
@@ -1129,18 +947,14 @@ fn base_seed() -> u64 {
         .ok()
         .and_then(|s| {
             let s = s.trim();
-            s.strip_prefix("0x")
-                .map_or_else(|| s.parse().ok(), |h| u64::from_str_radix(h, 16).ok())
+            s.strip_prefix("0x").map_or_else(|| s.parse().ok(), |h| u64::from_str_radix(h, 16).ok())
         })
         .unwrap_or(0x0c70_11ea_d1ff_0001)
 }
 
 /// Number of random cases: `n` times `OCTOLINEAR_DIFF_SCALE`.
 fn cases(n: usize) -> usize {
-    let scale: f64 = std::env::var("OCTOLINEAR_DIFF_SCALE")
-        .ok()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(1.0);
+    let scale: f64 = std::env::var("OCTOLINEAR_DIFF_SCALE").ok().and_then(|s| s.parse().ok()).unwrap_or(1.0);
     ((n as f64 * scale).round() as usize).max(1)
 }
 
@@ -1199,11 +1013,7 @@ impl Gen {
         };
         let half = 32768.0 * res;
         for c in &mut g.center {
-            *c = if g.rng.next_f64() < 0.5 {
-                g.rng.range(-20.0, 20.0) * res
-            } else {
-                g.rng.range(-0.5, 0.5) * half
-            };
+            *c = if g.rng.next_f64() < 0.5 { g.rng.range(-20.0, 20.0) * res } else { g.rng.range(-0.5, 0.5) * half };
         }
         if g.chance(0.15) {
             let axis = g.rng.below(3) as usize;
@@ -1284,11 +1094,7 @@ impl Gen {
                     let mut q = origin;
                     let axis = self.rng.below(3) as usize;
                     let m = self.int(-(reach as i64), reach as i64) as f64;
-                    let frac = if self.chance(0.5) {
-                        0.0
-                    } else {
-                        self.rng.range(-0.5, 0.5)
-                    };
+                    let frac = if self.chance(0.5) { 0.0 } else { self.rng.range(-0.5, 0.5) };
                     q[axis] = (o[axis] + (m + frac) * r) as f32;
                     q
                 }
@@ -1404,17 +1210,9 @@ impl Gen {
     fn scan(&mut self, n: usize) -> Op {
         let origin = self.origin();
         let reach = self.reach();
-        let points = if self.chance(self.walls) {
-            self.wall(origin)
-        } else {
-            self.points(origin, n, reach)
-        };
+        let points = if self.chance(self.walls) { self.wall(origin) } else { self.points(origin, n, reach) };
         let max_range = self.max_range(origin, &points, reach);
-        let threads = if self.chance(0.04) {
-            Some(self.pick(&[1, 2, 8]))
-        } else {
-            None
-        };
+        let threads = if self.chance(0.04) { Some(self.pick(&[1, 2, 8])) } else { None };
         let discretize = self.chance(0.3);
         let mut points = points;
         if discretize && self.edge.is_some() {
@@ -1429,24 +1227,13 @@ impl Gen {
                 !out || wrapped == 1
             });
         }
-        Op::Scan {
-            origin,
-            points,
-            max_range,
-            discretize,
-            lazy: self.chance(0.3),
-            threads,
-        }
+        Op::Scan { origin, points, max_range, discretize, lazy: self.chance(0.3), threads }
     }
 
     fn rays(&mut self, n: usize) -> Op {
         let origin = self.origin();
         let reach = self.reach();
-        Op::Rays {
-            origin,
-            points: self.points(origin, n, reach),
-            lazy: self.chance(0.3),
-        }
+        Op::Rays { origin, points: self.points(origin, n, reach), lazy: self.chance(0.3) }
     }
 
     /// A key near the region (a small cluster, so that groups fill and prune).
@@ -1523,12 +1310,7 @@ impl Gen {
                     2 => self.res * f64::from(self.int(1, 20) as i32),
                     _ => self.rng.range(0.1, 100.0) * self.res,
                 };
-                Op::CastRay {
-                    origin,
-                    dir,
-                    ignore_unknown,
-                    max_range,
-                }
+                Op::CastRay { origin, dir, ignore_unknown, max_range }
             }
             4 => {
                 // keys of existing nodes or near them
@@ -1567,30 +1349,14 @@ fn random_config(rng: &mut SplitMix64, change_detection: f64) -> Config {
         let clamp_min = rng.range(0.02, 0.45);
         let clamp_max = rng.range(0.55, 0.999);
         Some(Sensor {
-            hit: if rng.next_f64() < 0.1 {
-                0.5
-            } else {
-                rng.range(0.51, 0.99)
-            },
-            miss: if rng.next_f64() < 0.1 {
-                0.5
-            } else {
-                rng.range(0.01, 0.49)
-            },
+            hit: if rng.next_f64() < 0.1 { 0.5 } else { rng.range(0.51, 0.99) },
+            miss: if rng.next_f64() < 0.1 { 0.5 } else { rng.range(0.01, 0.49) },
             clamp_min,
             clamp_max,
-            threshold: if rng.next_f64() < 0.5 {
-                0.5
-            } else {
-                rng.range(0.1, 0.9)
-            },
+            threshold: if rng.next_f64() < 0.5 { 0.5 } else { rng.range(0.1, 0.9) },
         })
     };
-    Config {
-        res,
-        sensor,
-        change_detection: rng.next_f64() < change_detection,
-    }
+    Config { res, sensor, change_detection: rng.next_f64() < change_detection }
 }
 
 // ------------------------------------------------------------------ tests
@@ -1671,10 +1437,7 @@ fn rays_case(i: usize) -> Case {
     for _ in 0..g.int(2, 7) {
         let n = g.pick(&[1, 3, 10, 30]);
         let op = if g.chance(0.75) { g.rays(n) } else { g.scan(n) };
-        let lazy = matches!(
-            op,
-            Op::Rays { lazy: true, .. } | Op::Scan { lazy: true, .. }
-        );
+        let lazy = matches!(op, Op::Rays { lazy: true, .. } | Op::Scan { lazy: true, .. });
         ops.push(op);
         if lazy && g.chance(0.6) {
             ops.push(Op::UpdateInner);
@@ -1713,11 +1476,7 @@ fn node_ops_case(i: usize) -> Case {
             let occupied = g.chance(0.5);
             let value = g.pick(&[clamp_min, clamp_max, 1.0, -1.0]);
             let delta = g.pick(&[0.5f32, -0.5, 100.0]);
-            let skip = if g.chance(0.2) {
-                g.rng.below(u32::from(size * size * size))
-            } else {
-                u32::MAX
-            };
+            let skip = if g.chance(0.2) { g.rng.below(u32::from(size * size * size)) } else { u32::MAX };
             let mut n = 0;
             for x in 0..size {
                 for y in 0..size {
@@ -1728,11 +1487,7 @@ fn node_ops_case(i: usize) -> Case {
                         }
                         let key = [base[0] + x, base[1] + y, base[2] + z];
                         ops.push(match kind {
-                            0 => Op::UpdateKey {
-                                key,
-                                occupied,
-                                lazy,
-                            },
+                            0 => Op::UpdateKey { key, occupied, lazy },
                             1 => Op::SetValue { key, value, lazy },
                             _ => Op::UpdateDelta { key, delta, lazy },
                         });
@@ -1742,11 +1497,7 @@ fn node_ops_case(i: usize) -> Case {
             continue;
         }
         let op = match g.rng.below(40) {
-            0..=11 => Op::UpdateKey {
-                key,
-                occupied: g.chance(0.6),
-                lazy,
-            },
+            0..=11 => Op::UpdateKey { key, occupied: g.chance(0.6), lazy },
             12..=15 => {
                 let ks = octolinear::KeySpace::new(cfg.res);
                 let mut p = ks.key_to_point(Key(key)).to_array();
@@ -1754,11 +1505,7 @@ fn node_ops_case(i: usize) -> Case {
                     let center = p.map(f64::from);
                     p = g.near(center, 0.6);
                 }
-                Op::UpdatePoint {
-                    p,
-                    occupied: g.chance(0.6),
-                    lazy,
-                }
+                Op::UpdatePoint { p, occupied: g.chance(0.6), lazy }
             }
             16..=21 => Op::UpdateDelta {
                 key,
@@ -1807,10 +1554,7 @@ fn run_random(test: &str, n: usize, gen: Generator) {
     for i in 0..n {
         let (seed, cfg, ops) = gen(i);
         n_ops += ops.len();
-        scans += ops
-            .iter()
-            .filter(|o| matches!(o, Op::Scan { .. } | Op::Rays { .. }))
-            .count();
+        scans += ops.iter().filter(|o| matches!(o, Op::Scan { .. } | Op::Rays { .. })).count();
         queries += ops.iter().filter(|o| !o.mutates()).count();
         points += ops.iter().map(Op::num_points).sum::<usize>();
         skipped += check_case(test, seed, &cfg, ops);
@@ -1862,46 +1606,22 @@ fn simulated_scans_match_octomap() {
     }
     let setups = [
         (SceneKind::Indoor, 0.05, -1.0, false, false, None),
-        (
-            SceneKind::Indoor,
-            0.1,
-            8.0,
-            true,
-            false,
-            Some(SensorSetup::Custom),
-        ),
+        (SceneKind::Indoor, 0.1, 8.0, true, false, Some(SensorSetup::Custom)),
         (SceneKind::Indoor, 0.2, -1.0, false, true, None),
         (SceneKind::Outdoor, 0.2, 25.0, false, false, None),
-        (
-            SceneKind::Outdoor,
-            0.5,
-            -1.0,
-            true,
-            true,
-            Some(SensorSetup::Custom),
-        ),
+        (SceneKind::Outdoor, 0.5, -1.0, true, true, Some(SensorSetup::Custom)),
         (SceneKind::Outdoor, 1.0, -1.0, false, false, None),
     ];
     for (i, &(kind, res, max_range, discretize, lazy, sensor)) in setups.iter().enumerate() {
         let cfg_lidar = LidarConfig {
             beams: 6,
             horizontal_steps: 90,
-            ..if kind == SceneKind::Indoor {
-                LidarConfig::indoor()
-            } else {
-                LidarConfig::outdoor()
-            }
+            ..if kind == SceneKind::Indoor { LidarConfig::indoor() } else { LidarConfig::outdoor() }
         };
         let graph = simulate(kind, 4, 100 + i as u64, &cfg_lidar).unwrap();
         let cfg = Config {
             res,
-            sensor: sensor.map(|_| Sensor {
-                hit: 0.8,
-                miss: 0.35,
-                clamp_min: 0.2,
-                clamp_max: 0.95,
-                threshold: 0.6,
-            }),
+            sensor: sensor.map(|_| Sensor { hit: 0.8, miss: 0.35, clamp_min: 0.2, clamp_max: 0.95, threshold: 0.6 }),
             change_detection: i % 2 == 0,
         };
         let mut ops = Vec::new();
@@ -1937,39 +1657,25 @@ fn thread_count_independence() {
     if !require_or_skip("thread_count_independence") {
         return;
     }
-    for (i, (kind, res)) in [(SceneKind::Indoor, 0.1), (SceneKind::Outdoor, 0.2)]
-        .into_iter()
-        .enumerate()
-    {
+    for (i, (kind, res)) in [(SceneKind::Indoor, 0.1), (SceneKind::Outdoor, 0.2)].into_iter().enumerate() {
         let lidar = LidarConfig {
             beams: 8,
             horizontal_steps: 180,
-            ..if kind == SceneKind::Indoor {
-                LidarConfig::indoor()
-            } else {
-                LidarConfig::outdoor()
-            }
+            ..if kind == SceneKind::Indoor { LidarConfig::indoor() } else { LidarConfig::outdoor() }
         };
         let graph = simulate(kind, 3, 7 + i as u64, &lidar).unwrap();
         quiet_octomap();
         let mut theirs = OracleTree::new(res).unwrap();
-        let mut ours: Vec<OccupancyTree> =
-            (0..3).map(|_| OccupancyTree::new(res).unwrap()).collect();
+        let mut ours: Vec<OccupancyTree> = (0..3).map(|_| OccupancyTree::new(res).unwrap()).collect();
         for (s, node) in graph.nodes.iter().enumerate() {
             let (cloud, origin) = node.graph2tree();
             assert!(cloud.len() > 768, "want several ray-casting chunks");
             let raw: Vec<[f32; 3]> = cloud.points.iter().map(|q| q.to_array()).collect();
             let discretize = s % 2 == 1;
-            theirs
-                .insert_point_cloud(&raw, origin.to_array(), -1.0, false, discretize)
-                .unwrap();
+            theirs.insert_point_cloud(&raw, origin.to_array(), -1.0, false, discretize).unwrap();
             let want = theirs.write_ot().unwrap();
             for (t, threads) in ours.iter_mut().zip([1, 2, 8]) {
-                let opts = ScanOptions {
-                    discretize,
-                    threads: Some(threads),
-                    ..Default::default()
-                };
+                let opts = ScanOptions { discretize, threads: Some(threads), ..Default::default() };
                 t.insert_point_cloud(&cloud.points, origin, &opts).unwrap();
                 assert!(
                     ot_bytes(t) == want,
@@ -2012,11 +1718,7 @@ fn directed_edge_cases_match_octomap() {
                     [-1.0, -1.0, -1.0],
                     [0.5, 1.0, 0.0],
                 ] {
-                    points.push([
-                        o[0] + dir[0] * m * r,
-                        o[1] + dir[1] * m * r,
-                        o[2] + dir[2] * m * r,
-                    ]);
+                    points.push([o[0] + dir[0] * m * r, o[1] + dir[1] * m * r, o[2] + dir[2] * m * r]);
                 }
             }
             // repeated end point, the origin itself, sub-voxel rays, the map edge
@@ -2045,24 +1747,14 @@ fn directed_edge_cases_match_octomap() {
             for q in points.iter().take(20) {
                 ops.push(Op::RayKeys { origin: o, end: *q });
                 let dir = [q[0] - o[0], q[1] - o[1], q[2] - o[2]];
-                for (ignore_unknown, max_range) in [(false, -1.0), (true, 20.0 * res), (true, 0.0)]
-                {
-                    ops.push(Op::CastRay {
-                        origin: o,
-                        dir,
-                        ignore_unknown,
-                        max_range,
-                    });
+                for (ignore_unknown, max_range) in [(false, -1.0), (true, 20.0 * res), (true, 0.0)] {
+                    ops.push(Op::CastRay { origin: o, dir, ignore_unknown, max_range });
                 }
             }
         }
         ops.push(Op::WriteBinary);
         ops.push(Op::RoundTrip);
-        let cfg = Config {
-            res,
-            sensor: None,
-            change_detection: true,
-        };
+        let cfg = Config { res, sensor: None, change_detection: true };
         check_case("directed", ri as u64, &cfg, ops);
     }
 }
@@ -2076,11 +1768,7 @@ fn shrinker_reduces_a_planted_difference() {
     }
     // plant: a scan at resolution 0.1 containing a point at x = 1.25 makes
     // octolinear's tree differ (we add one update to octolinear only).
-    let cfg = Config {
-        res: 0.1,
-        sensor: None,
-        change_detection: false,
-    };
+    let cfg = Config { res: 0.1, sensor: None, change_detection: false };
     let mut g = Gen::new(5, cfg.res);
     let mut ops: Vec<Op> = (0..6).map(|_| g.scan(20)).collect();
     if let Op::Scan { points, .. } = &mut ops[3] {
@@ -2092,8 +1780,7 @@ fn shrinker_reduces_a_planted_difference() {
             apply(&mut pair, op).map_err(|(kind, what)| Failure { step, kind, what })?;
             if let Op::Scan { points, .. } = op {
                 if points.contains(&[1.25, 0.0, 0.0]) {
-                    pair.ours
-                        .update_occupancy(Key([1, 2, 3]), true, InnerNodes::Update);
+                    pair.ours.update_occupancy(Key([1, 2, 3]), true, InnerNodes::Update);
                 }
             }
             compare_state(&pair).map_err(|(kind, what)| Failure { step, kind, what })?;
@@ -2106,10 +1793,7 @@ fn shrinker_reduces_a_planted_difference() {
     assert_eq!(ops.len(), 1, "{ops:?}");
     assert_eq!(ops[0].num_points(), 1, "{ops:?}");
     let code = reproducer("regression_example", &cfg, &ops, &fail);
-    assert!(
-        code.contains("p(0x3fa00000, 0x00000000, 0x00000000)"),
-        "{code}"
-    );
+    assert!(code.contains("p(0x3fa00000, 0x00000000, 0x00000000)"), "{code}");
     assert!(code.contains("check_regression(&cfg, &ops);"), "{code}");
     // without the plant, the shrunk case agrees with OctoMap
     assert!(run_case(&cfg, &ops).is_ok());

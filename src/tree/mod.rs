@@ -829,11 +829,14 @@ struct Batch<'a> {
 }
 
 impl Batch<'_> {
-    /// Applies `codes` (all below `n`, which sits at `depth`) to the subtree.
-    fn apply(&mut self, n: NodeId, depth: u8, codes: &[u64], created: bool) {
+    /// Applies `codes` (all below `n`, which sits at `depth`) to the
+    /// subtree; returns whether any voxel was updated. Like `updateNode`,
+    /// whose early exit on a saturated voxel leaves the path above it alone,
+    /// a node is updated and pruned only when something below it changed
+    /// (which matters when earlier lazy updates left inner nodes stale).
+    fn apply(&mut self, n: NodeId, depth: u8, codes: &[u64], created: bool) -> bool {
         if depth == TREE_DEPTH {
-            self.apply_leaf(n, codes[0], created);
-            return;
+            return self.apply_leaf(n, codes[0], created);
         }
         // where each child's codes start: codes are sorted and share the
         // prefix above this node, so the child index is monotone in them
@@ -864,7 +867,7 @@ impl Batch<'_> {
         if mask == 0 && !created {
             // a pruned leaf: unchanged when the update saturates, else expanded
             if self.sensor.is_saturated(a.value(n), self.delta) {
-                return;
+                return false;
             }
             a.expand_node(n);
             self.size += 8;
@@ -876,27 +879,29 @@ impl Batch<'_> {
             }
         }
         let (first, mask) = (a.first_child(n), a.mask(n));
+        let mut changed = false;
         for pos in 0..8 {
             if needed & (1 << pos) == 0 {
                 continue;
             }
             let child = first + (mask & ((1u8 << pos) - 1)).count_ones();
             let range = &codes[bounds[pos]..bounds[pos + 1]];
-            self.apply(child, depth + 1, range, new_children & (1 << pos) != 0);
+            changed |= self.apply(child, depth + 1, range, new_children & (1 << pos) != 0);
         }
-        if !self.lazy {
+        if changed && !self.lazy {
             if prune_node(self.arena, n, self.rules).is_some() {
                 self.size -= 8;
             } else {
                 update_from_children(self.arena, n, self.rules);
             }
         }
+        changed
     }
 
-    fn apply_leaf(&mut self, n: NodeId, code: u64, created: bool) {
+    fn apply_leaf(&mut self, n: NodeId, code: u64, created: bool) -> bool {
         let before = self.arena.value(n);
         if !created && self.sensor.is_saturated(before, self.delta) {
-            return;
+            return false;
         }
         let after = self.sensor.apply(before, self.delta);
         self.arena.set_value(n, after);
@@ -919,6 +924,7 @@ impl Batch<'_> {
                 }
             }
         }
+        true
     }
 }
 
