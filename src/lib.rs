@@ -20,6 +20,7 @@
 pub mod formats;
 pub mod geometry;
 pub mod key;
+pub mod mapped;
 pub mod morton;
 pub mod ray;
 pub mod scan;
@@ -30,6 +31,7 @@ pub mod tree;
 pub use formats::graph::{ScanEdge, ScanGraph, ScanNode};
 pub use geometry::{Point3, PointCloud, Pose6D, Quaternion};
 pub use key::{Key, KeyError, KeySpace};
+pub use mapped::{MapView, MappedMap, OlmError};
 pub use morton::MortonCode;
 pub use ray::{CastOptions, CastOutcome, RayKeys};
 pub use scan::{OutOfMap, ScanOptions, ScanReport, UpdateBox};
