@@ -443,7 +443,7 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Meta, OlmError> {
             Some("starts inside the header")
         } else if s.offset % SECTION_ALIGN != 0 {
             Some("is not aligned to 64 bytes")
-        } else if end.is_none_or(|e| e > len) {
+        } else if end.map_or(true, |e| e > len) {
             Some("extends past the end of the file")
         } else if spans
             .iter()
@@ -556,7 +556,10 @@ pub(crate) fn encode(h: &Header) -> [u8; HEADER_LEN] {
         put(field::SENSOR + 4 * i, &v.to_le_bytes());
     }
     put(field::ROOT_LABEL, &[h.root_label]);
-    put(field::SECTION_COUNT, &(h.sections.len() as u16).to_le_bytes());
+    put(
+        field::SECTION_COUNT,
+        &(h.sections.len() as u16).to_le_bytes(),
+    );
     put(field::SIZE_COUNTER, &h.size_counter.to_le_bytes());
     put(field::NODE_COUNT, &h.node_count.to_le_bytes());
     put(field::INNER_COUNT, &h.inner_count.to_le_bytes());

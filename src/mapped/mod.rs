@@ -73,13 +73,17 @@ pub enum OlmError {
     BadMagic,
     #[error("file is {len} bytes, shorter than the {need}-byte header")]
     TooShort { len: u64, need: u64 },
-    #[error("format version {major}.{minor} is not supported (this reader reads {VERSION_MAJOR}.x)")]
+    #[error(
+        "format version {major}.{minor} is not supported (this reader reads {VERSION_MAJOR}.x)"
+    )]
     Version { major: u16, minor: u16 },
     #[error("endianness check word reads {found:#010x}, expected 0x0a0b0c0d (file written big-endian or corrupted)")]
     Endianness { found: u32 },
     #[error("header checksum mismatch: stored {stored:#010x}, computed {computed:#010x}")]
     HeaderChecksum { stored: u32, computed: u32 },
-    #[error("tree kind {0} is reserved (ColorOcTree = 1, OcTreeStamped = 2) but not supported yet")]
+    #[error(
+        "tree kind {0} is reserved (ColorOcTree = 1, OcTreeStamped = 2) but not supported yet"
+    )]
     UnsupportedKind(u8),
     #[error("header field {field} is invalid: {value}")]
     BadField { field: &'static str, value: String },
@@ -87,8 +91,14 @@ pub enum OlmError {
     FileLength { header: u64, actual: u64 },
     #[error("section kind {kind}: {reason}")]
     Section { kind: u16, reason: String },
-    #[error("section kind {kind}: checksum mismatch (stored {stored:#010x}, computed {computed:#010x})")]
-    SectionChecksum { kind: u16, stored: u32, computed: u32 },
+    #[error(
+        "section kind {kind}: checksum mismatch (stored {stored:#010x}, computed {computed:#010x})"
+    )]
+    SectionChecksum {
+        kind: u16,
+        stored: u32,
+        computed: u32,
+    },
     #[error("inconsistent tree structure: {0}")]
     Structure(String),
 }
@@ -361,7 +371,9 @@ fn preorder<N: Nav>(nav: N, b: &mut PreorderBuilder) -> Result<(), String> {
         index += 1;
         if mask != 0 {
             let mut ch = [Node::default(); 8];
-            let k = nav.children(n, mask, &mut ch).ok_or("children out of range")?;
+            let k = nav
+                .children(n, mask, &mut ch)
+                .ok_or("children out of range")?;
             stack.extend(ch[..k].iter().rev());
         }
     }

@@ -5,9 +5,9 @@
 //! for the pointer layout, which keeps a `u32` subtree size per node.
 
 use super::format::{
-    self, required_sections, round8, Header, Index, Section, SectionKind, TreeKind,
-    Variant, DEFAULT_RANK_BLOCK_LOG2, HEADER_LEN, MAX_NODES, RANK_BLOCK_LOG2, SECTION_ALIGN,
-    VERSION_MAJOR, VERSION_MINOR,
+    self, required_sections, round8, Header, Index, Section, SectionKind, TreeKind, Variant,
+    DEFAULT_RANK_BLOCK_LOG2, HEADER_LEN, MAX_NODES, RANK_BLOCK_LOG2, SECTION_ALIGN, VERSION_MAJOR,
+    VERSION_MINOR,
 };
 use crate::key::TREE_DEPTH;
 use crate::tree::{NodeRef, OccupancyTree};
@@ -78,7 +78,11 @@ pub fn to_bytes(tree: &OccupancyTree, opts: WriteOptions) -> io::Result<Vec<u8>>
 /// The maximum-likelihood variant stores what OctoMap's `writeBinary`
 /// would: the tree converted to maximum likelihood and pruned (the
 /// caller's tree is not changed).
-pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOptions) -> io::Result<()> {
+pub fn write<W: Write + Seek>(
+    tree: &OccupancyTree,
+    w: &mut W,
+    opts: WriteOptions,
+) -> io::Result<()> {
     let log2 = match opts.index {
         Index::Rank => {
             if !RANK_BLOCK_LOG2.contains(&opts.rank_block_log2) {
