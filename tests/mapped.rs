@@ -706,6 +706,59 @@ fn header_checks_name_the_problem() {
     m.verify().unwrap();
     assert_eq!(ex.len(), 452);
     assert_eq!(m.header().node_count, 17);
+    let listed = spec_example();
+    if listed != ex {
+        let hex: Vec<String> = ex
+            .chunks(16)
+            .enumerate()
+            .map(|(i, c)| {
+                format!(
+                    "{:03x}: {}",
+                    16 * i,
+                    c.iter()
+                        .map(|b| format!("{b:02x}"))
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                )
+            })
+            .collect();
+        panic!(
+            "formats/olm.md example differs from the writer's bytes:\n{}",
+            hex.join("\n")
+        );
+    }
+}
+
+/// The bytes listed in the example of `formats/olm.md` (`OFFSET: hex ... | note`,
+/// `00*N` for a run of zeros).
+fn spec_example() -> Vec<u8> {
+    let doc =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/formats/olm.md")).unwrap();
+    let start = doc.find("<!-- olm-example-begin -->").unwrap();
+    let end = doc.find("<!-- olm-example-end -->").unwrap();
+    let mut out = Vec::new();
+    for line in doc[start..end].lines() {
+        let Some((off, rest)) = line.split_once(": ") else {
+            continue;
+        };
+        let Ok(off) = usize::from_str_radix(off, 16) else {
+            continue;
+        };
+        assert_eq!(
+            off,
+            out.len(),
+            "formats/olm.md example: offset {off:#x} out of sequence"
+        );
+        let bytes = rest.split('|').next().unwrap();
+        for tok in bytes.split_whitespace() {
+            if let Some(n) = tok.strip_prefix("00*") {
+                out.resize(out.len() + n.parse::<usize>().unwrap(), 0);
+            } else {
+                out.push(u8::from_str_radix(tok, 16).unwrap());
+            }
+        }
+    }
+    out
 }
 
 // ----- corruption suite ----------------------------------------------------------------

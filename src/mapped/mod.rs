@@ -335,7 +335,11 @@ impl<'a> MapView<'a> {
         direction: Point3,
         opts: CastOptions,
     ) -> Result<CastOutcome, CastError> {
-        query::cast_ray(self, origin, direction, opts)
+        let (keys, sensor) = (&self.meta.keys, &self.meta.header.sensor);
+        with_nav!(self.nav, |nav| {
+            let mut path = query::PathSearch::new(nav);
+            query::cast_ray_with(keys, sensor, |k| path.search(k), origin, direction, opts)
+        })
     }
 
     /// The in-memory tree (after [`Self::verify`]). Its `size()` is the
@@ -359,22 +363,25 @@ fn preorder<N: Nav>(nav: N, b: &mut PreorderBuilder) -> Result<(), String> {
     let Some(root) = nav.root() else {
         return Ok(());
     };
-    let mut stack = vec![root];
+    let mut stack = vec![(root, 0usize)];
+    let mut seq = [(0u32, 0u32); 17];
     let mut index = 0u64;
     let budget = nav.node_budget();
-    while let Some(n) = stack.pop() {
-        if index >= budget {
+    while let Some((n, depth)) = stack.pop() {
+        if index >= budget || depth > 16 {
             return Err("more nodes reachable than announced".into());
         }
         let (value, mask) = nav.get(n).ok_or("node out of range")?;
         b.push(value, mask, index).map_err(|e| e.to_string())?;
         index += 1;
-        if mask != 0 {
+        if mask == 0 {
+            nav.skip_seq(n, &mut seq[depth]);
+        } else {
             let mut ch = [Node::default(); 8];
             let k = nav
-                .children(n, mask, &mut ch)
+                .children_seq(n, mask, &mut seq[depth], &mut ch)
                 .ok_or("children out of range")?;
-            stack.extend(ch[..k].iter().rev());
+            stack.extend(ch[..k].iter().rev().map(|&c| (c, depth + 1)));
         }
     }
     Ok(())

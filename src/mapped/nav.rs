@@ -27,6 +27,23 @@ pub(crate) trait Nav: Copy {
     fn children(&self, n: Node, mask: u8, out: &mut [Node; 8]) -> Option<usize>;
     /// An upper bound on the nodes a traversal may visit.
     fn node_budget(&self) -> u64;
+    /// [`Nav::children`] for a traversal that visits each level's nodes in
+    /// increasing order: `slot` (one per level, initially `(0, 0)`)
+    /// remembers where the next node's children start, so that a run of
+    /// consecutive nodes needs no rank computation.
+    #[inline]
+    fn children_seq(
+        &self,
+        n: Node,
+        mask: u8,
+        _slot: &mut (u32, u32),
+        out: &mut [Node; 8],
+    ) -> Option<usize> {
+        self.children(n, mask, out)
+    }
+    /// Tells the sequence that a childless node `n` was passed.
+    #[inline]
+    fn skip_seq(&self, _n: Node, _slot: &mut (u32, u32)) {}
 }
 
 #[inline(always)]
@@ -126,6 +143,40 @@ impl Nav for RankNav<'_> {
 
     fn node_budget(&self) -> u64 {
         u64::from(self.n)
+    }
+
+    #[inline]
+    fn children_seq(
+        &self,
+        n: Node,
+        mask: u8,
+        slot: &mut (u32, u32),
+        out: &mut [Node; 8],
+    ) -> Option<usize> {
+        let k = mask.count_ones();
+        let first = if slot.0 == n.idx && n.idx != 0 {
+            slot.1
+        } else {
+            self.first_child(n)?
+        };
+        *slot = (n.idx.wrapping_add(1), first.wrapping_add(k));
+        if first <= n.idx || first.checked_add(k)? > self.n {
+            return None;
+        }
+        for (j, o) in out.iter_mut().take(k as usize).enumerate() {
+            *o = Node {
+                idx: first + j as u32,
+                label: 0,
+            };
+        }
+        Some(k as usize)
+    }
+
+    #[inline]
+    fn skip_seq(&self, n: Node, slot: &mut (u32, u32)) {
+        if slot.0 == n.idx {
+            slot.0 = slot.0.wrapping_add(1);
+        }
     }
 }
 
@@ -306,6 +357,37 @@ impl Nav for MlNav<'_> {
 
     fn node_budget(&self) -> u64 {
         u64::from(self.nodes)
+    }
+
+    #[inline]
+    fn children_seq(
+        &self,
+        n: Node,
+        _mask: u8,
+        slot: &mut (u32, u32),
+        out: &mut [Node; 8],
+    ) -> Option<usize> {
+        if n.label != 3 {
+            return Some(0);
+        }
+        let w = self.word(n.idx)?;
+        let base = if slot.0 == n.idx && n.idx != 0 {
+            slot.1
+        } else {
+            self.rank(n.idx)?.checked_add(1)?
+        };
+        *slot = (
+            n.idx.wrapping_add(1),
+            base.wrapping_add(count_inner(u64::from(w))),
+        );
+        let mut k = 0;
+        for pos in 0..8 {
+            if (w >> (2 * pos)) & 3 != 0 {
+                out[k] = self.make_child(n, w, pos, base)?;
+                k += 1;
+            }
+        }
+        Some(k)
     }
 }
 

@@ -132,6 +132,8 @@ pub(crate) struct RawIter<'a, N: Nav> {
     leaves_only: bool,
     bbx: Option<KeyBox>,
     budget: u64,
+    /// Per depth: where the next node's children start (see `Nav::children_seq`).
+    seq: [(u32, u32); TREE_DEPTH as usize + 1],
 }
 
 impl<'a, N: Nav> RawIter<'a, N> {
@@ -155,6 +157,7 @@ impl<'a, N: Nav> RawIter<'a, N> {
             max_depth: normalize_depth(max_depth),
             leaves_only,
             bbx,
+            seq: [(0, 0); TREE_DEPTH as usize + 1],
         }
     }
 
@@ -170,9 +173,13 @@ impl<'a, N: Nav> RawIter<'a, N> {
                 continue;
             };
             let is_leaf = mask == 0 || depth >= self.max_depth;
+            if mask == 0 && depth < self.max_depth {
+                self.nav.skip_seq(n, &mut self.seq[depth as usize]);
+            }
             if !is_leaf {
                 let mut children = [Node::default(); 8];
-                if let Some(mut k) = self.nav.children(n, mask, &mut children) {
+                let slot = &mut self.seq[depth as usize];
+                if let Some(mut k) = self.nav.children_seq(n, mask, slot, &mut children) {
                     for pos in (0..8).rev() {
                         if mask & (1 << pos) != 0 {
                             if k == 0 {
@@ -269,10 +276,27 @@ pub fn cast_ray<M: OccupancyLookup + ?Sized>(
     direction: Point3,
     opts: CastOptions,
 ) -> Result<CastOutcome, CastError> {
-    let keys = map.key_space();
-    let sensor = map.sensor();
+    cast_ray_with(
+        map.key_space(),
+        map.sensor(),
+        |k| map.search(k, 0),
+        origin,
+        direction,
+        opts,
+    )
+}
+
+/// [`cast_ray`] with the voxel search given as a closure (depth 16).
+pub(crate) fn cast_ray_with(
+    keys: &KeySpace,
+    sensor: &SensorModel,
+    mut search: impl FnMut(Key) -> Option<Found>,
+    origin: Point3,
+    direction: Point3,
+    opts: CastOptions,
+) -> Result<CastOutcome, CastError> {
     let start = keys.key(origin)?;
-    match map.search(start, 0) {
+    match search(start) {
         Some(n) if sensor.is_occupied(n.value) => {
             return Ok(CastOutcome::Occupied {
                 end: keys.key_to_point(start),
@@ -319,11 +343,76 @@ pub fn cast_ray<M: OccupancyLookup + ?Sized>(
                 return Ok(CastOutcome::MaxRange { end });
             }
         }
-        match map.search(dda.key, 0) {
+        match search(dda.key) {
             Some(n) if sensor.is_occupied(n.value) => return Ok(CastOutcome::Occupied { end }),
             Some(_) => {}
             None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end }),
             None => {}
         }
+    }
+}
+
+/// Depth-16 searches that restart from the deepest node shared with the
+/// previous key's path instead of the root. Consecutive voxels of a ray
+/// share most of their path, so a step costs a level or two instead of 16.
+/// Answers are those of [`search`]: the shared nodes are the same nodes.
+pub(crate) struct PathSearch<N: Nav> {
+    nav: N,
+    key: Key,
+    /// Entries `0..len` hold the nodes at depths `0..len` on `key`'s path.
+    len: u8,
+    path: [(Node, f32, u8); TREE_DEPTH as usize + 1],
+}
+
+impl<N: Nav> PathSearch<N> {
+    pub fn new(nav: N) -> Self {
+        PathSearch {
+            nav,
+            key: Key::ROOT,
+            len: 0,
+            path: [(Node::default(), 0.0, 0); TREE_DEPTH as usize + 1],
+        }
+    }
+
+    #[inline]
+    pub fn search(&mut self, key: Key) -> Option<Found> {
+        // levels whose child index is the same for both keys
+        let mut common = u32::from(TREE_DEPTH);
+        for a in 0..3 {
+            common = common.min((key.0[a] ^ self.key.0[a]).leading_zeros());
+        }
+        let start = if self.len == 0 {
+            let root = self.nav.root()?;
+            let (v, m) = self.nav.get(root)?;
+            self.path[0] = (root, v, m);
+            0
+        } else {
+            (common as u8).min(self.len - 1)
+        };
+        self.key = key;
+        self.len = start + 1;
+        let (mut node, mut value, mut mask) = self.path[start as usize];
+        for d in start..TREE_DEPTH {
+            let pos = key.child_index(d);
+            if mask & (1 << pos) == 0 {
+                if mask != 0 {
+                    return None;
+                }
+                return Some(Found {
+                    value,
+                    depth: d,
+                    is_leaf: true,
+                });
+            }
+            node = self.nav.child(node, mask, pos)?;
+            (value, mask) = self.nav.get(node)?;
+            self.path[d as usize + 1] = (node, value, mask);
+            self.len = d + 2;
+        }
+        Some(Found {
+            value,
+            depth: TREE_DEPTH,
+            is_leaf: mask == 0,
+        })
     }
 }
