@@ -16,7 +16,7 @@ use octolinear::{CastOptions, Key, OccupancyTree, Point3, ScanOptions};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-fn build(scans: usize, res: f64) -> OccupancyTree {
+fn build(scans: usize, res: f64, compact: bool) -> OccupancyTree {
     let graph = simulate(SceneKind::Outdoor, scans, 21, &LidarConfig::outdoor()).unwrap();
     let mut tree = OccupancyTree::new(res).unwrap();
     for node in &graph.nodes {
@@ -24,7 +24,9 @@ fn build(scans: usize, res: f64) -> OccupancyTree {
         tree.insert_point_cloud(&cloud.points, origin, &ScanOptions::default())
             .unwrap();
     }
-    tree.compact();
+    if compact {
+        tree.compact();
+    }
     tree
 }
 
@@ -79,7 +81,7 @@ fn fixture() -> Fixture {
         .and_then(|s| s.parse().ok())
         .unwrap_or(12);
     let t = Instant::now();
-    let tree = build(scans, 0.1);
+    let tree = build(scans, 0.1, true);
     eprintln!(
         "map: {scans} outdoor scans at 0.1 m, {} nodes, {} leaves, built in {:.1} s",
         tree.calc_num_nodes(),
@@ -134,8 +136,113 @@ fn fixture() -> Fixture {
     Fixture { tree, dir, files }
 }
 
+/// Best of `rounds` interleaved runs of each contender (robust to the
+/// load of a shared machine), in ms.
+fn paired(what: &str, rounds: usize, contenders: &mut [(&str, &mut dyn FnMut() -> f64)]) {
+    let mut best = vec![f64::MAX; contenders.len()];
+    let mut sink = 0.0;
+    for _ in 0..rounds {
+        for (i, (_, f)) in contenders.iter_mut().enumerate() {
+            let t = Instant::now();
+            sink += f();
+            best[i] = best[i].min(t.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    black_box(sink);
+    let base = best[0];
+    let line: Vec<String> = contenders
+        .iter()
+        .zip(&best)
+        .map(|((n, _), b)| format!("{n} {b:.2} ms ({:.2}x)", b / base))
+        .collect();
+    eprintln!("paired {what}: {}", line.join(", "));
+}
+
+fn summary(fx: &Fixture) {
+    let tree = &fx.tree;
+    let keys = query_keys(tree, 10_000, 1);
+    let rs = rays(tree, 300);
+    let maps: Vec<_> = fx
+        .files
+        .iter()
+        .map(|(n, p)| (*n, MappedMap::open(p).unwrap()))
+        .collect();
+    let views: Vec<_> = maps.iter().map(|(n, m)| (*n, m.view())).collect();
+    let search_tree = || {
+        keys.iter()
+            .filter_map(|&k| tree.search(k, 0))
+            .map(|f| f.value as f64)
+            .sum::<f64>()
+    };
+    let mut a = search_tree;
+    let mut fs: Vec<Box<dyn FnMut() -> f64>> = views
+        .iter()
+        .map(|(_, v)| {
+            let v = *v;
+            let keys = &keys;
+            Box::new(move || {
+                keys.iter()
+                    .filter_map(|&k| v.search(k, 0))
+                    .map(|f| f.value as f64)
+                    .sum::<f64>()
+            }) as Box<dyn FnMut() -> f64>
+        })
+        .collect();
+    let mut c: Vec<(&str, &mut dyn FnMut() -> f64)> = vec![("arena", &mut a)];
+    for ((n, _), f) in views.iter().zip(fs.iter_mut()) {
+        c.push((n, f.as_mut()));
+    }
+    paired("search 10k keys", 15, &mut c);
+
+    let mut a = || tree.leaves(0).map(|l| l.value as f64).sum::<f64>();
+    let mut fs: Vec<Box<dyn FnMut() -> f64>> = views
+        .iter()
+        .map(|(_, v)| {
+            let v = *v;
+            Box::new(move || v.leaves(0).map(|l| l.value as f64).sum::<f64>())
+                as Box<dyn FnMut() -> f64>
+        })
+        .collect();
+    let mut c: Vec<(&str, &mut dyn FnMut() -> f64)> = vec![("arena", &mut a)];
+    for ((n, _), f) in views.iter().zip(fs.iter_mut()) {
+        c.push((n, f.as_mut()));
+    }
+    paired("all leaves", 5, &mut c);
+
+    let opts = CastOptions {
+        ignore_unknown: false,
+        max_range: Some(30.0),
+    };
+    let mut a = || {
+        rs.iter()
+            .filter(|(o, d)| tree.cast_ray(*o, *d, opts).is_ok_and(|r| r.hit()))
+            .count() as f64
+    };
+    let mut fs: Vec<Box<dyn FnMut() -> f64>> = views
+        .iter()
+        .map(|(_, v)| {
+            let v = *v;
+            let rs = &rs;
+            Box::new(move || {
+                rs.iter()
+                    .filter(|(o, d)| v.cast_ray(*o, *d, opts).is_ok_and(|r| r.hit()))
+                    .count() as f64
+            }) as Box<dyn FnMut() -> f64>
+        })
+        .collect();
+    let mut c: Vec<(&str, &mut dyn FnMut() -> f64)> = vec![("arena", &mut a)];
+    for ((n, _), f) in views.iter().zip(fs.iter_mut()) {
+        c.push((n, f.as_mut()));
+    }
+    paired("cast_ray 300", 10, &mut c);
+}
+
 fn benches(c: &mut Criterion) {
     let fx = fixture();
+    summary(&fx);
+    if std::env::var_os("OLM_SUMMARY_ONLY").is_some() {
+        return;
+    }
     let tree = &fx.tree;
     let keys = query_keys(tree, 10_000, 1);
     let ml = {
@@ -242,6 +349,29 @@ fn benches(c: &mut Criterion) {
     g.finish();
 }
 
+/// Resident KiB of the mappings of `path` (from /proc/self/smaps).
+fn mapped_rss_kib(path: &Path) -> u64 {
+    let name = path.to_string_lossy();
+    let Ok(smaps) = std::fs::read_to_string("/proc/self/smaps") else {
+        return 0;
+    };
+    let mut inside = false;
+    let mut total = 0;
+    for line in smaps.lines() {
+        let first = line.split_whitespace().next().unwrap_or("");
+        if first.contains('-') && first.chars().all(|c| c.is_ascii_hexdigit() || c == '-') {
+            inside = line.ends_with(name.as_ref());
+        } else if inside && line.starts_with("Rss:") {
+            total += line
+                .split_whitespace()
+                .nth(1)
+                .and_then(|v| v.parse::<u64>().ok())
+                .unwrap_or(0);
+        }
+    }
+    total
+}
+
 fn vm_rss_kib() -> u64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
@@ -260,7 +390,7 @@ fn scale(scans: usize) {
         .unwrap_or_else(std::env::temp_dir);
     let path = dir.join("olm-scale.olm");
     let t = Instant::now();
-    let tree = build(scans, 0.05);
+    let tree = build(scans, 0.05, false);
     let nodes = tree.calc_num_nodes();
     eprintln!(
         "scale: {scans} outdoor scans at 0.05 m: {nodes} nodes, built in {:.0} s, RSS {} MiB",
@@ -286,6 +416,10 @@ fn scale(scans: usize) {
     let found = keys.iter().filter(|&&k| v.search(k, 0).is_some()).count();
     let q = t.elapsed();
     let rss1 = vm_rss_kib();
+    eprintln!(
+        "scale: resident pages of the mapped file after the queries: {} MiB",
+        mapped_rss_kib(&path) / 1024
+    );
     eprintln!(
         "scale: open {:.1} µs; 100k random searches ({found} found) in {:.1} ms ({:.0} ns each, cold page cache not forced); RSS {} MiB before open, {} MiB after the queries (+{} MiB of {} MiB mapped)",
         open.as_secs_f64() * 1e6,
