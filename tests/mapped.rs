@@ -920,3 +920,42 @@ fn corrupted_files_never_panic() {
         "the mutants should reach past the header"
     );
 }
+
+/// Writes small seed files for `cargo fuzz run olm` to `fuzz/corpus/olm`
+/// (`cargo test --test mapped write_fuzz_seeds -- --ignored`).
+#[test]
+#[ignore]
+fn write_fuzz_seeds() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus/olm");
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut trees = vec![("empty", OccupancyTree::new(0.1).unwrap())];
+    let mut t = OccupancyTree::new(0.1).unwrap();
+    t.update_point(Point3::new(0.05, 0.05, 0.05), true, Default::default())
+        .unwrap();
+    trees.push(("voxel", t.clone()));
+    for (i, p) in [(0.3, -0.2, 0.1), (-0.4, 0.25, 0.05), (0.15, 0.15, -0.3)]
+        .into_iter()
+        .enumerate()
+    {
+        t.update_point(Point3::new(p.0, p.1, p.2), i % 2 == 0, Default::default())
+            .unwrap();
+    }
+    trees.push(("voxels", t));
+    let mut block = OccupancyTree::new(0.1).unwrap();
+    for i in 0..8 {
+        let p = Point3::new(
+            0.05 + 0.1 * (i & 1) as f32,
+            0.05 + 0.1 * ((i >> 1) & 1) as f32,
+            0.05 + 0.1 * (i >> 2) as f32,
+        );
+        block.update_point(p, true, Default::default()).unwrap();
+    }
+    trees.push(("block", block));
+    for (name, tree) in &trees {
+        for (label, opts) in all_options() {
+            let b = mapped::to_bytes(tree, opts).unwrap();
+            let file = format!("{name}-{}.olm", label.replace(['/', ' '], "-"));
+            std::fs::write(dir.join(file), b).unwrap();
+        }
+    }
+}
