@@ -257,6 +257,10 @@ fn benches(c: &mut Criterion) {
     for (name, p) in &fx.files {
         g.bench_function(*name, |b| b.iter(|| black_box(MappedMap::open(p).unwrap())));
     }
+    let bytes = std::fs::read(&fx.files[0].1).unwrap();
+    g.bench_function("header checks only (slice)", |b| {
+        b.iter(|| black_box(MappedMap::new(&bytes[..]).unwrap()))
+    });
     g.bench_function("ot-read (parse)", |b| {
         let p = fx.dir.path().join("map.ot");
         b.iter(|| {
