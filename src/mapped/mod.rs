@@ -1,0 +1,405 @@
+//! `.olm`: a native read-only map format queried in place, with no parse
+//! step. The file is memory-mapped (or any byte buffer is borrowed) and
+//! OctoMap's queries — `search`, leaf and box iteration, `castRay` — run
+//! directly on its bytes, answering exactly as the in-memory
+//! [`OccupancyTree`] does.
+//!
+//! The byte layout is specified in `formats/olm.md`. In short: a 256-byte
+//! header (magic, version, endianness check, tree kind, variant,
+//! resolution, sensor model, OctoMap's `size()` counter, node counts,
+//! section table with CRC-32s, header CRC-32) and 64-byte-aligned
+//! sections. The full variant keeps nodes in breadth-first order (each
+//! level in Morton order) as a child-mask array, a log-odds array and a
+//! rank directory; the children of node `i` are contiguous and start at
+//! `1 + rank(i)`. The maximum-likelihood variant keeps `.bt`'s two-bit
+//! child labels per inner node, one occupancy bit per inner node and a
+//! rank directory over the labels.
+//!
+//! ```
+//! use octolinear::{mapped, OccupancyTree, Point3, ScanOptions};
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let mut tree = OccupancyTree::new(0.1)?;
+//! let scan = [Point3::new(2.0, 0.5, 0.3)];
+//! tree.insert_point_cloud(&scan, Point3::new(0.0, 0.0, 0.0), &ScanOptions::default())?;
+//! let bytes = mapped::to_bytes(&tree, mapped::WriteOptions::default())?;
+//! let map = mapped::MappedMap::new(&bytes[..])?; // O(1) header checks
+//! map.verify()?; // optional O(n) walk: checksums and structure
+//! let view = map.view();
+//! let p = Point3::new(2.0, 0.5, 0.3);
+//! assert_eq!(view.search_point(p, 0)?, tree.search_point(p, 0)?);
+//! assert_eq!(view.leaves(0).count(), tree.leaves(0).count());
+//! # Ok(()) }
+//! ```
+//!
+//! Robustness: opening checks only the header, in O(1). Whatever the
+//! remaining bytes hold, queries never panic and never loop without bound
+//! (a search visits at most 16 levels, an iteration at most as many nodes
+//! as the header announces); on a corrupted file they may answer wrongly.
+//! [`MapView::verify`] checks everything and guarantees correct answers.
+//! No `unsafe` code is involved except the memory mapping in
+//! [`MappedMap::open`].
+
+pub mod format;
+mod nav;
+mod query;
+mod verify;
+mod write;
+
+pub use format::{
+    Header, Index, Section, SectionKind, TreeKind, Variant, HEADER_LEN, MAGIC, VERSION_MAJOR, VERSION_MINOR,
+};
+pub use query::{cast_ray, MapItem, OccupancyLookup};
+pub use verify::VerifyReport;
+pub use write::{to_bytes, write, write_file, write_file_with, WriteOptions};
+
+use crate::geometry::Point3;
+use crate::key::{Key, KeyError, KeySpace};
+use crate::ray::{CastError, CastOptions, CastOutcome};
+use crate::sensor::SensorModel;
+use crate::tree::{Found, KeyBox, OccupancyTree, PreorderBuilder};
+use format::Meta;
+use nav::{with_nav, AnyNav, MlNav, Nav, Node, PtrNav, RankNav};
+use query::RawIter;
+use std::io;
+use std::path::Path;
+
+/// Why an `.olm` file was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum OlmError {
+    #[error("I/O error: {0}")]
+    Io(#[from] io::Error),
+    #[error("not an .olm file (magic bytes differ)")]
+    BadMagic,
+    #[error("file is {len} bytes, shorter than the {need}-byte header")]
+    TooShort { len: u64, need: u64 },
+    #[error("format version {major}.{minor} is not supported (this reader reads {VERSION_MAJOR}.x)")]
+    Version { major: u16, minor: u16 },
+    #[error("endianness check word reads {found:#010x}, expected 0x0a0b0c0d (file written big-endian or corrupted)")]
+    Endianness { found: u32 },
+    #[error("header checksum mismatch: stored {stored:#010x}, computed {computed:#010x}")]
+    HeaderChecksum { stored: u32, computed: u32 },
+    #[error("tree kind {0} is reserved (ColorOcTree = 1, OcTreeStamped = 2) but not supported yet")]
+    UnsupportedKind(u8),
+    #[error("header field {field} is invalid: {value}")]
+    BadField { field: &'static str, value: String },
+    #[error("file is {actual} bytes but its header says {header} (truncated or extended)")]
+    FileLength { header: u64, actual: u64 },
+    #[error("section kind {kind}: {reason}")]
+    Section { kind: u16, reason: String },
+    #[error("section kind {kind}: checksum mismatch (stored {stored:#010x}, computed {computed:#010x})")]
+    SectionChecksum { kind: u16, stored: u32, computed: u32 },
+    #[error("inconsistent tree structure: {0}")]
+    Structure(String),
+}
+
+/// An `.olm` map over bytes it owns or borrows: `Vec<u8>`, `&[u8]`,
+/// `&'static [u8]` or a [`memmap2::Mmap`] ([`MappedMap::open`]).
+/// Construction checks the header only (O(1)); queries go through
+/// [`MappedMap::view`].
+pub struct MappedMap<D> {
+    data: D,
+    meta: Meta,
+}
+
+impl<D: AsRef<[u8]>> MappedMap<D> {
+    /// Checks the header (O(1)) and keeps the bytes.
+    pub fn new(data: D) -> Result<Self, OlmError> {
+        let meta = format::parse(data.as_ref())?;
+        Ok(MappedMap { data, meta })
+    }
+
+    /// A cheap, copyable handle for queries.
+    #[inline]
+    pub fn view(&self) -> MapView<'_> {
+        MapView::from_parts(self.data.as_ref(), &self.meta)
+    }
+
+    pub fn header(&self) -> &Header {
+        &self.meta.header
+    }
+
+    pub fn bytes(&self) -> &[u8] {
+        self.data.as_ref()
+    }
+
+    pub fn into_inner(self) -> D {
+        self.data
+    }
+
+    /// See [`MapView::verify`].
+    pub fn verify(&self) -> Result<VerifyReport, OlmError> {
+        self.view().verify()
+    }
+
+    /// See [`MapView::search`].
+    #[inline]
+    pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
+        self.view().search(key, depth)
+    }
+
+    /// See [`MapView::search_point`].
+    pub fn search_point(&self, p: Point3, depth: u8) -> Result<Option<Found>, KeyError> {
+        self.view().search_point(p, depth)
+    }
+
+    /// See [`MapView::to_tree`].
+    pub fn to_tree(&self) -> Result<OccupancyTree, OlmError> {
+        self.view().to_tree()
+    }
+}
+
+impl MappedMap<memmap2::Mmap> {
+    /// Memory-maps the file at `path` and checks its header (O(1): nothing
+    /// beyond the header is read until queried).
+    ///
+    /// This is the only `unsafe` in the module. Assumption: the file is
+    /// not truncated or modified in place while mapped. Writers in this
+    /// crate never modify a file in place (they write a temporary file and
+    /// rename it over the old one, so a mapping keeps the old contents).
+    /// If another process breaks the assumption, truncation makes reads
+    /// fault (SIGBUS) and modification makes the bytes change under the
+    /// reader; all reads are bounds-checked copies of bytes into integers,
+    /// so changed contents can only produce wrong answers.
+    pub fn open(path: &Path) -> Result<Self, OlmError> {
+        let file = std::fs::File::open(path)?;
+        // SAFETY: memmap2 requires that the mapped file is not modified or
+        // truncated for the lifetime of the map; see the assumption above.
+        // The map is read-only and only ever read through `&[u8]`.
+        let map = unsafe { memmap2::Mmap::map(&file)? };
+        Self::new(map)
+    }
+}
+
+/// Opens an `.olm` file by memory mapping ([`MappedMap::open`]).
+pub fn open(path: &Path) -> Result<MappedMap<memmap2::Mmap>, OlmError> {
+    MappedMap::open(path)
+}
+
+/// Reads an `.olm` file into an in-memory tree (open, verify, convert).
+pub fn read_file(path: &Path) -> Result<OccupancyTree, OlmError> {
+    open(path)?.to_tree()
+}
+
+/// Queries on a mapped file. Copyable; borrows the bytes and the parsed header.
+#[derive(Clone, Copy)]
+pub struct MapView<'a> {
+    data: &'a [u8],
+    meta: &'a Meta,
+    nav: AnyNav<'a>,
+}
+
+/// Depth-first iteration over a mapped file, in OctoMap's order.
+pub struct MapIter<'a>(IterInner<'a>);
+
+enum IterInner<'a> {
+    Rank(RawIter<'a, RankNav<'a>>),
+    Ptr(RawIter<'a, PtrNav<'a>>),
+    Ml(RawIter<'a, MlNav<'a>>),
+}
+
+impl<'a> Iterator for MapIter<'a> {
+    type Item = MapItem<'a>;
+
+    #[inline]
+    fn next(&mut self) -> Option<MapItem<'a>> {
+        match &mut self.0 {
+            IterInner::Rank(i) => i.next_item(),
+            IterInner::Ptr(i) => i.next_item(),
+            IterInner::Ml(i) => i.next_item(),
+        }
+    }
+}
+
+impl<'a> MapView<'a> {
+    fn from_parts(data: &'a [u8], meta: &'a Meta) -> Self {
+        MapView { data, meta, nav: AnyNav::new(data, meta) }
+    }
+
+    pub fn header(&self) -> &'a Header {
+        &self.meta.header
+    }
+
+    pub fn bytes(&self) -> &'a [u8] {
+        self.data
+    }
+
+    pub fn resolution(&self) -> f64 {
+        self.meta.header.resolution
+    }
+
+    pub fn sensor(&self) -> &'a SensorModel {
+        &self.meta.header.sensor
+    }
+
+    pub fn key_space(&self) -> &'a KeySpace {
+        &self.meta.keys
+    }
+
+    pub fn variant(&self) -> Variant {
+        self.meta.header.variant
+    }
+
+    /// OctoMap's `size()` counter of the tree that was written.
+    pub fn size_counter(&self) -> u64 {
+        self.meta.header.size_counter
+    }
+
+    pub fn node_count(&self) -> u64 {
+        self.meta.header.node_count
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.meta.header.node_count == 0
+    }
+
+    pub fn is_occupied(&self, value: f32) -> bool {
+        self.meta.header.sensor.is_occupied(value)
+    }
+
+    /// The key of the voxel containing `p`.
+    pub fn key(&self, p: Point3) -> Result<Key, KeyError> {
+        self.meta.keys.key(p)
+    }
+
+    /// Checks every byte: section checksums, padding, the rank directory
+    /// or child pointers, and that the nodes form one tree of depth ≤ 16
+    /// with the announced counts. O(file size).
+    pub fn verify(&self) -> Result<VerifyReport, OlmError> {
+        verify::verify(self.data, self.meta)
+    }
+
+    /// OctoMap's `search(key, depth)` (depth 0 means 16): the node at
+    /// `depth` containing `key`, or the deepest existing leaf above it;
+    /// `None` when the path ends at an inner node lacking the child.
+    #[inline]
+    pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
+        with_nav!(self.nav, |nav| query::search(nav, key, depth))
+    }
+
+    /// [`Self::search`] at the voxel containing `p`.
+    pub fn search_point(&self, p: Point3, depth: u8) -> Result<Option<Found>, KeyError> {
+        Ok(self.search(self.meta.keys.key(p)?, depth))
+    }
+
+    /// The root's value, `None` for an empty map.
+    pub fn root_value(&self) -> Option<f32> {
+        with_nav!(self.nav, |nav| nav.root().and_then(|r| nav.get(r)).map(|(v, _)| v))
+    }
+
+    fn iter(&self, max_depth: u8, leaves_only: bool, bbx: Option<KeyBox>) -> MapIter<'a> {
+        let keys = &self.meta.keys;
+        MapIter(match self.nav {
+            AnyNav::Rank(n) => IterInner::Rank(RawIter::new(n, keys, max_depth, leaves_only, bbx)),
+            AnyNav::Ptr(n) => IterInner::Ptr(RawIter::new(n, keys, max_depth, leaves_only, bbx)),
+            AnyNav::Ml(n) => IterInner::Ml(RawIter::new(n, keys, max_depth, leaves_only, bbx)),
+        })
+    }
+
+    /// Every node, depth first with children 0..7 (`begin_tree(max_depth)`).
+    pub fn nodes(&self, max_depth: u8) -> MapIter<'a> {
+        self.iter(max_depth, false, None)
+    }
+
+    /// Every leaf (and every node at `max_depth`), in OctoMap's order.
+    pub fn leaves(&self, max_depth: u8) -> MapIter<'a> {
+        self.iter(max_depth, true, None)
+    }
+
+    /// Leaves overlapping the key box, as OctoMap's `leaf_bbx_iterator`.
+    pub fn leaves_in_box(&self, bbx: KeyBox, max_depth: u8) -> MapIter<'a> {
+        self.iter(max_depth, true, Some(bbx))
+    }
+
+    /// OctoMap's `castRay`, as [`OccupancyTree::cast_ray`].
+    pub fn cast_ray(&self, origin: Point3, direction: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
+        let (keys, sensor) = (&self.meta.keys, &self.meta.header.sensor);
+        with_nav!(self.nav, |nav| {
+            let mut path = query::PathSearch::new(nav);
+            query::cast_ray_with(keys, sensor, |k| path.search(k), origin, direction, opts)
+        })
+    }
+
+    /// The in-memory tree (after [`Self::verify`]). Its `size()` is the
+    /// recounted node count, as after OctoMap's `.ot` reader; the stored
+    /// counter is [`Self::size_counter`].
+    pub fn to_tree(&self) -> Result<OccupancyTree, OlmError> {
+        self.verify()?;
+        let h = &self.meta.header;
+        let mut builder = PreorderBuilder::new();
+        let pushed = with_nav!(self.nav, |nav| preorder(nav, &mut builder));
+        pushed.map_err(OlmError::Structure)?;
+        builder
+            .finish(h.resolution, h.sensor)
+            .map_err(|e| OlmError::Structure(e.to_string()))?
+            .ok_or_else(|| OlmError::Structure("node stream ended early".into()))
+    }
+}
+
+/// Feeds the nodes in depth-first pre-order to the builder.
+fn preorder<N: Nav>(nav: N, b: &mut PreorderBuilder) -> Result<(), String> {
+    let Some(root) = nav.root() else {
+        return Ok(());
+    };
+    let mut stack = vec![(root, 0usize)];
+    let mut seq = [(0u32, 0u32); 17];
+    let mut index = 0u64;
+    let budget = nav.node_budget();
+    while let Some((n, depth)) = stack.pop() {
+        if index >= budget || depth > 16 {
+            return Err("more nodes reachable than announced".into());
+        }
+        let (value, mask) = nav.get(n).ok_or("node out of range")?;
+        b.push(value, mask, index).map_err(|e| e.to_string())?;
+        index += 1;
+        if mask == 0 {
+            nav.skip_seq(n, &mut seq[depth]);
+        } else {
+            let mut ch = [Node::default(); 8];
+            let k = nav.children_seq(n, mask, &mut seq[depth], &mut ch).ok_or("children out of range")?;
+            stack.extend(ch[..k].iter().rev().map(|&c| (c, depth + 1)));
+        }
+    }
+    Ok(())
+}
+
+impl OccupancyLookup for MapView<'_> {
+    fn key_space(&self) -> &KeySpace {
+        &self.meta.keys
+    }
+
+    fn sensor(&self) -> &SensorModel {
+        &self.meta.header.sensor
+    }
+
+    #[inline]
+    fn search(&self, key: Key, depth: u8) -> Option<Found> {
+        MapView::search(self, key, depth)
+    }
+}
+
+impl<D: AsRef<[u8]>> OccupancyLookup for MappedMap<D> {
+    fn key_space(&self) -> &KeySpace {
+        &self.meta.keys
+    }
+
+    fn sensor(&self) -> &SensorModel {
+        &self.meta.header.sensor
+    }
+
+    #[inline]
+    fn search(&self, key: Key, depth: u8) -> Option<Found> {
+        self.view().search(key, depth)
+    }
+}
+
+impl<D> std::fmt::Debug for MappedMap<D> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MappedMap").field("header", &self.meta.header).finish_non_exhaustive()
+    }
+}
+
+impl std::fmt::Debug for MapView<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MapView").field("header", &self.meta.header).finish_non_exhaustive()
+    }
+}

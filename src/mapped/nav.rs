@@ -1,0 +1,417 @@
+//! Child lookup on the mapped sections, one implementation per layout.
+//!
+//! Every read is bounds-checked; an index that falls outside its section,
+//! or a child that would not lie strictly after its parent, ends the walk
+//! (`None`) instead of panicking. Verified files never take those exits.
+
+use super::format::{f32_at, u16_at, u32_at, u64_at, Index, Meta, Variant};
+
+/// A node of the mapped tree. For the full layouts `idx` is the node's
+/// position in the node arrays; for maximum likelihood, `label` is the
+/// node's two-bit label (1 free leaf, 2 occupied leaf, 3 inner) and `idx`
+/// the inner record of an inner node.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Node {
+    pub idx: u32,
+    pub label: u8,
+}
+
+/// Navigation over one layout.
+pub(crate) trait Nav: Copy {
+    fn root(&self) -> Option<Node>;
+    /// The node's log-odds and child mask.
+    fn get(&self, n: Node) -> Option<(f32, u8)>;
+    /// Child `pos` (present in `mask`, the node's mask).
+    fn child(&self, n: Node, mask: u8, pos: usize) -> Option<Node>;
+    /// The children present in `mask`, in child order; returns how many.
+    fn children(&self, n: Node, mask: u8, out: &mut [Node; 8]) -> Option<usize>;
+    /// An upper bound on the nodes a traversal may visit.
+    fn node_budget(&self) -> u64;
+    /// [`Nav::children`] for a traversal that visits each level's nodes in
+    /// increasing order: `slot` (one per level, initially `(0, 0)`)
+    /// remembers where the next node's children start, so that a run of
+    /// consecutive nodes needs no rank computation.
+    #[inline]
+    fn children_seq(&self, n: Node, mask: u8, _slot: &mut (u32, u32), out: &mut [Node; 8]) -> Option<usize> {
+        self.children(n, mask, out)
+    }
+    /// Tells the sequence that a childless node `n` was passed.
+    #[inline]
+    fn skip_seq(&self, _n: Node, _slot: &mut (u32, u32)) {}
+}
+
+#[inline(always)]
+fn below(pos: usize) -> u8 {
+    ((1u16 << pos) - 1) as u8
+}
+
+/// Counts of `11` pairs (inner children) in a word of two-bit labels.
+#[inline(always)]
+pub(crate) fn count_inner(x: u64) -> u32 {
+    (x & (x >> 1) & 0x5555_5555_5555_5555).count_ones()
+}
+
+/// Child mask of a label word: bit `i` set when label `i` is not `00`.
+#[inline(always)]
+pub(crate) fn label_mask(w: u16) -> u8 {
+    let x = u32::from((w | (w >> 1)) & 0x5555);
+    let x = (x | (x >> 1)) & 0x3333;
+    let x = (x | (x >> 2)) & 0x0f0f;
+    let x = (x | (x >> 4)) & 0x00ff;
+    x as u8
+}
+
+/// Full variant, breadth-first order, rank directory.
+#[derive(Clone, Copy)]
+pub(crate) struct RankNav<'a> {
+    pub masks: &'a [u8],
+    pub values: &'a [u8],
+    pub dir: &'a [u8],
+    pub log2: u32,
+    pub n: u32,
+}
+
+impl RankNav<'_> {
+    /// Children of the nodes `0..i` (the first child of `i` is at `1 + rank(i)`).
+    #[inline(always)]
+    pub fn rank(&self, i: u32) -> Option<u32> {
+        let i = i as usize;
+        let b = i >> self.log2;
+        let mut s = u32_at(self.dir, 4 * b)?;
+        let end = i >> 3;
+        let mut w = (b << self.log2) >> 3;
+        while w < end {
+            s = s.wrapping_add(u64_at(self.masks, 8 * w)?.count_ones());
+            w += 1;
+        }
+        let rem = i & 7;
+        if rem != 0 {
+            let word = u64_at(self.masks, 8 * end)?;
+            s = s.wrapping_add((word & ((1u64 << (8 * rem)) - 1)).count_ones());
+        }
+        Some(s)
+    }
+
+    #[inline(always)]
+    fn first_child(&self, n: Node) -> Option<u32> {
+        let c = self.rank(n.idx)?.checked_add(1)?;
+        (c > n.idx).then_some(c)
+    }
+}
+
+impl Nav for RankNav<'_> {
+    #[inline(always)]
+    fn root(&self) -> Option<Node> {
+        (self.n > 0).then_some(Node { idx: 0, label: 0 })
+    }
+
+    #[inline(always)]
+    fn get(&self, n: Node) -> Option<(f32, u8)> {
+        let i = n.idx as usize;
+        Some((f32_at(self.values, 4 * i)?, *self.masks.get(i)?))
+    }
+
+    #[inline(always)]
+    fn child(&self, n: Node, mask: u8, pos: usize) -> Option<Node> {
+        let c = self.first_child(n)?.checked_add((mask & below(pos)).count_ones())?;
+        (c < self.n).then_some(Node { idx: c, label: 0 })
+    }
+
+    #[inline]
+    fn children(&self, n: Node, mask: u8, out: &mut [Node; 8]) -> Option<usize> {
+        let first = self.first_child(n)?;
+        let k = mask.count_ones();
+        if first.checked_add(k)? > self.n {
+            return None;
+        }
+        for (j, o) in out.iter_mut().take(k as usize).enumerate() {
+            *o = Node { idx: first + j as u32, label: 0 };
+        }
+        Some(k as usize)
+    }
+
+    fn node_budget(&self) -> u64 {
+        u64::from(self.n)
+    }
+
+    #[inline]
+    fn children_seq(&self, n: Node, mask: u8, slot: &mut (u32, u32), out: &mut [Node; 8]) -> Option<usize> {
+        let k = mask.count_ones();
+        let first = if slot.0 == n.idx && n.idx != 0 { slot.1 } else { self.first_child(n)? };
+        *slot = (n.idx.wrapping_add(1), first.wrapping_add(k));
+        if first <= n.idx || first.checked_add(k)? > self.n {
+            return None;
+        }
+        for (j, o) in out.iter_mut().take(k as usize).enumerate() {
+            *o = Node { idx: first + j as u32, label: 0 };
+        }
+        Some(k as usize)
+    }
+
+    #[inline]
+    fn skip_seq(&self, n: Node, slot: &mut (u32, u32)) {
+        if slot.0 == n.idx {
+            slot.0 = slot.0.wrapping_add(1);
+        }
+    }
+}
+
+/// Full variant, depth-first group order, first-child pointers.
+#[derive(Clone, Copy)]
+pub(crate) struct PtrNav<'a> {
+    pub masks: &'a [u8],
+    pub values: &'a [u8],
+    pub first: &'a [u8],
+    pub n: u32,
+}
+
+impl PtrNav<'_> {
+    #[inline(always)]
+    fn first_child(&self, n: Node) -> Option<u32> {
+        let c = u32_at(self.first, 4 * n.idx as usize)?;
+        (c > n.idx).then_some(c)
+    }
+}
+
+impl Nav for PtrNav<'_> {
+    #[inline(always)]
+    fn root(&self) -> Option<Node> {
+        (self.n > 0).then_some(Node { idx: 0, label: 0 })
+    }
+
+    #[inline(always)]
+    fn get(&self, n: Node) -> Option<(f32, u8)> {
+        let i = n.idx as usize;
+        Some((f32_at(self.values, 4 * i)?, *self.masks.get(i)?))
+    }
+
+    #[inline(always)]
+    fn child(&self, n: Node, mask: u8, pos: usize) -> Option<Node> {
+        let c = self.first_child(n)?.checked_add((mask & below(pos)).count_ones())?;
+        (c < self.n).then_some(Node { idx: c, label: 0 })
+    }
+
+    #[inline]
+    fn children(&self, n: Node, mask: u8, out: &mut [Node; 8]) -> Option<usize> {
+        let first = self.first_child(n)?;
+        let k = mask.count_ones();
+        if first.checked_add(k)? > self.n {
+            return None;
+        }
+        for (j, o) in out.iter_mut().take(k as usize).enumerate() {
+            *o = Node { idx: first + j as u32, label: 0 };
+        }
+        Some(k as usize)
+    }
+
+    fn node_budget(&self) -> u64 {
+        u64::from(self.n)
+    }
+}
+
+/// Maximum likelihood: breadth-first inner records of child labels.
+#[derive(Clone, Copy)]
+pub(crate) struct MlNav<'a> {
+    pub labels: &'a [u8],
+    pub occupancy: &'a [u8],
+    pub dir: &'a [u8],
+    pub log2: u32,
+    /// Inner records.
+    pub inner: u32,
+    pub nodes: u32,
+    pub root_label: u8,
+    pub free: f32,
+    pub occupied: f32,
+}
+
+impl MlNav<'_> {
+    /// Inner children of the inner records `0..j`.
+    #[inline(always)]
+    pub fn rank(&self, j: u32) -> Option<u32> {
+        let j = j as usize;
+        let b = j >> self.log2;
+        let mut s = u32_at(self.dir, 4 * b)?;
+        let end = j >> 2;
+        let mut w = (b << self.log2) >> 2;
+        while w < end {
+            s = s.wrapping_add(count_inner(u64_at(self.labels, 8 * w)?));
+            w += 1;
+        }
+        let rem = j & 3;
+        if rem != 0 {
+            let word = u64_at(self.labels, 8 * end)?;
+            s = s.wrapping_add(count_inner(word & ((1u64 << (16 * rem)) - 1)));
+        }
+        Some(s)
+    }
+
+    #[inline(always)]
+    pub fn word(&self, j: u32) -> Option<u16> {
+        u16_at(self.labels, 2 * j as usize)
+    }
+
+    #[inline(always)]
+    pub fn occupied_bit(&self, j: u32) -> Option<bool> {
+        let w = u64_at(self.occupancy, 8 * (j as usize >> 6))?;
+        Some(w >> (j & 63) & 1 != 0)
+    }
+
+    #[inline(always)]
+    fn make_child(&self, n: Node, w: u16, pos: usize, inner_base: u32) -> Option<Node> {
+        match (w >> (2 * pos)) & 3 {
+            0 => None,
+            3 => {
+                let lower = u64::from(w) & ((1u64 << (2 * pos)) - 1);
+                let c = inner_base.checked_add(count_inner(lower))?;
+                (c > n.idx && c < self.inner).then_some(Node { idx: c, label: 3 })
+            }
+            l => Some(Node { idx: 0, label: l as u8 }),
+        }
+    }
+}
+
+impl Nav for MlNav<'_> {
+    #[inline(always)]
+    fn root(&self) -> Option<Node> {
+        match self.root_label {
+            0 => None,
+            l => Some(Node { idx: 0, label: l }),
+        }
+    }
+
+    #[inline(always)]
+    fn get(&self, n: Node) -> Option<(f32, u8)> {
+        match n.label {
+            1 => Some((self.free, 0)),
+            2 => Some((self.occupied, 0)),
+            3 => {
+                let v = if self.occupied_bit(n.idx)? { self.occupied } else { self.free };
+                Some((v, label_mask(self.word(n.idx)?)))
+            }
+            _ => None,
+        }
+    }
+
+    #[inline(always)]
+    fn child(&self, n: Node, _mask: u8, pos: usize) -> Option<Node> {
+        if n.label != 3 {
+            return None;
+        }
+        let w = self.word(n.idx)?;
+        let base = self.rank(n.idx)?.checked_add(1)?;
+        self.make_child(n, w, pos, base)
+    }
+
+    #[inline]
+    fn children(&self, n: Node, _mask: u8, out: &mut [Node; 8]) -> Option<usize> {
+        if n.label != 3 {
+            return Some(0);
+        }
+        let w = self.word(n.idx)?;
+        let base = self.rank(n.idx)?.checked_add(1)?;
+        let mut k = 0;
+        for pos in 0..8 {
+            if (w >> (2 * pos)) & 3 != 0 {
+                out[k] = self.make_child(n, w, pos, base)?;
+                k += 1;
+            }
+        }
+        Some(k)
+    }
+
+    fn node_budget(&self) -> u64 {
+        u64::from(self.nodes)
+    }
+
+    #[inline]
+    fn children_seq(&self, n: Node, _mask: u8, slot: &mut (u32, u32), out: &mut [Node; 8]) -> Option<usize> {
+        if n.label != 3 {
+            return Some(0);
+        }
+        let w = self.word(n.idx)?;
+        let base = if slot.0 == n.idx && n.idx != 0 { slot.1 } else { self.rank(n.idx)?.checked_add(1)? };
+        *slot = (n.idx.wrapping_add(1), base.wrapping_add(count_inner(u64::from(w))));
+        let mut k = 0;
+        for pos in 0..8 {
+            if (w >> (2 * pos)) & 3 != 0 {
+                out[k] = self.make_child(n, w, pos, base)?;
+                k += 1;
+            }
+        }
+        Some(k)
+    }
+}
+
+/// The navigator of a parsed file, one variant per layout.
+#[derive(Clone, Copy)]
+pub(crate) enum AnyNav<'a> {
+    Rank(RankNav<'a>),
+    Ptr(PtrNav<'a>),
+    Ml(MlNav<'a>),
+}
+
+fn section<'a>(data: &'a [u8], r: &std::ops::Range<usize>) -> &'a [u8] {
+    data.get(r.clone()).unwrap_or(&[])
+}
+
+impl<'a> AnyNav<'a> {
+    pub fn new(data: &'a [u8], meta: &Meta) -> Self {
+        let h = &meta.header;
+        let r = &meta.ranges;
+        let n = h.node_count.min(u64::from(u32::MAX)) as u32;
+        match (h.variant, h.index) {
+            (Variant::Full, Index::Rank) => AnyNav::Rank(RankNav {
+                masks: section(data, &r.masks),
+                values: section(data, &r.values),
+                dir: section(data, &r.rank),
+                log2: u32::from(h.rank_block_log2),
+                n,
+            }),
+            (Variant::Full, Index::Pointers) => AnyNav::Ptr(PtrNav {
+                masks: section(data, &r.masks),
+                values: section(data, &r.values),
+                first: section(data, &r.first_child),
+                n,
+            }),
+            (Variant::MaxLikelihood, _) => AnyNav::Ml(MlNav {
+                labels: section(data, &r.labels),
+                occupancy: section(data, &r.inner_occupancy),
+                dir: section(data, &r.rank),
+                log2: u32::from(h.rank_block_log2),
+                inner: h.inner_count.min(u64::from(u32::MAX)) as u32,
+                nodes: n,
+                root_label: h.root_label,
+                free: h.sensor.clamping_min,
+                occupied: h.sensor.clamping_max,
+            }),
+        }
+    }
+}
+
+/// Runs `$body` with `$nav` bound to the concrete navigator, so that the
+/// body is compiled once per layout (no per-level dispatch).
+macro_rules! with_nav {
+    ($any:expr, |$nav:ident| $body:expr) => {
+        match $any {
+            $crate::mapped::nav::AnyNav::Rank($nav) => $body,
+            $crate::mapped::nav::AnyNav::Ptr($nav) => $body,
+            $crate::mapped::nav::AnyNav::Ml($nav) => $body,
+        }
+    };
+}
+pub(crate) use with_nav;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn label_masks_and_inner_counts() {
+        assert_eq!(label_mask(0), 0);
+        assert_eq!(label_mask(0b11_00_10_01), 0b1011);
+        assert_eq!(label_mask(0xffff), 0xff);
+        assert_eq!(label_mask(0b01 << 14), 0x80);
+        assert_eq!(count_inner(0b11_01_11_10), 2);
+        assert_eq!(count_inner(u64::MAX), 32);
+    }
+}

@@ -1,0 +1,355 @@
+//! Queries answered in place: OctoMap's `search`, depth-first iteration
+//! (`tree_iterator`, `leaf_iterator`, `leaf_bbx_iterator`) and `castRay`,
+//! each with exactly the in-memory tree's semantics.
+//!
+//! `search` is bounded by 16 levels. Iterators stop after as many nodes as
+//! the header announces (a verified file never reaches that bound; a
+//! corrupted one whose child indices alias cannot make them run longer).
+
+use super::nav::{Nav, Node};
+use crate::geometry::Point3;
+use crate::key::{adjust_key_to_depth, Key, KeySpace, KEY_CENTER, TREE_DEPTH};
+use crate::ray::{CastError, CastOptions, CastOutcome};
+use crate::sensor::SensorModel;
+use crate::tree::{Found, KeyBox, OccupancyTree};
+
+/// What ray casting needs from a map: OctoMap's `search` and its key space.
+/// Implemented by [`OccupancyTree`] and by the mapped views, so that one
+/// [`cast_ray`] serves both (`ray.rs` could share it too).
+pub trait OccupancyLookup {
+    fn key_space(&self) -> &KeySpace;
+    fn sensor(&self) -> &SensorModel;
+    /// OctoMap's `search(key, depth)`; depth 0 means 16.
+    fn search(&self, key: Key, depth: u8) -> Option<Found>;
+}
+
+impl OccupancyLookup for OccupancyTree {
+    fn key_space(&self) -> &KeySpace {
+        OccupancyTree::key_space(self)
+    }
+
+    fn sensor(&self) -> &SensorModel {
+        OccupancyTree::sensor(self)
+    }
+
+    #[inline]
+    fn search(&self, key: Key, depth: u8) -> Option<Found> {
+        OccupancyTree::search(self, key, depth)
+    }
+}
+
+#[inline(always)]
+pub(crate) fn normalize_depth(depth: u8) -> u8 {
+    if depth == 0 || depth > TREE_DEPTH {
+        TREE_DEPTH
+    } else {
+        depth
+    }
+}
+
+/// `search` on any layout (mirrors `OccupancyTree::search`).
+#[inline(always)]
+pub(crate) fn search<N: Nav>(nav: N, key: Key, depth: u8) -> Option<Found> {
+    let depth = normalize_depth(depth);
+    let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
+    let mut node = nav.root()?;
+    let (mut value, mut mask) = nav.get(node)?;
+    for d in 0..depth {
+        let pos = key.child_index(d);
+        if mask & (1 << pos) == 0 {
+            if mask != 0 {
+                return None;
+            }
+            return Some(Found { value, depth: d, is_leaf: true, extra: 0 });
+        }
+        node = nav.child(node, mask, pos)?;
+        (value, mask) = nav.get(node)?;
+    }
+    Some(Found { value, depth, is_leaf: mask == 0, extra: 0 })
+}
+
+/// Does the node at `key`/`depth` overlap the box? (OctoMap's test, as
+/// `KeyBox` applies it in the tree's iterator.)
+#[inline]
+fn overlaps(b: &KeyBox, key: Key, depth: u8) -> bool {
+    let off = (KEY_CENTER >> depth) as i32;
+    (0..3).all(|i| {
+        let k = i32::from(key.0[i]);
+        i32::from(b.min.0[i]) <= k + off && i32::from(b.max.0[i]) >= k - off
+    })
+}
+
+/// One node as a mapped iterator reports it (the fields of the tree's
+/// `NodeItem`).
+#[derive(Clone, Copy, Debug)]
+pub struct MapItem<'a> {
+    /// The key OctoMap's iterator computes (centre key of the node).
+    pub key: Key,
+    pub depth: u8,
+    pub value: f32,
+    /// No children, or at the iteration's depth limit.
+    pub is_leaf: bool,
+    keys: &'a KeySpace,
+}
+
+impl MapItem<'_> {
+    /// Edge length in metres.
+    pub fn size(&self) -> f64 {
+        self.keys.node_size(self.depth)
+    }
+
+    /// Centre in metres (double, as OctoMap's `getX/Y/Z`).
+    pub fn center(&self) -> [f64; 3] {
+        self.key.0.map(|k| self.keys.key_to_coord_at_depth(k, self.depth))
+    }
+
+    /// Centre as a float point (`getCoordinate`).
+    pub fn center_point(&self) -> Point3 {
+        self.keys.key_to_point_at_depth(self.key, self.depth)
+    }
+}
+
+/// Depth-first iteration over one layout.
+pub(crate) struct RawIter<'a, N: Nav> {
+    nav: N,
+    keys: &'a KeySpace,
+    stack: Vec<(Node, Key, u8)>,
+    max_depth: u8,
+    leaves_only: bool,
+    bbx: Option<KeyBox>,
+    budget: u64,
+    /// Per depth: where the next node's children start (see `Nav::children_seq`).
+    seq: [(u32, u32); TREE_DEPTH as usize + 1],
+}
+
+impl<'a, N: Nav> RawIter<'a, N> {
+    pub fn new(nav: N, keys: &'a KeySpace, max_depth: u8, leaves_only: bool, bbx: Option<KeyBox>) -> Self {
+        let mut stack = Vec::new();
+        if let Some(root) = nav.root() {
+            stack.reserve(8 * TREE_DEPTH as usize + 1);
+            stack.push((root, Key::ROOT, 0));
+        }
+        RawIter {
+            budget: nav.node_budget(),
+            nav,
+            keys,
+            stack,
+            max_depth: normalize_depth(max_depth),
+            leaves_only,
+            bbx,
+            seq: [(0, 0); TREE_DEPTH as usize + 1],
+        }
+    }
+
+    #[inline]
+    pub fn next_item(&mut self) -> Option<MapItem<'a>> {
+        while let Some((n, key, depth)) = self.stack.pop() {
+            if self.budget == 0 {
+                self.stack.clear();
+                return None;
+            }
+            self.budget -= 1;
+            let Some((value, mask)) = self.nav.get(n) else {
+                continue;
+            };
+            let is_leaf = mask == 0 || depth >= self.max_depth;
+            if mask == 0 && depth < self.max_depth {
+                self.nav.skip_seq(n, &mut self.seq[depth as usize]);
+            }
+            if !is_leaf {
+                let mut children = [Node::default(); 8];
+                let slot = &mut self.seq[depth as usize];
+                if let Some(mut k) = self.nav.children_seq(n, mask, slot, &mut children) {
+                    for pos in (0..8).rev() {
+                        if mask & (1 << pos) != 0 {
+                            if k == 0 {
+                                break;
+                            }
+                            k -= 1;
+                            let ck = key.child_key(pos, depth);
+                            if self.bbx.map_or(true, |b| overlaps(&b, ck, depth + 1)) {
+                                self.stack.push((children[k], ck, depth + 1));
+                            }
+                        }
+                    }
+                }
+                if self.leaves_only {
+                    continue;
+                }
+            }
+            return Some(MapItem { key, depth, value, is_leaf, keys: self.keys });
+        }
+        None
+    }
+}
+
+/// `origin + ...` DDA state of `castRay` (the border offset added in
+/// double, unlike `computeRayKeys`). Duplicated from `ray.rs`, whose `Dda`
+/// is private.
+struct Dda {
+    key: Key,
+    step: [i32; 3],
+    t_max: [f64; 3],
+    t_delta: [f64; 3],
+}
+
+/// Index of the smallest `t_max`, ties going to the higher axis.
+#[inline(always)]
+fn min_axis(t: &[f64; 3]) -> usize {
+    if t[0] < t[1] {
+        if t[0] < t[2] {
+            0
+        } else {
+            2
+        }
+    } else if t[1] < t[2] {
+        1
+    } else {
+        2
+    }
+}
+
+impl Dda {
+    fn new(keys: &KeySpace, origin: Point3, key: Key, direction: Point3) -> Self {
+        let o = [origin.x, origin.y, origin.z];
+        let d = [direction.x, direction.y, direction.z];
+        let mut step = [0; 3];
+        let mut t_max = [f64::MAX; 3];
+        let mut t_delta = [f64::MAX; 3];
+        for i in 0..3 {
+            step[i] = if d[i] > 0.0 {
+                1
+            } else if d[i] < 0.0 {
+                -1
+            } else {
+                0
+            };
+            if step[i] != 0 {
+                let offset = f64::from(step[i]) * keys.resolution() * 0.5;
+                let border = keys.key_to_coord(key.0[i]) + offset;
+                t_max[i] = (border - f64::from(o[i])) / f64::from(d[i]);
+                t_delta[i] = keys.resolution() / f64::from(d[i].abs());
+            }
+        }
+        Dda { key, step, t_max, t_delta }
+    }
+}
+
+/// OctoMap's `castRay` on any map (bit-identical to
+/// `OccupancyTree::cast_ray`): follows the ray from `origin` until an
+/// occupied voxel, unknown space (unless ignored), the maximum range or
+/// the edge of the map.
+pub fn cast_ray<M: OccupancyLookup + ?Sized>(
+    map: &M,
+    origin: Point3,
+    direction: Point3,
+    opts: CastOptions,
+) -> Result<CastOutcome, CastError> {
+    cast_ray_with(map.key_space(), map.sensor(), |k| map.search(k, 0), origin, direction, opts)
+}
+
+/// [`cast_ray`] with the voxel search given as a closure (depth 16).
+pub(crate) fn cast_ray_with(
+    keys: &KeySpace,
+    sensor: &SensorModel,
+    mut search: impl FnMut(Key) -> Option<Found>,
+    origin: Point3,
+    direction: Point3,
+    opts: CastOptions,
+) -> Result<CastOutcome, CastError> {
+    let start = keys.key(origin)?;
+    match search(start) {
+        Some(n) if sensor.is_occupied(n.value) => return Ok(CastOutcome::Occupied { end: keys.key_to_point(start) }),
+        Some(_) => {}
+        None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end: keys.key_to_point(start) }),
+        None => {}
+    }
+    let direction = direction.normalized();
+    let mut dda = Dda::new(keys, origin, start, direction);
+    if dda.step == [0; 3] {
+        return Err(CastError::ZeroDirection);
+    }
+    let max_range = opts.max_range.unwrap_or(-1.0);
+    let max_range_set = max_range > 0.0;
+    let max_range_sq = max_range * max_range;
+    let o = [origin.x, origin.y, origin.z];
+    loop {
+        let dim = min_axis(&dda.t_max);
+        let k = dda.key.0[dim];
+        if (dda.step[dim] < 0 && k == 0) || (dda.step[dim] > 0 && u32::from(k) == 2 * KEY_CENTER - 1) {
+            return Ok(CastOutcome::LeftMap { end: keys.key_to_point(dda.key) });
+        }
+        dda.key.0[dim] = dda.key.0[dim].wrapping_add(dda.step[dim] as u16);
+        dda.t_max[dim] += dda.t_delta[dim];
+        let end = keys.key_to_point(dda.key);
+        if max_range_set {
+            let e = [end.x, end.y, end.z];
+            let mut dist_sq = 0.0f64;
+            for j in 0..3 {
+                let d = e[j] - o[j];
+                dist_sq += f64::from(d * d);
+            }
+            if dist_sq > max_range_sq {
+                return Ok(CastOutcome::MaxRange { end });
+            }
+        }
+        match search(dda.key) {
+            Some(n) if sensor.is_occupied(n.value) => return Ok(CastOutcome::Occupied { end }),
+            Some(_) => {}
+            None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end }),
+            None => {}
+        }
+    }
+}
+
+/// Depth-16 searches that restart from the deepest node shared with the
+/// previous key's path instead of the root. Consecutive voxels of a ray
+/// share most of their path, so a step costs a level or two instead of 16.
+/// Answers are those of [`search`]: the shared nodes are the same nodes.
+pub(crate) struct PathSearch<N: Nav> {
+    nav: N,
+    key: Key,
+    /// Entries `0..len` hold the nodes at depths `0..len` on `key`'s path.
+    len: u8,
+    path: [(Node, f32, u8); TREE_DEPTH as usize + 1],
+}
+
+impl<N: Nav> PathSearch<N> {
+    pub fn new(nav: N) -> Self {
+        PathSearch { nav, key: Key::ROOT, len: 0, path: [(Node::default(), 0.0, 0); TREE_DEPTH as usize + 1] }
+    }
+
+    #[inline]
+    pub fn search(&mut self, key: Key) -> Option<Found> {
+        // levels whose child index is the same for both keys
+        let mut common = u32::from(TREE_DEPTH);
+        for a in 0..3 {
+            common = common.min((key.0[a] ^ self.key.0[a]).leading_zeros());
+        }
+        let start = if self.len == 0 {
+            let root = self.nav.root()?;
+            let (v, m) = self.nav.get(root)?;
+            self.path[0] = (root, v, m);
+            0
+        } else {
+            (common as u8).min(self.len - 1)
+        };
+        self.key = key;
+        self.len = start + 1;
+        let (mut node, mut value, mut mask) = self.path[start as usize];
+        for d in start..TREE_DEPTH {
+            let pos = key.child_index(d);
+            if mask & (1 << pos) == 0 {
+                if mask != 0 {
+                    return None;
+                }
+                return Some(Found { value, depth: d, is_leaf: true, extra: 0 });
+            }
+            node = self.nav.child(node, mask, pos)?;
+            (value, mask) = self.nav.get(node)?;
+            self.path[d as usize + 1] = (node, value, mask);
+            self.len = d + 2;
+        }
+        Some(Found { value, depth: TREE_DEPTH, is_leaf: mask == 0, extra: 0 })
+    }
+}

@@ -1,0 +1,388 @@
+//! Tree → `.olm`. Sections are produced by walks over the tree (one
+//! depth-limited walk per level for the breadth-first layouts), streamed
+//! through small buffers to their final offsets; the header, which holds
+//! the checksums, is written last. Memory stays bounded (a few MiB) except
+//! for the pointer layout, which keeps a `u32` subtree size per node.
+
+use super::format::{
+    self, required_sections, round8, Header, Index, Section, SectionKind, TreeKind, Variant, DEFAULT_RANK_BLOCK_LOG2,
+    HEADER_LEN, MAX_NODES, RANK_BLOCK_LOG2, SECTION_ALIGN, VERSION_MAJOR, VERSION_MINOR,
+};
+use crate::key::TREE_DEPTH;
+use crate::tree::{NodeRef, OccupancyTree};
+use std::io::{self, Seek, SeekFrom, Write};
+use std::path::Path;
+
+/// How to write a map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct WriteOptions {
+    pub variant: Variant,
+    /// [`Index::Pointers`] is for the full variant only.
+    pub index: Index,
+    /// Records per rank-directory block, as a power of two (3..=12).
+    pub rank_block_log2: u8,
+}
+
+impl Default for WriteOptions {
+    fn default() -> Self {
+        WriteOptions { variant: Variant::Full, index: Index::Rank, rank_block_log2: DEFAULT_RANK_BLOCK_LOG2 }
+    }
+}
+
+impl WriteOptions {
+    /// Maximum likelihood (what `.bt` holds), rank index.
+    pub fn max_likelihood() -> Self {
+        WriteOptions { variant: Variant::MaxLikelihood, ..Self::default() }
+    }
+
+    /// Full variant with first-child pointers instead of the rank directory.
+    pub fn pointers() -> Self {
+        WriteOptions { index: Index::Pointers, ..Self::default() }
+    }
+}
+
+fn invalid(msg: String) -> io::Error {
+    io::Error::new(io::ErrorKind::InvalidInput, msg)
+}
+
+/// Writes `tree` as `.olm` with the default options (full log-odds, rank
+/// index) to `path`, atomically (a temporary file renamed into place).
+pub fn write_file(tree: &OccupancyTree, path: &Path) -> io::Result<()> {
+    write_file_with(tree, path, WriteOptions::default())
+}
+
+/// [`write_file`] with options.
+pub fn write_file_with(tree: &OccupancyTree, path: &Path, opts: WriteOptions) -> io::Result<()> {
+    crate::formats::write_atomically(path, |w| write(tree, w, opts))
+}
+
+/// The `.olm` bytes of `tree`.
+pub fn to_bytes(tree: &OccupancyTree, opts: WriteOptions) -> io::Result<Vec<u8>> {
+    let mut c = io::Cursor::new(Vec::new());
+    write(tree, &mut c, opts)?;
+    Ok(c.into_inner())
+}
+
+/// Writes `tree` to a seekable writer positioned at the start of the file.
+/// The maximum-likelihood variant stores what OctoMap's `writeBinary`
+/// would: the tree converted to maximum likelihood and pruned (the
+/// caller's tree is not changed).
+pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOptions) -> io::Result<()> {
+    let log2 = match opts.index {
+        Index::Rank => {
+            if !RANK_BLOCK_LOG2.contains(&opts.rank_block_log2) {
+                return Err(invalid(format!("rank block log2 {} outside {:?}", opts.rank_block_log2, RANK_BLOCK_LOG2)));
+            }
+            opts.rank_block_log2
+        }
+        Index::Pointers => {
+            if opts.variant != Variant::Full {
+                return Err(invalid("child pointers exist for the full variant only".into()));
+            }
+            0
+        }
+    };
+    let ml_tree;
+    let tree = match opts.variant {
+        Variant::Full => tree,
+        Variant::MaxLikelihood => {
+            let mut t = tree.clone();
+            t.to_max_likelihood();
+            t.prune();
+            ml_tree = t;
+            &ml_tree
+        }
+    };
+    let (nodes, inner) = count(tree);
+    if nodes > MAX_NODES {
+        return Err(invalid(format!("{nodes} nodes exceed the format's {MAX_NODES}")));
+    }
+    let sensor = *tree.sensor();
+    let root_label = match (opts.variant, tree.root()) {
+        (Variant::Full, _) | (_, None) => 0,
+        (_, Some(r)) if r.has_children() => 3,
+        (_, Some(r)) => ml_label(r, sensor.clamping_max),
+    };
+    // section offsets: consecutive, each aligned
+    let required = required_sections(opts.variant, opts.index, nodes, inner, log2);
+    let mut sections = Vec::with_capacity(required.len());
+    let mut offset = HEADER_LEN as u64;
+    for (kind, length) in &required {
+        offset = offset.div_ceil(SECTION_ALIGN) * SECTION_ALIGN;
+        sections.push(Section { kind: *kind as u16, flags: 0, crc32: 0, offset, length: *length });
+        offset += length;
+    }
+    let file_length = offset;
+    let mut sinks: Vec<Sink> = sections.iter().map(|s| Sink::new(s.offset)).collect();
+    let sink_of = |kind: SectionKind| required.iter().position(|(k, _)| *k == kind).expect("section planned");
+    match (opts.variant, opts.index) {
+        (Variant::Full, Index::Rank) => {
+            let (m, r, v) = (sink_of(SectionKind::Masks), sink_of(SectionKind::Rank), sink_of(SectionKind::Values));
+            let block = 1u64 << log2;
+            let mut i = 0u64;
+            let mut children = 0u64;
+            for_each_level(tree, TREE_DEPTH, |n| {
+                let mask = n.child_mask();
+                if i % block == 0 {
+                    sinks[r].put(w, &(children as u32).to_le_bytes())?;
+                }
+                sinks[m].put(w, &[mask])?;
+                sinks[v].put(w, &n.value().to_le_bytes())?;
+                children += u64::from(mask.count_ones());
+                i += 1;
+                Ok(())
+            })?;
+            if i % block == 0 {
+                sinks[r].put(w, &(children as u32).to_le_bytes())?;
+            }
+            sinks[m].pad(w, round8(nodes) - nodes)?;
+        }
+        (Variant::Full, Index::Pointers) => {
+            write_pointers(
+                tree,
+                w,
+                &mut sinks,
+                [sink_of(SectionKind::Masks), sink_of(SectionKind::FirstChild), sink_of(SectionKind::Values)],
+            )?;
+            sinks[sink_of(SectionKind::Masks)].pad(w, round8(nodes) - nodes)?;
+        }
+        (Variant::MaxLikelihood, _) => {
+            let (l, r, o) =
+                (sink_of(SectionKind::Labels), sink_of(SectionKind::Rank), sink_of(SectionKind::InnerOccupancy));
+            let block = 1u64 << log2;
+            let mut j = 0u64;
+            let mut inner_children = 0u64;
+            let mut bits = 0u64;
+            for_each_level(tree, TREE_DEPTH - 1, |n| {
+                if !n.has_children() {
+                    return Ok(());
+                }
+                let mut word = 0u16;
+                for (pos, c) in n.children() {
+                    let label = if c.has_children() { 3 } else { ml_label(c, sensor.clamping_max) };
+                    word |= u16::from(label) << (2 * pos);
+                }
+                if j % block == 0 {
+                    sinks[r].put(w, &(inner_children as u32).to_le_bytes())?;
+                }
+                sinks[l].put(w, &word.to_le_bytes())?;
+                if ml_label(n, sensor.clamping_max) == 2 {
+                    bits |= 1 << (j % 64);
+                }
+                inner_children += u64::from(super::nav::count_inner(u64::from(word)));
+                j += 1;
+                if j % 64 == 0 {
+                    sinks[o].put(w, &bits.to_le_bytes())?;
+                    bits = 0;
+                }
+                Ok(())
+            })?;
+            debug_assert_eq!(j, inner);
+            if j % block == 0 {
+                sinks[r].put(w, &(inner_children as u32).to_le_bytes())?;
+            }
+            if j % 64 != 0 {
+                sinks[o].put(w, &bits.to_le_bytes())?;
+            }
+            sinks[l].pad(w, round8(2 * inner) - 2 * inner)?;
+        }
+    }
+    for (sink, section) in sinks.iter_mut().zip(sections.iter_mut()) {
+        sink.flush(w)?;
+        debug_assert_eq!(sink.written, section.length, "section {}", section.kind);
+        if sink.written != section.length {
+            return Err(io::Error::other(format!(
+                "section {} came out {} bytes, planned {}",
+                section.kind, sink.written, section.length
+            )));
+        }
+        section.crc32 = sink.crc.clone().finalize();
+    }
+    let header = Header {
+        version: (VERSION_MAJOR, VERSION_MINOR),
+        kind: TreeKind::OcTree,
+        variant: opts.variant,
+        index: opts.index,
+        rank_block_log2: log2,
+        resolution: tree.resolution(),
+        sensor,
+        root_label,
+        size_counter: tree.size() as u64,
+        node_count: nodes,
+        inner_count: inner,
+        file_length,
+        sections,
+    };
+    // pad the file to its full length, then the header
+    if file_length > HEADER_LEN as u64 {
+        let end = w.seek(SeekFrom::End(0))?;
+        if end < file_length {
+            w.seek(SeekFrom::Start(file_length - 1))?;
+            w.write_all(&[0])?;
+        }
+    }
+    w.seek(SeekFrom::Start(0))?;
+    w.write_all(&format::encode(&header))?;
+    w.seek(SeekFrom::Start(file_length))?;
+    Ok(())
+}
+
+/// Label of a maximum-likelihood leaf: 2 occupied (`clamping_max`), 1 free.
+fn ml_label(n: NodeRef<'_>, occupied_value: f32) -> u8 {
+    if n.value() == occupied_value {
+        2
+    } else {
+        1
+    }
+}
+
+/// Nodes and inner nodes reachable from the root.
+fn count(tree: &OccupancyTree) -> (u64, u64) {
+    let Some(root) = tree.root() else {
+        return (0, 0);
+    };
+    let mut stack = vec![root];
+    let (mut nodes, mut inner) = (0u64, 0u64);
+    while let Some(n) = stack.pop() {
+        nodes += 1;
+        if n.has_children() {
+            inner += 1;
+            stack.extend(n.children().map(|(_, c)| c));
+        }
+    }
+    (nodes, inner)
+}
+
+/// Calls `f` on every node of depth 0, then depth 1, ... up to `max_depth`,
+/// each level in child order (breadth-first order), by depth-limited walks.
+fn for_each_level(
+    tree: &OccupancyTree,
+    max_depth: u8,
+    mut f: impl FnMut(NodeRef<'_>) -> io::Result<()>,
+) -> io::Result<()> {
+    fn walk<'t>(
+        n: NodeRef<'t>,
+        depth: u8,
+        target: u8,
+        f: &mut impl FnMut(NodeRef<'t>) -> io::Result<()>,
+        found: &mut bool,
+    ) -> io::Result<()> {
+        if depth == target {
+            *found = true;
+            return f(n);
+        }
+        for (_, c) in n.children() {
+            walk(c, depth + 1, target, f, found)?;
+        }
+        Ok(())
+    }
+    let Some(root) = tree.root() else {
+        return Ok(());
+    };
+    for level in 0..=max_depth {
+        let mut found = false;
+        walk(root, 0, level, &mut f, &mut found)?;
+        if !found {
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// Depth-first group order with first-child indices.
+fn write_pointers<W: Write + Seek>(
+    tree: &OccupancyTree,
+    w: &mut W,
+    sinks: &mut [Sink],
+    [m, fc, v]: [usize; 3],
+) -> io::Result<()> {
+    let Some(root) = tree.root() else {
+        return Ok(());
+    };
+    // subtree sizes in depth-first pre-order
+    fn sizes(n: NodeRef<'_>, out: &mut Vec<u32>) -> u32 {
+        let at = out.len();
+        out.push(0);
+        let mut s = 1u32;
+        for (_, c) in n.children() {
+            s += sizes(c, out);
+        }
+        out[at] = s;
+        s
+    }
+    let mut size = Vec::new();
+    sizes(root, &mut size);
+    let mut put = |sinks: &mut [Sink], n: NodeRef<'_>, first: u32| -> io::Result<()> {
+        sinks[m].put(w, &[n.child_mask()])?;
+        sinks[fc].put(w, &first.to_le_bytes())?;
+        sinks[v].put(w, &n.value().to_le_bytes())
+    };
+    put(sinks, root, u32::from(root.has_children()))?;
+    // (node, its pre-order index, where its children group starts)
+    let mut stack = vec![(root, 0u32, 1u32)];
+    while let Some((n, pre, group)) = stack.pop() {
+        if !n.has_children() {
+            continue;
+        }
+        let k = n.child_mask().count_ones();
+        // groups of the children's subtrees follow this group in order
+        let mut next_group = group + k;
+        let mut child_pre = pre + 1;
+        let mut pending = Vec::with_capacity(8);
+        for (_, c) in n.children() {
+            let first = if c.has_children() { next_group } else { 0 };
+            put(sinks, c, first)?;
+            pending.push((c, child_pre, next_group));
+            let s = size[child_pre as usize];
+            next_group += s - 1;
+            child_pre += s;
+        }
+        stack.extend(pending.into_iter().rev());
+    }
+    Ok(())
+}
+
+/// A section being streamed to its place in the file.
+struct Sink {
+    pos: u64,
+    buf: Vec<u8>,
+    crc: crc32fast::Hasher,
+    written: u64,
+}
+
+const CHUNK: usize = 1 << 18;
+
+impl Sink {
+    fn new(offset: u64) -> Self {
+        Sink { pos: offset, buf: Vec::new(), crc: crc32fast::Hasher::new(), written: 0 }
+    }
+
+    #[inline]
+    fn put<W: Write + Seek>(&mut self, w: &mut W, bytes: &[u8]) -> io::Result<()> {
+        self.buf.extend_from_slice(bytes);
+        if self.buf.len() >= CHUNK {
+            self.flush(w)?;
+        }
+        Ok(())
+    }
+
+    fn pad<W: Write + Seek>(&mut self, w: &mut W, zeros: u64) -> io::Result<()> {
+        for _ in 0..zeros {
+            self.put(w, &[0])?;
+        }
+        Ok(())
+    }
+
+    fn flush<W: Write + Seek>(&mut self, w: &mut W) -> io::Result<()> {
+        if self.buf.is_empty() {
+            return Ok(());
+        }
+        w.seek(SeekFrom::Start(self.pos))?;
+        w.write_all(&self.buf)?;
+        self.crc.update(&self.buf);
+        self.pos += self.buf.len() as u64;
+        self.written += self.buf.len() as u64;
+        self.buf.clear();
+        Ok(())
+    }
+}

@@ -1,0 +1,827 @@
+//! The `.olm` mapped format: one query suite run against the arena tree, a
+//! `Vec`-backed view, a borrowed-slice view and an mmap-backed view (every
+//! layout), round trips through `.ot`/`.bt` (golden maps included), golden
+//! point and ray queries answered from mapped files, and a corruption suite
+//! of seeded mutants that must never panic.
+
+// the fuzz target compiled in below tests `cfg(fuzzing)`, which cargo-fuzz sets
+#![allow(unexpected_cfgs)]
+
+mod common;
+
+use common::*;
+use octolinear::formats::{bt, ot};
+use octolinear::mapped::{self, format, MapItem, MapView, MappedMap, OccupancyLookup, OlmError, Variant, WriteOptions};
+use octolinear::ray::CastError;
+use octolinear::simulate::{simulate, LidarConfig, SceneKind, SplitMix64};
+use octolinear::{CastOptions, CastOutcome, Found, Key, KeyBox, OccupancyTree, Point3};
+use octolinear::{ScanOptions, SensorModel};
+use std::fmt::Write as _;
+
+// ----- maps ------------------------------------------------------------------
+
+fn small_lidar() -> LidarConfig {
+    LidarConfig { beams: 8, horizontal_steps: 120, ..LidarConfig::indoor() }
+}
+
+fn simulated(kind: SceneKind, scans: usize, seed: u64, res: f64, cfg: &LidarConfig) -> OccupancyTree {
+    let graph = simulate(kind, scans, seed, cfg).unwrap();
+    let mut tree = OccupancyTree::new(res).unwrap();
+    for node in &graph.nodes {
+        let (cloud, origin) = node.graph2tree();
+        tree.insert_point_cloud(&cloud.points, origin, &ScanOptions::default()).unwrap();
+    }
+    tree
+}
+
+fn ot_bytes(tree: &OccupancyTree) -> Vec<u8> {
+    let mut v = Vec::new();
+    ot::write(tree, &mut v).unwrap();
+    v
+}
+
+fn bt_bytes(tree: &OccupancyTree) -> Vec<u8> {
+    let mut v = Vec::new();
+    bt::write(tree, &mut v).unwrap();
+    v
+}
+
+fn ml_of(tree: &OccupancyTree) -> OccupancyTree {
+    let mut t = tree.clone();
+    t.to_max_likelihood();
+    t.prune();
+    t
+}
+
+fn all_options() -> Vec<(&'static str, WriteOptions)> {
+    vec![
+        ("full/rank", WriteOptions::default()),
+        ("full/rank b8", WriteOptions { rank_block_log2: 3, ..Default::default() }),
+        ("full/pointers", WriteOptions::pointers()),
+        ("ml/rank", WriteOptions::max_likelihood()),
+        ("ml/rank b4096", WriteOptions { rank_block_log2: 12, ..WriteOptions::max_likelihood() }),
+    ]
+}
+
+// ----- one query suite for every implementation -------------------------------
+
+type Item = (Key, u8, u32, bool);
+
+/// The queries compared between implementations.
+trait Queries {
+    fn lookup(&self) -> &dyn OccupancyLookup;
+    fn items(&self, which: Iter, max_depth: u8) -> Vec<Item>;
+    fn cast(&self, o: Point3, d: Point3, opts: CastOptions) -> Result<CastOutcome, CastError>;
+}
+
+#[derive(Clone, Copy)]
+enum Iter {
+    Leaves,
+    Nodes,
+    Box(KeyBox),
+}
+
+fn item(i: MapItem<'_>) -> Item {
+    (i.key, i.depth, i.value.to_bits(), i.is_leaf)
+}
+
+impl Queries for OccupancyTree {
+    fn lookup(&self) -> &dyn OccupancyLookup {
+        self
+    }
+    fn items(&self, which: Iter, d: u8) -> Vec<Item> {
+        let f = |n: octolinear::tree::NodeItem<'_>| (n.key, n.depth, n.value.to_bits(), n.is_leaf);
+        match which {
+            Iter::Leaves => self.leaves(d).map(f).collect(),
+            Iter::Nodes => self.nodes(d).map(f).collect(),
+            Iter::Box(b) => self.leaves_in_box(b, d).map(f).collect(),
+        }
+    }
+    fn cast(&self, o: Point3, d: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
+        self.cast_ray(o, d, opts)
+    }
+}
+
+impl Queries for MapView<'_> {
+    fn lookup(&self) -> &dyn OccupancyLookup {
+        self
+    }
+    fn items(&self, which: Iter, d: u8) -> Vec<Item> {
+        match which {
+            Iter::Leaves => self.leaves(d).map(item).collect(),
+            Iter::Nodes => self.nodes(d).map(item).collect(),
+            Iter::Box(b) => self.leaves_in_box(b, d).map(item).collect(),
+        }
+    }
+    fn cast(&self, o: Point3, d: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
+        self.cast_ray(o, d, opts)
+    }
+}
+
+impl<D: AsRef<[u8]>> Queries for MappedMap<D> {
+    fn lookup(&self) -> &dyn OccupancyLookup {
+        self
+    }
+    fn items(&self, which: Iter, d: u8) -> Vec<Item> {
+        self.view().items(which, d)
+    }
+    fn cast(&self, o: Point3, d: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
+        mapped::cast_ray(self, o, d, opts)
+    }
+}
+
+fn found_bits(f: Option<Found>) -> Option<(u32, u8, bool)> {
+    f.map(|f| (f.value.to_bits(), f.depth, f.is_leaf))
+}
+
+/// Runs every query on `reference` and `other` and compares bit for bit.
+fn same_answers(what: &str, reference: &dyn Queries, other: &dyn Queries, seed: u64) {
+    let r = reference.lookup();
+    let o = other.lookup();
+    assert_eq!(r.key_space(), o.key_space(), "{what}: key space");
+    assert_eq!(r.sensor(), o.sensor(), "{what}: sensor");
+    let mut rng = SplitMix64(seed);
+    // the reference is a tree: sample keys from its leaves
+    let leaves = reference.items(Iter::Leaves, 0);
+    let mut keys = vec![Key::ROOT, Key::new(0, 0, 0), Key::new(65535, 65535, 65535)];
+    for i in 0..600 {
+        keys.push(match i % 3 {
+            0 if !leaves.is_empty() => leaves[rng.below(leaves.len() as u32) as usize].0,
+            1 if !leaves.is_empty() => {
+                let b = leaves[rng.below(leaves.len() as u32) as usize].0;
+                Key(b.0.map(|c| c.wrapping_add((rng.below(64) as u16).wrapping_sub(32))))
+            }
+            _ => Key([0; 3].map(|_: u16| rng.next_u64() as u16)),
+        });
+    }
+    for &k in &keys {
+        for depth in [0, 16, 17, 15, 14, 12, 9, 5, 1] {
+            assert_eq!(found_bits(r.search(k, depth)), found_bits(o.search(k, depth)), "{what}: search({k}, {depth})");
+        }
+    }
+    for d in [0, 16, 14, 13, 8, 3, 1] {
+        assert_eq!(reference.items(Iter::Leaves, d), other.items(Iter::Leaves, d), "{what}: leaves({d})");
+    }
+    for d in [0, 14, 2] {
+        assert_eq!(reference.items(Iter::Nodes, d), other.items(Iter::Nodes, d), "{what}: nodes({d})");
+    }
+    for _ in 0..6 {
+        let a = keys[rng.below(keys.len() as u32) as usize];
+        let ext = rng.below(200) as u16;
+        let bbx = KeyBox { min: Key(a.0.map(|c| c.saturating_sub(ext))), max: Key(a.0.map(|c| c.saturating_add(ext))) };
+        for d in [0, 14] {
+            assert_eq!(
+                reference.items(Iter::Box(bbx), d),
+                other.items(Iter::Box(bbx), d),
+                "{what}: leaves_in_box({bbx:?}, {d})"
+            );
+        }
+    }
+    let ks = r.key_space();
+    for i in 0..120 {
+        let origin = if leaves.is_empty() || i % 4 == 0 {
+            Point3::new(0.0, 0.0, 0.0)
+        } else {
+            let k = leaves[rng.below(leaves.len() as u32) as usize].0;
+            ks.key_to_point(k)
+        };
+        let dir = Point3::new(rng.range(-1.0, 1.0) as f32, rng.range(-1.0, 1.0) as f32, rng.range(-0.3, 0.3) as f32);
+        for opts in [CastOptions::default(), CastOptions { ignore_unknown: true, max_range: Some(8.0) }] {
+            assert_eq!(
+                reference.cast(origin, dir, opts),
+                other.cast(origin, dir, opts),
+                "{what}: cast_ray({origin:?}, {dir:?}, {opts:?})"
+            );
+        }
+    }
+}
+
+/// Checks every layout and backing (Vec, slice, mmap) against the tree.
+fn check_all_backings(name: &str, tree: &OccupancyTree) {
+    let ml = ml_of(tree);
+    let dir = tempfile::tempdir().unwrap();
+    for (label, opts) in all_options() {
+        let what = format!("{name} {label}");
+        let reference = match opts.variant {
+            Variant::Full => tree,
+            Variant::MaxLikelihood => &ml,
+        };
+        let bytes = mapped::to_bytes(tree, opts).unwrap();
+        let owned = MappedMap::new(bytes.clone()).unwrap();
+        let report = owned.verify().unwrap_or_else(|e| panic!("{what}: {e}"));
+        assert_eq!(report.nodes, reference.calc_num_nodes() as u64, "{what}");
+        assert_eq!(report.leaves, reference.num_leaves() as u64, "{what}");
+        assert_eq!(owned.header().size_counter, reference.size() as u64);
+        same_answers(&format!("{what} (Vec)"), reference, &owned, 7);
+        let borrowed = MappedMap::new(&bytes[..]).unwrap();
+        same_answers(&format!("{what} (slice view)"), reference, &borrowed.view(), 8);
+        let path = dir.path().join(format!("{}.olm", label.replace(['/', ' '], "_")));
+        mapped::write_file_with(tree, &path, opts).unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), bytes, "{what}: file bytes");
+        let mm = MappedMap::open(&path).unwrap();
+        mm.verify().unwrap();
+        same_answers(&format!("{what} (mmap)"), reference, &mm, 9);
+        // back to a tree: same bytes in OctoMap's formats
+        let back = mm.to_tree().unwrap();
+        assert_eq!(back.sensor(), tree.sensor());
+        match opts.variant {
+            Variant::Full => assert_eq!(ot_bytes(&back), ot_bytes(tree), "{what}: .ot"),
+            Variant::MaxLikelihood => {
+                assert_eq!(ot_bytes(&back), ot_bytes(&ml), "{what}: ML .ot");
+                assert_eq!(bt_bytes(&back), bt_bytes(tree), "{what}: .bt")
+            }
+        }
+    }
+}
+
+#[test]
+fn simulated_indoor_maps_answer_like_the_tree() {
+    let tree = simulated(SceneKind::Indoor, 3, 5, 0.1, &small_lidar());
+    assert!(tree.num_leaves() > 1000);
+    check_all_backings("indoor 0.1", &tree);
+}
+
+#[test]
+fn simulated_outdoor_map_with_custom_sensor() {
+    let mut tree = simulated(
+        SceneKind::Outdoor,
+        2,
+        11,
+        0.2,
+        &LidarConfig { beams: 8, horizontal_steps: 90, ..LidarConfig::outdoor() },
+    );
+    // a sensor model that is not OctoMap's default travels with the file
+    let sensor = SensorModel::from_probabilities(&octolinear::SensorProbabilities {
+        hit: 0.9,
+        miss: 0.3,
+        clamping_min: 0.2,
+        clamping_max: 0.9,
+        occupancy_threshold: 0.6,
+    })
+    .unwrap();
+    tree.set_sensor(sensor);
+    check_all_backings("outdoor 0.2", &tree);
+}
+
+#[test]
+fn tiny_maps_empty_single_and_pruned() {
+    let empty = OccupancyTree::new(0.05).unwrap();
+    check_all_backings("empty", &empty);
+    for (_, opts) in all_options() {
+        let b = mapped::to_bytes(&empty, opts).unwrap();
+        let m = MappedMap::new(&b[..]).unwrap();
+        assert!(m.view().is_empty());
+        assert_eq!(m.view().leaves(0).count(), 0);
+        assert_eq!(m.search(Key::ROOT, 0), None);
+        assert!(m.to_tree().unwrap().is_empty());
+    }
+    let mut one = OccupancyTree::new(0.1).unwrap();
+    one.update_point(Point3::new(1.0, 2.0, 3.0), true, Default::default()).unwrap();
+    check_all_backings("one voxel", &one);
+    // a tree that is only its root (every voxel deleted)
+    let k = one.key(Point3::new(1.0, 2.0, 3.0)).unwrap();
+    one.delete(k, 0);
+    assert_eq!(one.calc_num_nodes(), 1);
+    check_all_backings("lone root", &one);
+    // a pruned block: 8 equal voxels merge into a depth-15 leaf
+    let mut block = OccupancyTree::new(0.1).unwrap();
+    for x in 0..4 {
+        for y in 0..4 {
+            for z in 0..2 {
+                let p = Point3::new(0.05 + 0.1 * x as f32, 0.05 + 0.1 * y as f32, 0.05 + 0.1 * z as f32);
+                block.update_point(p, true, Default::default()).unwrap();
+            }
+        }
+    }
+    assert!(block.leaves(0).any(|l| l.depth < 16));
+    check_all_backings("pruned block", &block);
+}
+
+// ----- golden maps ---------------------------------------------------------------
+
+/// Every stored `.ot` (OcTree) of the golden set: `.ot → .olm → .ot` gives
+/// the bytes the `.ot` reader and writer give, for every layout.
+#[test]
+fn golden_ot_files_round_trip() {
+    let Some(g) = golden("golden_ot_files_round_trip") else {
+        return;
+    };
+    let mut f = Failures::default();
+    let (mut files, mut identical) = (0, 0);
+    for case in g.manifest["cases"].as_array().unwrap() {
+        let id = case["id"].as_str().unwrap();
+        for file in case["files"].as_array().unwrap() {
+            if file["kind"] != "ot" || file["stored"] == "digest-only" {
+                continue;
+            }
+            let name = file["name"].as_str().unwrap();
+            let bytes = g.load(case, name).unwrap();
+            let Ok(ot::AnyTree::Occupancy(tree)) = ot::read(&bytes[..]) else {
+                continue; // color, counting and stamped trees are not OcTrees
+            };
+            files += 1;
+            let plain = ot_bytes(&tree);
+            identical += usize::from(plain == bytes);
+            for (label, opts) in all_options() {
+                if opts.variant != Variant::Full {
+                    continue;
+                }
+                let olm = mapped::to_bytes(&tree, opts).unwrap();
+                let map = MappedMap::new(olm).unwrap();
+                let back = match map.to_tree() {
+                    Ok(t) => t,
+                    Err(e) => {
+                        f.0.push(format!("{id}/{name} {label}: {e}"));
+                        continue;
+                    }
+                };
+                f.check(ot_bytes(&back) == plain, || format!("{id}/{name} {label}: .ot bytes differ after .olm"));
+            }
+            // the ML variant equals what writeBinary stores
+            let olm = mapped::to_bytes(&tree, WriteOptions::max_likelihood()).unwrap();
+            let back = MappedMap::new(olm).unwrap().to_tree().unwrap();
+            f.check(bt_bytes(&back) == bt_bytes(&tree), || format!("{id}/{name} ml: .bt bytes differ after .olm"));
+        }
+    }
+    eprintln!("{files} golden .ot files, {identical} rewritten byte-identically by the .ot writer");
+    assert!(files > 50);
+    f.finish("golden .ot round trips");
+}
+
+/// `.bt → .olm (ML) → .bt` restores the input bytes: the example map and
+/// every stored `.bt` of the golden set.
+#[test]
+fn golden_bt_files_round_trip() {
+    let Some(g) = golden("golden_bt_files_round_trip") else {
+        return;
+    };
+    let mut f = Failures::default();
+    let mut inputs = vec![("inputs/geb079.bt".to_string(), std::fs::read(g.input("inputs/geb079.bt")).unwrap())];
+    for case in g.manifest["cases"].as_array().unwrap() {
+        for file in case["files"].as_array().unwrap() {
+            if file["kind"] == "bt" && file["stored"] != "digest-only" {
+                let name = file["name"].as_str().unwrap();
+                if let Some(b) = g.load(case, name) {
+                    inputs.push((format!("{}/{name}", case["id"].as_str().unwrap()), b));
+                }
+            }
+        }
+    }
+    let mut checked = 0;
+    for (name, bytes) in &inputs {
+        let Ok(tree) = bt::read(&bytes[..]) else {
+            continue;
+        };
+        let mut plain = Vec::new();
+        bt::write_const(&tree, &mut plain).unwrap();
+        if plain != *bytes {
+            continue; // ColorOcTree .bt files: the OcTree writer names another type
+        }
+        let olm = mapped::to_bytes(&tree, WriteOptions::max_likelihood()).unwrap();
+        let map = MappedMap::new(&olm[..]).unwrap();
+        map.verify().unwrap();
+        let back = map.to_tree().unwrap();
+        // the tree readBinary gives (root clamping_max, inner = max of children)
+        f.check(ot_bytes(&back) == ot_bytes(&tree), || format!("{name}: tree differs after .olm"));
+        let mut out = Vec::new();
+        bt::write_const(&back, &mut out).unwrap();
+        f.check(out == *bytes, || format!("{name}: .bt bytes differ after .olm"));
+        checked += 1;
+        if name.ends_with("geb079.bt") {
+            let full = mapped::to_bytes(&tree, WriteOptions::default()).unwrap();
+            eprintln!(
+                "geb079: .bt {} bytes, .olm ML {} ({:.3}x), .ot {} bytes, .olm full {} ({:.3}x)",
+                bytes.len(),
+                olm.len(),
+                olm.len() as f64 / bytes.len() as f64,
+                ot_bytes(&tree).len(),
+                full.len(),
+                full.len() as f64 / ot_bytes(&tree).len() as f64
+            );
+            same_answers("geb079 ML", &tree, &map, 3);
+            let fm = MappedMap::new(full).unwrap();
+            same_answers("geb079 full", &tree, &fm, 4);
+        }
+    }
+    assert!(checked > 10);
+    f.finish("golden .bt round trips");
+}
+
+fn opt_f32(v: Option<f32>) -> String {
+    v.map(f32hex).unwrap_or_default()
+}
+
+/// `query_points.csv` and `query_castray.csv` of every build case whose
+/// `tree.ot` is stored, answered from a memory-mapped `.olm`.
+#[test]
+fn golden_queries_from_mapped_files() {
+    let Some(g) = golden("golden_queries_from_mapped_files") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let mut f = Failures::default();
+    let mut answered = 0;
+    let (mut t_points, mut t_rays) = (0.0, 0.0);
+    for case in g.cases("build") {
+        let Some(tree_ot) = g.load(case, "tree.ot") else {
+            continue;
+        };
+        let points = g.load_text(case, "query_points.csv");
+        let rays = g.load_text(case, "query_castray.csv");
+        if points.is_none() && rays.is_none() {
+            continue;
+        }
+        let tree = ot::read(&tree_ot[..]).unwrap().into_occupancy().unwrap();
+        let path = dir.path().join("case.olm");
+        for opts in [WriteOptions::default(), WriteOptions::pointers()] {
+            mapped::write_file_with(&tree, &path, opts).unwrap();
+            let map = mapped::open(&path).unwrap();
+            let view = map.view();
+            let t0 = std::time::Instant::now();
+            if let Some(expected) = &points {
+                let mut s = String::from("i,x,y,z,key_ok,kx,ky,kz,found,logodds,occupied,found_d14,logodds_d14\n");
+                for line in expected.lines().skip(1) {
+                    let c: Vec<&str> = line.split(',').collect();
+                    let p = point_from_hex(&c[1..4]);
+                    let key = view.key(p);
+                    let [kx, ky, kz] = key.map(|k| k.0).unwrap_or([0; 3]);
+                    let found = key.ok().and_then(|k| view.search(k, 0));
+                    let found14 = key.ok().and_then(|k| view.search(k, 14));
+                    writeln!(
+                        s,
+                        "{},{},{},{},{},{kx},{ky},{kz},{},{},{},{},{}",
+                        c[0],
+                        c[1],
+                        c[2],
+                        c[3],
+                        u8::from(key.is_ok()),
+                        u8::from(found.is_some()),
+                        opt_f32(found.map(|f| f.value)),
+                        u8::from(found.is_some_and(|f| view.is_occupied(f.value))),
+                        u8::from(found14.is_some()),
+                        opt_f32(found14.map(|f| f.value)),
+                    )
+                    .unwrap();
+                }
+                f.check_digest(&g, case, "query_points.csv", s.as_bytes());
+            }
+            t_points += t0.elapsed().as_secs_f64();
+            let t0 = std::time::Instant::now();
+            // rays are costly (up to 65536 searches each): default layout only
+            let rays = rays.as_ref().filter(|_| opts == WriteOptions::default());
+            if let Some(expected) = rays {
+                let mut s = String::from("i,ox,oy,oz,dx,dy,dz,ignore_unknown,max_range,ret,ex,ey,ez\n");
+                for line in expected.lines().skip(1) {
+                    let c: Vec<&str> = line.split(',').collect();
+                    let opts = CastOptions { ignore_unknown: c[7] == "1", max_range: Some(parse_f64hex(c[8])) };
+                    let (ret, end) = match view.cast_ray(point_from_hex(&c[1..4]), point_from_hex(&c[4..7]), opts) {
+                        Ok(o) => (o.hit(), o.end()),
+                        Err(_) => (false, Point3::new(f32::NAN, f32::NAN, f32::NAN)),
+                    };
+                    writeln!(
+                        s,
+                        "{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                        c[0],
+                        c[1],
+                        c[2],
+                        c[3],
+                        c[4],
+                        c[5],
+                        c[6],
+                        c[7],
+                        c[8],
+                        u8::from(ret),
+                        f32hex(end.x),
+                        f32hex(end.y),
+                        f32hex(end.z)
+                    )
+                    .unwrap();
+                }
+                f.check_digest(&g, case, "query_castray.csv", s.as_bytes());
+            }
+            t_rays += t0.elapsed().as_secs_f64();
+        }
+        answered += 1;
+    }
+    eprintln!("{answered} golden cases answered from mapped files; points {t_points:.1} s, rays {t_rays:.1} s");
+    assert!(answered > 20);
+    f.finish("golden queries from mapped files");
+}
+
+// ----- header checks ---------------------------------------------------------------
+
+fn sample_bytes(opts: WriteOptions) -> Vec<u8> {
+    let tree = simulated(
+        SceneKind::Indoor,
+        1,
+        3,
+        0.2,
+        &LidarConfig { beams: 4, horizontal_steps: 60, ..LidarConfig::indoor() },
+    );
+    mapped::to_bytes(&tree, opts).unwrap()
+}
+
+fn fix_header_crc(b: &mut [u8]) {
+    if b.len() >= format::HEADER_LEN {
+        let crc = crc32fast::hash(&b[..252]);
+        b[252..256].copy_from_slice(&crc.to_le_bytes());
+    }
+}
+
+/// Recomputes every section checksum the table names, then the header's.
+fn fix_all_crcs(b: &mut [u8]) {
+    if b.len() < format::HEADER_LEN {
+        return;
+    }
+    let count = u16::from_le_bytes([b[54], b[55]]).min(6) as usize;
+    for i in 0..count {
+        let e = 96 + 24 * i;
+        let off = u64::from_le_bytes(b[e + 8..e + 16].try_into().unwrap());
+        let len = u64::from_le_bytes(b[e + 16..e + 24].try_into().unwrap());
+        let Some(end) = off.checked_add(len) else {
+            continue;
+        };
+        if end as usize <= b.len() {
+            let crc = crc32fast::hash(&b[off as usize..end as usize]);
+            b[e + 4..e + 8].copy_from_slice(&crc.to_le_bytes());
+        }
+    }
+    fix_header_crc(b);
+}
+
+#[test]
+fn header_checks_name_the_problem() {
+    let good = sample_bytes(WriteOptions::default());
+    assert!(MappedMap::new(&good[..]).is_ok());
+    let err = |b: &[u8]| MappedMap::new(b).unwrap_err();
+    assert!(matches!(err(&good[..100]), OlmError::TooShort { .. }));
+    assert!(matches!(err(b"OCTO"), OlmError::TooShort { .. }));
+    assert!(matches!(err(b"# Octomap OcTree file\n"), OlmError::BadMagic));
+    let mut b = good.clone();
+    b[8] = 2;
+    assert!(matches!(err(&b), OlmError::Version { major: 2, .. }));
+    let mut b = good.clone();
+    b[12..16].copy_from_slice(&0x0A0B_0C0Du32.to_be_bytes());
+    assert!(matches!(err(&b), OlmError::Endianness { .. }));
+    let mut b = good.clone();
+    b[30] ^= 1;
+    assert!(matches!(err(&b), OlmError::HeaderChecksum { .. }));
+    for kind in [1u8, 2] {
+        let mut b = good.clone();
+        b[20] = kind;
+        fix_header_crc(&mut b);
+        assert!(matches!(err(&b), OlmError::UnsupportedKind(k) if k == kind));
+    }
+    let mut b = good.clone();
+    b.push(0);
+    assert!(matches!(err(&b), OlmError::FileLength { .. }));
+    let mut b = good.clone();
+    b.pop();
+    assert!(matches!(err(&b), OlmError::FileLength { .. }));
+    // a node count the sections cannot hold
+    let mut b = good.clone();
+    let n = u64::from_le_bytes(b[64..72].try_into().unwrap()) + 1;
+    b[64..72].copy_from_slice(&n.to_le_bytes());
+    fix_header_crc(&mut b);
+    assert!(matches!(err(&b), OlmError::Section { .. } | OlmError::BadField { .. }));
+    // a section checksum is only checked by verify
+    let mut b = good.clone();
+    let last = b.len() - 1;
+    b[last] ^= 0x40;
+    let m = MappedMap::new(&b[..]).unwrap();
+    assert!(matches!(m.verify(), Err(OlmError::SectionChecksum { .. })));
+    // resolution
+    let mut b = good.clone();
+    b[24..32].copy_from_slice(&f64::NAN.to_le_bytes());
+    fix_header_crc(&mut b);
+    assert!(matches!(err(&b), OlmError::BadField { field: "resolution", .. }));
+    // the example in formats/olm.md
+    let mut t = OccupancyTree::new(0.1).unwrap();
+    t.update_point(Point3::new(0.05, 0.05, 0.05), true, Default::default()).unwrap();
+    let ex = mapped::to_bytes(&t, WriteOptions::default()).unwrap();
+    let m = MappedMap::new(&ex[..]).unwrap();
+    m.verify().unwrap();
+    assert_eq!(ex.len(), 452);
+    assert_eq!(m.header().node_count, 17);
+    let listed = spec_example();
+    if listed != ex {
+        let hex: Vec<String> = ex
+            .chunks(16)
+            .enumerate()
+            .map(|(i, c)| {
+                format!("{:03x}: {}", 16 * i, c.iter().map(|b| format!("{b:02x}")).collect::<Vec<_>>().join(" "))
+            })
+            .collect();
+        panic!("formats/olm.md example differs from the writer's bytes:\n{}", hex.join("\n"));
+    }
+}
+
+/// The bytes listed in the example of `formats/olm.md` (`OFFSET: hex ... | note`,
+/// `00*N` for a run of zeros).
+fn spec_example() -> Vec<u8> {
+    let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/formats/olm.md")).unwrap();
+    let start = doc.find("<!-- olm-example-begin -->").unwrap();
+    let end = doc.find("<!-- olm-example-end -->").unwrap();
+    let mut out = Vec::new();
+    for line in doc[start..end].lines() {
+        let Some((off, rest)) = line.split_once(": ") else {
+            continue;
+        };
+        let Ok(off) = usize::from_str_radix(off, 16) else {
+            continue;
+        };
+        assert_eq!(off, out.len(), "formats/olm.md example: offset {off:#x} out of sequence");
+        let bytes = rest.split('|').next().unwrap();
+        for tok in bytes.split_whitespace() {
+            if let Some(n) = tok.strip_prefix("00*") {
+                out.resize(out.len() + n.parse::<usize>().unwrap(), 0);
+            } else {
+                out.push(u8::from_str_radix(tok, 16).unwrap());
+            }
+        }
+    }
+    out
+}
+
+// ----- corruption suite ----------------------------------------------------------------
+
+/// The fuzz target's check: open, verify, query; never panics, and a
+/// verified file answers as the tree it converts to.
+#[path = "../fuzz/fuzz_targets/olm.rs"]
+#[allow(dead_code)]
+mod olm_fuzz;
+
+fn exercise(bytes: &[u8]) -> (bool, bool) {
+    olm_fuzz::check(bytes)
+}
+
+fn mutate(base: &[u8], kind: u64, rng: &mut SplitMix64) -> Vec<u8> {
+    let mut b = base.to_vec();
+    let len = b.len() as u32;
+    let pos = |rng: &mut SplitMix64, b: &[u8]| rng.below(b.len().max(1) as u32) as usize;
+    match kind {
+        // truncation
+        0 => b.truncate(rng.below(len) as usize),
+        // bit flips anywhere
+        1 => {
+            for _ in 0..1 + rng.below(8) {
+                let p = pos(rng, &b);
+                b[p] ^= 1 << rng.below(8);
+            }
+        }
+        // bit flips with every checksum fixed: reaches the structure checks
+        2 => {
+            for _ in 0..1 + rng.below(4) {
+                let p = format::HEADER_LEN + rng.below(len - format::HEADER_LEN as u32) as usize;
+                b[p] ^= 1 << rng.below(8);
+            }
+            fix_all_crcs(&mut b);
+        }
+        // splice: a run of the file copied over another place
+        3 => {
+            let n = 1 + rng.below(64) as usize;
+            let from = pos(rng, &b);
+            let to = pos(rng, &b);
+            let chunk: Vec<u8> = b[from..(from + n).min(b.len())].to_vec();
+            for (i, v) in chunk.into_iter().enumerate() {
+                if to + i < b.len() {
+                    b[to + i] = v;
+                }
+            }
+            if rng.below(2) == 0 {
+                fix_all_crcs(&mut b);
+            }
+        }
+        // lying header fields (counts, sizes, labels, variant...)
+        4 => {
+            let fields: [(usize, usize); 12] = [
+                (20, 1),
+                (21, 1),
+                (22, 1),
+                (23, 1),
+                (52, 1),
+                (54, 2),
+                (56, 8),
+                (64, 8),
+                (72, 8),
+                (80, 8),
+                (24, 8),
+                (40, 4),
+            ];
+            let (off, n) = fields[rng.below(fields.len() as u32) as usize];
+            let v = match rng.below(4) {
+                0 => rng.next_u64(),
+                1 => u64::MAX,
+                2 => rng.next_u64() % 16,
+                _ => {
+                    let mut cur = [0u8; 8];
+                    cur[..n].copy_from_slice(&b[off..off + n]);
+                    u64::from_le_bytes(cur).wrapping_add(rng.below(5) as u64).wrapping_sub(2)
+                }
+            };
+            b[off..off + n].copy_from_slice(&v.to_le_bytes()[..n]);
+            fix_header_crc(&mut b);
+        }
+        // lying section table entries
+        5 => {
+            let e = 96 + 24 * rng.below(6) as usize;
+            let off = e + [0, 8, 16][rng.below(3) as usize];
+            let width = if off == e { 2 } else { 8 };
+            let v = match rng.below(4) {
+                0 => rng.next_u64(),
+                1 => u64::from(rng.below(len + 128)) & !63,
+                2 => u64::MAX - rng.below(100) as u64,
+                _ => u64::from(rng.below(8)),
+            };
+            b[off..off + width].copy_from_slice(&v.to_le_bytes()[..width]);
+            if rng.below(2) == 0 {
+                fix_all_crcs(&mut b);
+            } else {
+                fix_header_crc(&mut b);
+            }
+        }
+        // random bytes over a section, checksums fixed
+        6 => {
+            let start = format::HEADER_LEN + rng.below(len - format::HEADER_LEN as u32) as usize;
+            let n = (1 + rng.below(32) as usize).min(b.len() - start);
+            for v in &mut b[start..start + n] {
+                *v = rng.next_u64() as u8;
+            }
+            fix_all_crcs(&mut b);
+        }
+        // garbage appended, file length fixed
+        _ => {
+            for _ in 0..1 + rng.below(100) {
+                b.push(rng.next_u64() as u8);
+            }
+            let l = b.len() as u64;
+            b[80..88].copy_from_slice(&l.to_le_bytes());
+            fix_header_crc(&mut b);
+        }
+    }
+    b
+}
+
+#[test]
+fn corrupted_files_never_panic() {
+    let mut total = 0;
+    let mut opened = 0;
+    let mut verified = 0;
+    for (label, opts) in all_options() {
+        let base = sample_bytes(opts);
+        let mut rng = SplitMix64(0x0c70_11ea_u64 ^ base.len() as u64);
+        assert_eq!(exercise(&base), (true, true), "{label}");
+        for i in 0..1200u64 {
+            let m = mutate(&base, i % 8, &mut rng);
+            let (o, v) = exercise(&m);
+            total += 1;
+            opened += usize::from(o);
+            verified += usize::from(v);
+        }
+    }
+    // pure noise
+    let mut rng = SplitMix64(99);
+    for _ in 0..300 {
+        let n = rng.below(2048) as usize;
+        let mut b: Vec<u8> = (0..n).map(|_| rng.next_u64() as u8).collect();
+        if rng.below(2) == 0 && b.len() >= 8 {
+            b[..8].copy_from_slice(&format::MAGIC);
+        }
+        exercise(&b);
+        total += 1;
+    }
+    eprintln!("{total} mutants: {opened} opened, {verified} verified");
+    assert!(total >= 6000);
+    assert!(opened > total / 4, "the mutants should reach past the header");
+}
+
+/// Writes small seed files for `cargo fuzz run olm` to `fuzz/corpus/olm`
+/// (`cargo test --test mapped write_fuzz_seeds -- --ignored`).
+#[test]
+#[ignore]
+fn write_fuzz_seeds() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus/olm");
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut trees = vec![("empty", OccupancyTree::new(0.1).unwrap())];
+    let mut t = OccupancyTree::new(0.1).unwrap();
+    t.update_point(Point3::new(0.05, 0.05, 0.05), true, Default::default()).unwrap();
+    trees.push(("voxel", t.clone()));
+    for (i, p) in [(0.3, -0.2, 0.1), (-0.4, 0.25, 0.05), (0.15, 0.15, -0.3)].into_iter().enumerate() {
+        t.update_point(Point3::new(p.0, p.1, p.2), i % 2 == 0, Default::default()).unwrap();
+    }
+    trees.push(("voxels", t));
+    let mut block = OccupancyTree::new(0.1).unwrap();
+    for i in 0..8 {
+        let p =
+            Point3::new(0.05 + 0.1 * (i & 1) as f32, 0.05 + 0.1 * ((i >> 1) & 1) as f32, 0.05 + 0.1 * (i >> 2) as f32);
+        block.update_point(p, true, Default::default()).unwrap();
+    }
+    trees.push(("block", block));
+    for (name, tree) in &trees {
+        for (label, opts) in all_options() {
+            let b = mapped::to_bytes(tree, opts).unwrap();
+            let file = format!("{name}-{}.olm", label.replace(['/', ' '], "-"));
+            std::fs::write(dir.join(file), b).unwrap();
+        }
+    }
+}
