@@ -319,6 +319,9 @@ fn golden_ot_files_round_trip() {
             let Ok(ot::AnyTree::Occupancy(tree)) = ot::read(&bytes[..]) else {
                 continue; // color, counting and stamped trees are not OcTrees
             };
+            if tree.kind() != octolinear::NodeKind::Plain {
+                continue; // colour and stamped trees have no .olm sections yet
+            }
             files += 1;
             let plain = ot_bytes(&tree);
             identical += usize::from(plain == bytes);

@@ -68,6 +68,10 @@ pub fn to_bytes(tree: &OccupancyTree, opts: WriteOptions) -> io::Result<Vec<u8>>
 /// would: the tree converted to maximum likelihood and pruned (the
 /// caller's tree is not changed).
 pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOptions) -> io::Result<()> {
+    if tree.kind() != crate::tree::NodeKind::Plain {
+        // colours and stamps have reserved kind ids but no sections yet
+        return Err(invalid(format!("{:?} trees cannot be written as .olm yet", tree.kind())));
+    }
     let log2 = match opts.index {
         Index::Rank => {
             if !RANK_BLOCK_LOG2.contains(&opts.rank_block_log2) {
