@@ -28,7 +28,7 @@ pub enum TreeFileError {
     /// `offset` is that of the `res` value; `None` for a message's field.
     #[error("resolution {value}{} is not a positive finite number", at_byte(.offset))]
     BadResolution { value: f64, offset: Option<u64> },
-    #[error("input ends at byte {offset} in the middle of {what}")]
+    #[error("input ends inside {what} starting at byte {offset}")]
     Truncated { offset: u64, what: &'static str },
     #[error("node at byte {offset} lies below depth 16 (a voxel cannot have children)")]
     TooDeep { offset: u64 },
