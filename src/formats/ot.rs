@@ -112,14 +112,14 @@ pub fn read(r: impl BufRead) -> Result<AnyTree, TreeFileError> {
         .ok_or_else(|| TreeFileError::UnknownTreeType { id: header.id.clone(), offset: Some(header.id_offset) })?;
     if header.size == 0 {
         // OctoMap reads no data then, whatever follows
-        return empty(kind, header.resolution, Some(header.id_offset));
+        return empty(kind, header.resolution);
     }
     read_data(&mut r, kind, header.resolution)
 }
 
 /// An empty tree of `kind`.
-pub(crate) fn empty(kind: TreeKind, resolution: f64, offset: Option<u64>) -> Result<AnyTree, TreeFileError> {
-    let bad_res = |_| TreeFileError::BadResolution { value: resolution, offset };
+pub(crate) fn empty(kind: TreeKind, resolution: f64) -> Result<AnyTree, TreeFileError> {
+    let bad_res = |_| TreeFileError::BadResolution { value: resolution, offset: None };
     Ok(match kind {
         TreeKind::CountingOcTree => AnyTree::Counting(CountingTree::new(resolution).map_err(bad_res)?),
         _ => AnyTree::Occupancy(

@@ -73,14 +73,14 @@ pub fn msg_to_map(msg: &OctomapMsg) -> Result<AnyTree, TreeFileError> {
     let tree = if msg.binary {
         let kind = if msg.id == TreeKind::ColorOcTree.id() { NodeKind::Color } else { NodeKind::Plain };
         if msg.data.is_empty() {
-            return ot::empty(TreeKind::of(kind), resolution, None);
+            return ot::empty(TreeKind::of(kind), resolution);
         }
         AnyTree::Occupancy(bt::read_data(&mut r, resolution, SensorModel::default(), kind)?)
     } else {
         let kind = TreeKind::from_id(&msg.id)
             .ok_or_else(|| TreeFileError::UnknownTreeType { id: msg.id.clone(), offset: None })?;
         if msg.data.is_empty() {
-            return ot::empty(kind, resolution, None);
+            return ot::empty(kind, resolution);
         }
         ot::read_data(&mut r, kind, resolution)?
     };
