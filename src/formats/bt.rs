@@ -10,7 +10,7 @@
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, BT_FIRST_LINE};
 use super::TreeFileError;
 use crate::sensor::SensorModel;
-use crate::tree::{NodeArena, OccupancyTree};
+use crate::tree::{NodeArena, NodeKind, OccupancyTree};
 use std::io::{self, BufRead, Write};
 
 /// Reads a `.bt` file into a tree with the default sensor model.
@@ -32,23 +32,39 @@ pub fn read_with_sensor(r: impl BufRead, sensor: SensorModel) -> Result<Occupanc
                 } else {
                     format!("first line is `{}`", String::from_utf8_lossy(&line[..line.len().min(60)]))
                 };
-                return Err(TreeFileError::WrongFormat { expected: ".bt", reason });
+                return Err(TreeFileError::WrongFormat { offset: 0, expected: ".bt file", reason });
             }
             let h = read_header(&mut r)?;
             (h.size, h.resolution)
         }
         false => read_legacy_header(&mut r)?,
     };
-    let mut tree =
-        OccupancyTree::with_sensor(resolution, sensor).map_err(|_| TreeFileError::BadResolution(resolution))?;
-    if size > 0 {
-        let mut arena = NodeArena::with_root(sensor.clamping_max);
-        read_node(&mut r, &mut arena, 0, 0, &sensor)?;
-        tree.set_arena(Some(arena));
-    }
+    let tree = if size > 0 {
+        read_data(&mut r, resolution, sensor, NodeKind::Plain)?
+    } else {
+        OccupancyTree::with_sensor(resolution, sensor)
+            .map_err(|_| TreeFileError::BadResolution { value: resolution, offset: None })?
+    };
     if size != tree.size() as u64 {
-        return Err(TreeFileError::SizeMismatch { header: size, read: tree.size() as u64 });
+        return Err(TreeFileError::SizeMismatch { offset: r.offset, header: size, read: tree.size() as u64 });
     }
+    Ok(tree)
+}
+
+/// Reads one tree's binary node stream, root first
+/// (`OccupancyOcTreeBase::readBinaryData`), into a tree of `kind` whose
+/// nodes keep that kind's default colour or stamp.
+pub(crate) fn read_data<R: BufRead>(
+    r: &mut CountingReader<R>,
+    resolution: f64,
+    sensor: SensorModel,
+    kind: NodeKind,
+) -> Result<OccupancyTree, TreeFileError> {
+    let mut tree = OccupancyTree::with_kind(resolution, sensor, kind)
+        .map_err(|_| TreeFileError::BadResolution { value: resolution, offset: None })?;
+    let mut arena = OccupancyTree::new_arena(kind, sensor.clamping_max);
+    read_node(r, &mut arena, 0, 0, &sensor)?;
+    tree.set_arena(Some(arena));
     Ok(tree)
 }
 
@@ -64,7 +80,8 @@ fn read_legacy_header<R: BufRead>(r: &mut CountingReader<R>) -> Result<(u64, f64
     let kind = i32::from_le_bytes(b4);
     if kind != 3 {
         return Err(TreeFileError::WrongFormat {
-            expected: ".bt",
+            offset: 0,
+            expected: ".bt file",
             reason: format!("no text header and legacy tree type {kind} is not 3"),
         });
     }
@@ -72,7 +89,7 @@ fn read_legacy_header<R: BufRead>(r: &mut CountingReader<R>) -> Result<(u64, f64
     r.read_exact(&mut b8, "the legacy resolution")?;
     let res = f64::from_le_bytes(b8);
     if !(res > 0.0 && res.is_finite()) {
-        return Err(TreeFileError::BadResolution(res));
+        return Err(TreeFileError::BadResolution { value: res, offset: Some(r.offset - 8) });
     }
     r.read_exact(&mut b4, "the legacy size")?;
     Ok((u64::from(u32::from_le_bytes(b4)), res))
@@ -144,6 +161,12 @@ pub fn write(tree: &OccupancyTree, w: impl Write) -> io::Result<()> {
 pub fn write_const(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
     let id = super::ot::TreeKind::of(tree.kind()).id();
     write_header(&mut w, BT_FIRST_LINE, id, tree.size(), tree.resolution())?;
+    write_data(tree, w)
+}
+
+/// Writes the binary node stream alone, without header
+/// (`writeBinaryData`): the tree as it is, like [`write_const`].
+pub(crate) fn write_data(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
     let Some(arena) = tree.arena() else {
         return Ok(());
     };

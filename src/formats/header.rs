@@ -106,6 +106,8 @@ pub struct Header {
     pub id: String,
     pub size: u64,
     pub resolution: f64,
+    /// Byte offset of the `id` value, for errors about it.
+    pub id_offset: u64,
 }
 
 /// Which first line a file starts with.
@@ -134,28 +136,33 @@ pub fn read_first_line<R: BufRead>(r: &mut CountingReader<R>) -> Result<(FirstLi
 /// unknown keywords skipped, then the rest of the `data` line.
 pub fn read_header<R: BufRead>(r: &mut CountingReader<R>) -> Result<Header, TreeFileError> {
     let mut id = String::new();
+    let mut id_offset = r.offset;
     let mut size: u64 = 0;
     let mut resolution: f64 = 0.0;
-    loop {
+    let mut res_offset = None;
+    let data_offset = loop {
         let Some((offset, token)) = r.read_token()? else {
             return Err(TreeFileError::Header { offset: r.offset, reason: "no `data` line".into() });
         };
         match token.as_str() {
             "data" => {
                 r.skip_line()?;
-                break;
+                break offset;
             }
             t if t.starts_with('#') => r.skip_line()?,
-            "id" => id = r.read_token()?.map(|(_, t)| t).unwrap_or_default(),
+            "id" => {
+                (id_offset, id) = r.read_token()?.unwrap_or((r.offset, String::new()));
+            }
             "res" => {
-                let (o, v) = r.read_token()?.unwrap_or((offset, String::new()));
+                let (o, v) = r.read_token()?.unwrap_or((r.offset, String::new()));
+                res_offset = Some(o);
                 resolution = v.parse().map_err(|_| TreeFileError::Header {
                     offset: o,
                     reason: format!("resolution `{v}` is not a number"),
                 })?;
             }
             "size" => {
-                let (o, v) = r.read_token()?.unwrap_or((offset, String::new()));
+                let (o, v) = r.read_token()?.unwrap_or((r.offset, String::new()));
                 size = v.parse().map_err(|_| TreeFileError::Header {
                     offset: o,
                     reason: format!("size `{v}` is not a non-negative integer"),
@@ -163,17 +170,20 @@ pub fn read_header<R: BufRead>(r: &mut CountingReader<R>) -> Result<Header, Tree
             }
             _ => r.skip_line()?,
         }
-    }
+    };
     if id.is_empty() {
-        return Err(TreeFileError::Header { offset: r.offset, reason: "no `id` given".into() });
+        return Err(TreeFileError::Header { offset: data_offset, reason: "no `id` given".into() });
     }
     if !(resolution > 0.0 && resolution.is_finite()) {
-        return Err(TreeFileError::BadResolution(resolution));
+        return Err(TreeFileError::BadResolution {
+            value: resolution,
+            offset: Some(res_offset.unwrap_or(data_offset)),
+        });
     }
     if id == "1" {
         id = "OcTree".into();
     }
-    Ok(Header { id, size, resolution })
+    Ok(Header { id, size, resolution, id_offset })
 }
 
 /// Writes a header exactly as OctoMap's `write`/`writeBinaryConst` do.

@@ -7,6 +7,7 @@ pub mod graph;
 mod header;
 pub mod log;
 pub mod ot;
+pub mod ros;
 pub mod xyz;
 
 pub use header::{format_double, Header};
@@ -15,27 +16,35 @@ use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-/// Why an `.ot` or `.bt` file could not be read.
+/// Why an `.ot` or `.bt` file (or a ROS `Octomap` message) could not be
+/// read. Every variant that concerns a place in the input names its byte
+/// offset (counted from the start of the file, or of the message's `data`).
 #[derive(Debug, thiserror::Error)]
 pub enum TreeFileError {
     #[error("I/O error: {0}")]
     Io(#[from] io::Error),
     #[error("bad header at byte {offset}: {reason}")]
     Header { offset: u64, reason: String },
-    #[error("resolution {0} is not a positive finite number")]
-    BadResolution(f64),
-    #[error("file ends at byte {offset} in the middle of {what}")]
+    /// `offset` is that of the `res` value; `None` for a message's field.
+    #[error("resolution {value}{} is not a positive finite number", at_byte(.offset))]
+    BadResolution { value: f64, offset: Option<u64> },
+    #[error("input ends inside {what} starting at byte {offset}")]
     Truncated { offset: u64, what: &'static str },
     #[error("node at byte {offset} lies below depth 16 (a voxel cannot have children)")]
     TooDeep { offset: u64 },
-    #[error("header announces {header} nodes but the data holds {read}")]
-    SizeMismatch { header: u64, read: u64 },
-    #[error("unknown tree type `{0}`")]
-    UnknownTreeType(String),
+    #[error("header announces {header} nodes but the data ending at byte {offset} holds {read}")]
+    SizeMismatch { offset: u64, header: u64, read: u64 },
+    /// `offset` is that of the `id` value; `None` for a message's field.
+    #[error("unknown tree type `{id}`{}", at_byte(.offset))]
+    UnknownTreeType { id: String, offset: Option<u64> },
     #[error("tree type `{0}` is recognised but not supported yet")]
     UnsupportedTreeType(String),
-    #[error("not an OctoMap {expected} file: {reason}")]
-    WrongFormat { expected: &'static str, reason: String },
+    #[error("not an OctoMap {expected} at byte {offset}: {reason}")]
+    WrongFormat { offset: u64, expected: &'static str, reason: String },
+}
+
+fn at_byte(offset: &Option<u64>) -> String {
+    offset.map(|o| format!(" at byte {o}")).unwrap_or_default()
 }
 
 /// Writes through `write` into a fresh temporary file next to `path`,

@@ -105,43 +105,68 @@ pub fn read(r: impl BufRead) -> Result<AnyTree, TreeFileError> {
         } else {
             format!("first line is `{}`", String::from_utf8_lossy(&line[..line.len().min(60)]))
         };
-        return Err(TreeFileError::WrongFormat { expected: ".ot", reason });
+        return Err(TreeFileError::WrongFormat { offset: 0, expected: ".ot file", reason });
     }
     let header = read_header(&mut r)?;
-    let kind = TreeKind::from_id(&header.id).ok_or_else(|| TreeFileError::UnknownTreeType(header.id.clone()))?;
-    let node_kind = match kind {
+    let kind = TreeKind::from_id(&header.id)
+        .ok_or_else(|| TreeFileError::UnknownTreeType { id: header.id.clone(), offset: Some(header.id_offset) })?;
+    if header.size == 0 {
+        // OctoMap reads no data then, whatever follows
+        return empty(kind, header.resolution);
+    }
+    read_data(&mut r, kind, header.resolution)
+}
+
+/// An empty tree of `kind`.
+pub(crate) fn empty(kind: TreeKind, resolution: f64) -> Result<AnyTree, TreeFileError> {
+    let bad_res = |_| TreeFileError::BadResolution { value: resolution, offset: None };
+    Ok(match kind {
+        TreeKind::CountingOcTree => AnyTree::Counting(CountingTree::new(resolution).map_err(bad_res)?),
+        _ => AnyTree::Occupancy(
+            OccupancyTree::with_kind(resolution, SensorModel::default(), node_kind(kind)).map_err(bad_res)?,
+        ),
+    })
+}
+
+fn node_kind(kind: TreeKind) -> NodeKind {
+    match kind {
         TreeKind::OcTree => NodeKind::Plain,
         TreeKind::ColorOcTree => NodeKind::Color,
         // counts live in the extras, like stamps
         TreeKind::OcTreeStamped | TreeKind::CountingOcTree => NodeKind::Stamped,
-    };
-    let mut b = PreorderBuilder::with_kind(node_kind);
-    if header.size > 0 {
-        let mut buf = [0u8; 8];
-        let len = kind.payload_len() + 1;
-        let mut index = 0;
-        while !b.is_complete() {
-            let offset = r.offset;
-            r.read_exact(&mut buf[..len], "a node")?;
-            let word = [buf[0], buf[1], buf[2], buf[3]];
-            let (value, extra) = match kind {
-                TreeKind::OcTree => (f32::from_le_bytes(word), None),
-                TreeKind::OcTreeStamped => (f32::from_le_bytes(word), Some(0)),
-                TreeKind::ColorOcTree => {
-                    (f32::from_le_bytes(word), Some(u32::from_le_bytes([buf[4], buf[5], buf[6], 0])))
-                }
-                TreeKind::CountingOcTree => (0.0, Some(u32::from_le_bytes(word))),
-            };
-            b.push_with_extra(value, extra, buf[len - 1], index).map_err(|_| TreeFileError::TooDeep { offset })?;
-            index += 1;
-        }
     }
-    let bad_res = |_| TreeFileError::BadResolution(header.resolution);
+}
+
+/// Reads one tree's node stream, root first (`OcTreeBaseImpl::readData`):
+/// exactly the nodes the child masks announce, nothing after them.
+pub(crate) fn read_data<R: BufRead>(
+    r: &mut CountingReader<R>,
+    kind: TreeKind,
+    resolution: f64,
+) -> Result<AnyTree, TreeFileError> {
+    let mut b = PreorderBuilder::with_kind(node_kind(kind));
+    let mut buf = [0u8; 8];
+    let len = kind.payload_len() + 1;
+    let mut index = 0;
+    while !b.is_complete() {
+        let offset = r.offset;
+        r.read_exact(&mut buf[..len], "a node")?;
+        let word = [buf[0], buf[1], buf[2], buf[3]];
+        let (value, extra) = match kind {
+            TreeKind::OcTree => (f32::from_le_bytes(word), None),
+            TreeKind::OcTreeStamped => (f32::from_le_bytes(word), Some(0)),
+            TreeKind::ColorOcTree => (f32::from_le_bytes(word), Some(u32::from_le_bytes([buf[4], buf[5], buf[6], 0]))),
+            TreeKind::CountingOcTree => (0.0, Some(u32::from_le_bytes(word))),
+        };
+        b.push_with_extra(value, extra, buf[len - 1], index).map_err(|_| TreeFileError::TooDeep { offset })?;
+        index += 1;
+    }
+    let bad_res = |_| TreeFileError::BadResolution { value: resolution, offset: None };
     if kind == TreeKind::CountingOcTree {
         let arena = b.finish_arena().expect("complete");
-        return Ok(AnyTree::Counting(CountingTree::from_arena(header.resolution, arena).map_err(bad_res)?));
+        return Ok(AnyTree::Counting(CountingTree::from_arena(resolution, arena).map_err(bad_res)?));
     }
-    let tree = b.finish(header.resolution, SensorModel::default()).map_err(bad_res)?.expect("complete");
+    let tree = b.finish(resolution, SensorModel::default()).map_err(bad_res)?.expect("complete");
     Ok(AnyTree::Occupancy(tree))
 }
 
@@ -149,6 +174,12 @@ pub fn read(r: impl BufRead) -> Result<AnyTree, TreeFileError> {
 pub fn write(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
     let kind = TreeKind::of(tree.kind());
     write_header(&mut w, OT_FIRST_LINE, kind.id(), tree.size(), tree.resolution())?;
+    write_data(tree, w)
+}
+
+/// Writes the node stream alone, without header (`writeData`).
+pub(crate) fn write_data(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
+    let kind = TreeKind::of(tree.kind());
     write_nodes(tree.root(), &mut w, |n, out| {
         out.extend_from_slice(&n.value().to_le_bytes());
         if kind == TreeKind::ColorOcTree {
@@ -160,6 +191,11 @@ pub fn write(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
 /// Writes a counting tree (`id OcTreeBase`, `u32` counts).
 pub fn write_counting(tree: &CountingTree, mut w: impl Write) -> io::Result<()> {
     write_header(&mut w, OT_FIRST_LINE, TreeKind::CountingOcTree.id(), tree.size(), tree.resolution())?;
+    write_counting_data(tree, w)
+}
+
+/// A counting tree's node stream alone, without header.
+pub(crate) fn write_counting_data(tree: &CountingTree, mut w: impl Write) -> io::Result<()> {
     write_nodes(tree.root(), &mut w, |n, out| out.extend_from_slice(&n.extra().to_le_bytes()))
 }
 

@@ -417,7 +417,7 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Meta, OlmError> {
             Some("starts inside the header")
         } else if s.offset % SECTION_ALIGN != 0 {
             Some("is not aligned to 64 bytes")
-        } else if end.map_or(true, |e| e > len) {
+        } else if end.is_none_or(|e| e > len) {
             Some("extends past the end of the file")
         } else if spans.iter().any(|&(o, e)| s.offset < e && o < s.offset + s.length) {
             Some("overlaps another section")

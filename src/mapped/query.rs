@@ -167,7 +167,7 @@ impl<'a, N: Nav> RawIter<'a, N> {
                             }
                             k -= 1;
                             let ck = key.child_key(pos, depth);
-                            if self.bbx.map_or(true, |b| overlaps(&b, ck, depth + 1)) {
+                            if self.bbx.is_none_or(|b| overlaps(&b, ck, depth + 1)) {
                                 self.stack.push((children[k], ck, depth + 1));
                             }
                         }
