@@ -1064,3 +1064,26 @@ fn user_errors_are_one_line_without_panics() {
     // output to a directory path names no file
     fail(&["convert", a, f.dir.path().to_str().unwrap()], "unknown map format");
 }
+
+#[test]
+fn olm_maps_convert_verify_and_answer_queries_like_the_source() {
+    let f = Fixture::new();
+    ok(&["convert", f.p("a.ot"), f.p("a.olm")]);
+    assert!(ok(&["verify", f.p("a.olm")]).contains(": ok"));
+    ok(&["convert", f.p("a.olm"), f.p("back.ot")]);
+    assert_eq!(std::fs::read(f.path("a.ot")).unwrap(), std::fs::read(f.path("back.ot")).unwrap());
+    let tree = read_tree(f.p("a.ot"));
+    let mut pts = String::new();
+    for (i, leaf) in tree.leaves(0).enumerate().filter(|(i, _)| i % 97 == 0) {
+        let c = leaf.center_point();
+        pts.push_str(&format!("{} {} {}\n", c.x, c.y, c.z + (i % 3) as f32 * 7.0));
+    }
+    let points = f.write("q.xyz", pts);
+    let from_ot = ok(&["query", f.p("a.ot"), "--points", points]);
+    assert_eq!(ok(&["query", f.p("a.olm"), "--points", points]), from_ot);
+    assert!(from_ot.contains(",occupied,") && from_ot.contains(",free,") && from_ot.contains(",unknown,"));
+    let bytes = std::fs::read(f.path("a.olm")).unwrap();
+    let truncated = f.write("cut.olm", &bytes[..bytes.len() / 2]);
+    fail(&["verify", truncated], "not a valid .olm map");
+    fail(&["query", truncated, "--points", points], "not a valid .olm map");
+}

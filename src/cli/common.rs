@@ -12,6 +12,8 @@ use std::path::Path;
 pub enum MapFormat {
     Bt,
     Ot,
+    /// octolinear's memory-mapped format.
+    Olm,
 }
 
 impl MapFormat {
@@ -19,7 +21,8 @@ impl MapFormat {
         match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
             Some("bt") => Ok(MapFormat::Bt),
             Some("ot") => Ok(MapFormat::Ot),
-            _ => bail!("{}: unknown map format (expected .bt or .ot)", path.display()),
+            Some("olm") => Ok(MapFormat::Olm),
+            _ => bail!("{}: unknown map format (expected .bt, .ot or .olm)", path.display()),
         }
     }
 }
@@ -32,6 +35,11 @@ pub struct LoadedMap {
 
 pub fn load_map(path: &Path) -> Result<LoadedMap> {
     let format = MapFormat::of(path)?;
+    if format == MapFormat::Olm {
+        let tree =
+            octolinear::mapped::read_file(path).with_context(|| format!("{}: not a valid .olm map", path.display()))?;
+        return Ok(LoadedMap { tree, kind: "OcTree (.olm, memory-mapped)" });
+    }
     let file = File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
     let r = BufReader::with_capacity(1 << 16, file);
     Ok(match format {
@@ -39,6 +47,7 @@ pub fn load_map(path: &Path) -> Result<LoadedMap> {
             tree: bt::read(r).with_context(|| format!("{}: not a valid .bt map", path.display()))?,
             kind: "OcTree (.bt, maximum likelihood)",
         },
+        MapFormat::Olm => unreachable!("handled above"),
         MapFormat::Ot => {
             let t = ot::read(r).with_context(|| format!("{}: not a valid .ot map", path.display()))?;
             let kind = t.kind().id();
@@ -53,9 +62,13 @@ pub fn load_map(path: &Path) -> Result<LoadedMap> {
 /// Writes a map by extension, atomically.
 pub fn save_map(tree: &OccupancyTree, path: &Path) -> Result<()> {
     let format = MapFormat::of(path)?;
+    if format == MapFormat::Olm {
+        return octolinear::mapped::write_file(tree, path).with_context(|| format!("cannot write {}", path.display()));
+    }
     write_atomically(path, |w| match format {
         MapFormat::Bt => bt::write(tree, w),
         MapFormat::Ot => ot::write(tree, w),
+        MapFormat::Olm => unreachable!("handled above"),
     })
     .with_context(|| format!("cannot write {}", path.display()))
 }

@@ -1,6 +1,6 @@
 //! `octolinear info`, `convert` and `query`: inspect, convert and query maps.
 
-use super::common::{load_map, save_map};
+use super::common::{load_map, save_map, MapFormat};
 use anyhow::{bail, Context, Result};
 use octolinear::formats::xyz;
 use octolinear::{BoundsRule, OccupancyTree};
@@ -113,16 +113,32 @@ pub struct QueryArgs {
 }
 
 pub fn query(a: QueryArgs) -> Result<()> {
+    use octolinear::Found;
     use std::io::Write;
-    let m = load_map(&a.map)?;
     let pts = xyz::read_file(&a.points).with_context(|| format!("cannot read {}", a.points.display()))?;
+    // `.olm` maps are queried where they lie, without a parse step
+    let (loaded, mapped);
+    let lookup: Box<dyn Fn(octolinear::Point3) -> (Option<Found>, bool)> = if MapFormat::of(&a.map)? == MapFormat::Olm {
+        mapped =
+            octolinear::mapped::open(&a.map).with_context(|| format!("{}: not a valid .olm map", a.map.display()))?;
+        Box::new(|p| match mapped.search_point(p, 0) {
+            Ok(Some(f)) => (Some(f), mapped.view().is_occupied(f.value)),
+            _ => (None, false),
+        })
+    } else {
+        loaded = load_map(&a.map)?;
+        Box::new(|p| match loaded.tree.search_point(p, 0) {
+            Ok(Some(f)) => (Some(f), loaded.tree.is_occupied(f.value)),
+            _ => (None, false),
+        })
+    };
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
     for p in &pts.points {
-        let (state, bits) = match m.tree.search_point(*p, 0) {
-            Ok(Some(f)) if m.tree.is_occupied(f.value) => ("occupied", format!("{:08x}", f.value.to_bits())),
-            Ok(Some(f)) => ("free", format!("{:08x}", f.value.to_bits())),
-            Ok(None) | Err(_) => ("unknown", String::new()),
+        let (state, bits) = match lookup(*p) {
+            (Some(f), true) => ("occupied", format!("{:08x}", f.value.to_bits())),
+            (Some(f), false) => ("free", format!("{:08x}", f.value.to_bits())),
+            (None, _) => ("unknown", String::new()),
         };
         writeln!(out, "{},{},{},{state},{bits}", p.x, p.y, p.z)?;
     }
@@ -130,5 +146,21 @@ pub fn query(a: QueryArgs) -> Result<()> {
     if pts.points.is_empty() {
         bail!("{}: no points", a.points.display());
     }
+    Ok(())
+}
+
+/// Check every byte of a memory-mapped `.olm` map: child indices, order,
+/// counts and checksums.
+///
+/// Example: octolinear verify map.olm
+#[derive(clap::Args)]
+pub struct VerifyArgs {
+    map: PathBuf,
+}
+
+pub fn verify(a: VerifyArgs) -> Result<()> {
+    let m = octolinear::mapped::open(&a.map).with_context(|| format!("{}: not a valid .olm map", a.map.display()))?;
+    let report = m.verify().with_context(|| format!("{}: damaged", a.map.display()))?;
+    println!("{}: ok ({report:?})", a.map.display());
     Ok(())
 }
