@@ -34,7 +34,7 @@ impl Args {
             scenes: vec![SceneKind::Indoor, SceneKind::Outdoor],
             resolutions: vec![0.05, 0.1, 0.2],
             indoor_scans: 24,
-            outdoor_scans: 24,
+            outdoor_scans: 6,
             queries: 1_000_000,
             rays: 20_000,
         };
@@ -50,7 +50,7 @@ impl Args {
                     a.insert_reps = 1;
                     a.resolutions = vec![0.1];
                     a.indoor_scans = 6;
-                    a.outdoor_scans = 6;
+                    a.outdoor_scans = 2;
                     a.queries = 200_000;
                     a.rays = 5_000;
                 }
@@ -96,9 +96,19 @@ impl Args {
     }
 }
 
-fn median(mut v: Vec<Duration>) -> Duration {
+/// Median and minimum of the repetitions.
+#[derive(Clone, Copy)]
+struct Stat {
+    median: Duration,
+    min: Duration,
+}
+
+fn median(mut v: Vec<Duration>) -> Stat {
     v.sort();
-    v[v.len() / 2]
+    Stat {
+        median: v[v.len() / 2],
+        min: v[0],
+    }
 }
 
 fn secs(d: Duration) -> f64 {
@@ -115,8 +125,8 @@ fn time<T>(f: impl FnOnce() -> T) -> (Duration, T) {
 /// One row of the output table.
 struct Row {
     job: String,
-    octomap: Duration,
-    octolinear: Duration,
+    octomap: Stat,
+    octolinear: Stat,
     /// Work per run and its unit, for the rate column (e.g. points, MB).
     work: f64,
     unit: &'static str,
@@ -125,14 +135,16 @@ struct Row {
 impl Row {
     fn print(&self) {
         let rate = |d: Duration| self.work / secs(d);
+        let (a, b) = (self.octomap.median, self.octolinear.median);
         println!(
-            "| {:<28} | {:>10.2} | {:>10.2} | {:>7.2}x | {:>9} | {:>9} |",
+            "| {:<28} | {:>10.2} | {:>10.2} | {:>7.2}x | {:>7.2}x | {:>12} | {:>12} |",
             self.job,
-            secs(self.octomap) * 1e3,
-            secs(self.octolinear) * 1e3,
-            secs(self.octomap) / secs(self.octolinear),
-            fmt_rate(rate(self.octomap), self.unit),
-            fmt_rate(rate(self.octolinear), self.unit),
+            secs(a) * 1e3,
+            secs(b) * 1e3,
+            secs(a) / secs(b),
+            secs(self.octomap.min) / secs(self.octolinear.min),
+            fmt_rate(rate(a), self.unit),
+            fmt_rate(rate(b), self.unit),
         );
     }
 }
@@ -149,12 +161,12 @@ fn fmt_rate(r: f64, unit: &str) -> String {
 
 fn header() {
     println!(
-        "| {:<28} | {:>10} | {:>10} | {:>8} | {:>9} | {:>9} |",
-        "job", "OctoMap ms", "octolin. ms", "speed-up", "OctoMap", "octolin."
+        "| {:<28} | {:>10} | {:>10} | {:>8} | {:>8} | {:>12} | {:>12} |",
+        "job", "OctoMap ms", "octolin. ms", "speed-up", "(min)", "OctoMap", "octolinear"
     );
     println!(
-        "|{:-<30}|{:->12}|{:->12}|{:->10}|{:->11}|{:->11}|",
-        "", ":", ":", ":", ":", ":"
+        "|{:-<30}|{:->12}|{:->12}|{:->10}|{:->10}|{:->14}|{:->14}|",
+        "", ":", ":", ":", ":", ":", ":"
     );
 }
 
@@ -447,7 +459,8 @@ fn main() {
     let args = Args::parse();
     println!(
         "side_by_side: OctoMap {} (system library via the oracle shim) vs octolinear; \
-         median of {} runs ({} for insertion); times in ms; speed-up = OctoMap time / octolinear time",
+         median of {} runs ({} for insertion); times in ms; speed-up = OctoMap time / \
+         octolinear time, of the medians and (min) of the fastest runs; rates from the medians",
         octolinear_oracle::octomap_version().unwrap_or("?"),
         args.reps,
         args.insert_reps
