@@ -1,0 +1,116 @@
+//! Shared inputs of the benchmarks: simulated scenes and random queries.
+#![allow(dead_code)]
+
+use octolinear::simulate::{simulate, LidarConfig, SceneKind};
+use octolinear::{OccupancyTree, Point3, ScanOptions};
+
+/// Seed of every simulated scene (fixed so runs are comparable).
+pub const SEED: u64 = 7;
+
+/// One scan: world-frame end points and the sensor origin.
+pub type Scan = (Vec<Point3>, Point3);
+
+/// `scans` simulated lidar scans of an indoor or outdoor scene, in the
+/// world frame exactly as `graph2tree` hands them to `insertPointCloud`.
+pub fn scans(kind: SceneKind, scans: usize) -> Vec<Scan> {
+    let cfg = match kind {
+        SceneKind::Indoor => LidarConfig::indoor(),
+        SceneKind::Outdoor => LidarConfig::outdoor(),
+    };
+    let graph = simulate(kind, scans, SEED, &cfg).expect("simulate");
+    graph
+        .nodes
+        .iter()
+        .map(|n| {
+            let (cloud, origin) = n.graph2tree();
+            (cloud.points, origin)
+        })
+        .collect()
+}
+
+pub fn num_points(scans: &[Scan]) -> usize {
+    scans.iter().map(|(p, _)| p.len()).sum()
+}
+
+pub fn kind_name(kind: SceneKind) -> &'static str {
+    match kind {
+        SceneKind::Indoor => "indoor",
+        SceneKind::Outdoor => "outdoor",
+    }
+}
+
+/// Options matching OctoMap's `insertPointCloud(points, origin)` defaults.
+pub fn scan_options(threads: Option<usize>) -> ScanOptions {
+    ScanOptions { threads, ..ScanOptions::default() }
+}
+
+/// A tree built from `scans` at `res` with OctoMap's default parameters.
+pub fn build(scans: &[Scan], res: f64, threads: Option<usize>) -> OccupancyTree {
+    let mut tree = OccupancyTree::new(res).expect("resolution");
+    let opts = scan_options(threads);
+    for (points, origin) in scans {
+        tree.insert_point_cloud(points, *origin, &opts).expect("insert");
+    }
+    tree
+}
+
+/// xorshift64*: a small deterministic generator for query inputs.
+pub struct Rng(pub u64);
+
+impl Rng {
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+
+    /// Uniform in [lo, hi).
+    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
+        let u = (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
+        lo + (hi - lo) * u
+    }
+
+    /// A random unit vector.
+    pub fn direction(&mut self) -> Point3 {
+        loop {
+            let p = Point3::new(self.range(-1.0, 1.0), self.range(-1.0, 1.0), self.range(-1.0, 1.0));
+            let n = p.norm();
+            if n > 0.1 && n <= 1.0 {
+                return p.normalized();
+            }
+        }
+    }
+}
+
+/// Random query points: half are leaf centres of the tree (hits), half are
+/// uniform in the tree's bounding box (mostly unknown space: misses).
+pub fn query_points(tree: &OccupancyTree, n: usize, seed: u64) -> Vec<Point3> {
+    let mut rng = Rng(seed | 1);
+    let leaves: Vec<Point3> = tree.leaves(0).map(|l| l.center_point()).collect();
+    let b = tree.bounds(octolinear::BoundsRule::CenterHalfSize);
+    (0..n)
+        .map(|i| {
+            if i % 2 == 0 && !leaves.is_empty() {
+                leaves[(rng.next_u64() % leaves.len() as u64) as usize]
+            } else {
+                Point3::new(
+                    rng.range(b.min[0] as f32, b.max[0] as f32),
+                    rng.range(b.min[1] as f32, b.max[1] as f32),
+                    rng.range(b.min[2] as f32, b.max[2] as f32),
+                )
+            }
+        })
+        .collect()
+}
+
+/// Random rays from the sensor origins of `scans` (free space).
+pub fn rays(scans: &[Scan], n: usize, seed: u64) -> (Vec<Point3>, Vec<Point3>) {
+    let mut rng = Rng(seed | 1);
+    (0..n)
+        .map(|_| {
+            let o = scans[(rng.next_u64() % scans.len() as u64) as usize].1;
+            (o, rng.direction())
+        })
+        .unzip()
+}

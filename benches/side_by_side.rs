@@ -1,0 +1,423 @@
+//! Side-by-side benchmark: the same jobs through OctoMap (the oracle crate,
+//! Debian's liboctomap behind a C++ shim) and octolinear, alternately, in
+//! one process. Each figure is the median of several repetitions.
+//!
+//! Run with `cargo bench --bench side_by_side` (add `-- --quick` for a
+//! small run; `-- --help` lists the options).
+
+mod common;
+
+use common::*;
+use octolinear::formats::{bt, ot};
+use octolinear::simulate::SceneKind;
+use octolinear::{CastOptions, OccupancyTree, Point3};
+use octolinear_oracle::{OracleTree, ScanBatch};
+use std::hint::black_box;
+use std::time::{Duration, Instant};
+
+struct Args {
+    reps: usize,
+    insert_reps: usize,
+    scenes: Vec<SceneKind>,
+    resolutions: Vec<f64>,
+    indoor_scans: usize,
+    outdoor_scans: usize,
+    queries: usize,
+    rays: usize,
+}
+
+impl Args {
+    fn parse() -> Args {
+        let mut a = Args {
+            reps: 5,
+            insert_reps: 3,
+            scenes: vec![SceneKind::Indoor, SceneKind::Outdoor],
+            resolutions: vec![0.05, 0.1, 0.2],
+            indoor_scans: 24,
+            outdoor_scans: 6,
+            queries: 1_000_000,
+            rays: 20_000,
+        };
+        let mut it = std::env::args().skip(1);
+        while let Some(arg) = it.next() {
+            let mut value = |name: &str| it.next().unwrap_or_else(|| panic!("{name} needs a value (see --help)"));
+            match arg.as_str() {
+                "--quick" => {
+                    a.reps = 3;
+                    a.insert_reps = 1;
+                    a.resolutions = vec![0.1];
+                    a.indoor_scans = 6;
+                    a.outdoor_scans = 2;
+                    a.queries = 200_000;
+                    a.rays = 5_000;
+                }
+                "--reps" => a.reps = value("--reps").parse().expect("--reps N"),
+                "--insert-reps" => a.insert_reps = value("--insert-reps").parse().expect("--insert-reps N"),
+                "--res" => {
+                    a.resolutions = value("--res").split(',').map(|s| s.parse().expect("--res R[,R...]")).collect()
+                }
+                "--scene" => {
+                    a.scenes = match value("--scene").as_str() {
+                        "indoor" => vec![SceneKind::Indoor],
+                        "outdoor" => vec![SceneKind::Outdoor],
+                        "both" => vec![SceneKind::Indoor, SceneKind::Outdoor],
+                        s => panic!("--scene indoor|outdoor|both, not {s}"),
+                    }
+                }
+                "--scans" => {
+                    let n = value("--scans").parse().expect("--scans N");
+                    a.indoor_scans = n;
+                    a.outdoor_scans = n;
+                }
+                "--queries" => a.queries = value("--queries").parse().expect("--queries N"),
+                "--rays" => a.rays = value("--rays").parse().expect("--rays N"),
+                "--help" | "-h" => {
+                    println!(
+                        "side_by_side [--quick] [--reps N] [--insert-reps N] [--res 0.05,0.1,0.2] \
+                         [--scene indoor|outdoor|both] [--scans N] [--queries N] [--rays N]"
+                    );
+                    std::process::exit(0);
+                }
+                // `cargo bench` passes `--bench`; ignore it and other harness flags
+                _ => {}
+            }
+        }
+        a.reps = a.reps.max(1);
+        a.insert_reps = a.insert_reps.max(1);
+        a
+    }
+}
+
+/// Median and minimum of the repetitions.
+#[derive(Clone, Copy)]
+struct Stat {
+    median: Duration,
+    min: Duration,
+}
+
+fn median(mut v: Vec<Duration>) -> Stat {
+    v.sort();
+    Stat { median: v[v.len() / 2], min: v[0] }
+}
+
+fn secs(d: Duration) -> f64 {
+    d.as_secs_f64()
+}
+
+/// Times `f` once.
+fn time<T>(f: impl FnOnce() -> T) -> (Duration, T) {
+    let t = Instant::now();
+    let r = f();
+    (t.elapsed(), r)
+}
+
+/// One row of the output table.
+struct Row {
+    job: String,
+    octomap: Stat,
+    octolinear: Stat,
+    /// Work per run and its unit, for the rate column (e.g. points, MB).
+    work: f64,
+    unit: &'static str,
+}
+
+impl Row {
+    fn print(&self) {
+        let rate = |d: Duration| self.work / secs(d);
+        let (a, b) = (self.octomap.median, self.octolinear.median);
+        println!(
+            "| {:<28} | {:>10.2} | {:>10.2} | {:>7.2}x | {:>7.2}x | {:>12} | {:>12} |",
+            self.job,
+            secs(a) * 1e3,
+            secs(b) * 1e3,
+            secs(a) / secs(b),
+            secs(self.octomap.min) / secs(self.octolinear.min),
+            fmt_rate(rate(a), self.unit),
+            fmt_rate(rate(b), self.unit),
+        );
+    }
+}
+
+fn fmt_rate(r: f64, unit: &str) -> String {
+    if unit == "MB" {
+        format!("{:.0} MB/s", r)
+    } else if r >= 1e6 {
+        format!("{:.1} M{}/s", r / 1e6, unit)
+    } else {
+        format!("{:.0} k{}/s", r / 1e3, unit)
+    }
+}
+
+fn header() {
+    println!(
+        "| {:<28} | {:>10} | {:>10} | {:>8} | {:>8} | {:>12} | {:>12} |",
+        "job", "OctoMap ms", "octolin. ms", "speed-up", "(min)", "OctoMap", "octolinear"
+    );
+    println!("|{:-<30}|{:->12}|{:->12}|{:->10}|{:->10}|{:->14}|{:->14}|", "", ":", ":", ":", ":", ":", ":");
+}
+
+fn ot_bytes(tree: &OccupancyTree) -> Vec<u8> {
+    let mut v = Vec::new();
+    ot::write(tree, &mut v).expect("write .ot");
+    v
+}
+
+fn to_arrays(points: &[Point3]) -> Vec<[f32; 3]> {
+    points.iter().map(|p| p.to_array()).collect()
+}
+
+fn run_case(args: &Args, kind: SceneKind, res: f64, scans: &[Scan]) {
+    let npoints = num_points(scans);
+    let mut batch = ScanBatch::new();
+    for (points, origin) in scans {
+        batch.push(&to_arrays(points), origin.to_array());
+    }
+    println!();
+    println!("### {} scene, {} m: {} scans, {} points", kind_name(kind), res, scans.len(), npoints);
+    println!();
+    header();
+
+    // ----- insertion (also gives the trees for the other jobs)
+    let (mut t_om, mut t_1, mut t_2) = (Vec::new(), Vec::new(), Vec::new());
+    let mut om = None;
+    let mut ol = None;
+    let mut ol2 = None;
+    for _ in 0..args.insert_reps {
+        drop(om.take());
+        let (d, t) = time(|| {
+            let mut t = OracleTree::new(res).expect("oracle tree");
+            t.insert_scans(&batch, -1.0, false, false).expect("insert");
+            t
+        });
+        t_om.push(d);
+        om = Some(t);
+        drop(ol.take());
+        let (d, t) = time(|| build(scans, res, Some(1)));
+        t_1.push(d);
+        ol = Some(t);
+        drop(ol2.take());
+        let (d, t) = time(|| build(scans, res, Some(2)));
+        t_2.push(d);
+        ol2 = Some(t);
+    }
+    let om = om.expect("ran");
+    let mut ol = ol.expect("ran");
+    let om_ot = om.write_ot().expect("oracle .ot");
+    let ol_ot = ot_bytes(&ol);
+    assert!(
+        om_ot == ol_ot,
+        "{} {res} m: octolinear's .ot differs from OctoMap's ({} vs {} bytes); \
+         the comparison would be meaningless",
+        kind_name(kind),
+        ol_ot.len(),
+        om_ot.len()
+    );
+    assert!(ot_bytes(&ol2.take().expect("ran")) == om_ot, "2-thread tree differs");
+    let (om_ins, ol1, ol2) = (median(t_om), median(t_1), median(t_2));
+    for (job, d) in [("insert, 1 thread", ol1), ("insert, 2 threads", ol2)] {
+        Row { job: job.into(), octomap: om_ins, octolinear: d, work: npoints as f64, unit: "pt" }.print();
+    }
+
+    // ----- random search (half leaf centres, half uniform in the bounds)
+    let queries = query_points(&ol, args.queries, 11);
+    let q_arr = to_arrays(&queries);
+    let mut out = vec![0f32; queries.len()];
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for _ in 0..args.reps {
+        let (d, n_om) = time(|| om.bench_search(&q_arr, 0, &mut out));
+        a.push(d);
+        let (d, n_ol) = time(|| {
+            let mut n = 0usize;
+            for &p in &queries {
+                if let Ok(Some(f)) = ol.search_point(p, 0) {
+                    n += 1;
+                    black_box(f.value);
+                }
+            }
+            n
+        });
+        b.push(d);
+        assert_eq!(n_om, n_ol, "search: different hit counts");
+    }
+    Row {
+        job: "random search".into(),
+        octomap: median(a),
+        octolinear: median(b),
+        work: queries.len() as f64,
+        unit: "q",
+    }
+    .print();
+
+    // ----- full leaf iteration
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    let mut nleaves = 0;
+    for _ in 0..args.reps {
+        let (d, (n_om, s_om)) = time(|| om.bench_leaf_sum(0));
+        a.push(d);
+        let (d, (n_ol, s_ol)) = time(|| {
+            let mut n = 0usize;
+            let mut s = 0f64;
+            for l in ol.leaves(0) {
+                n += 1;
+                s += f64::from(l.value);
+            }
+            (n, s)
+        });
+        b.push(d);
+        assert_eq!((n_om, s_om), (n_ol, s_ol), "leaf iteration differs");
+        nleaves = n_ol;
+    }
+    Row { job: "leaf iteration".into(), octomap: median(a), octolinear: median(b), work: nleaves as f64, unit: "leaf" }
+        .print();
+
+    // ----- castRay from sensor origins, through unknown space, 20 m
+    let (origins, dirs) = rays(scans, args.rays, 5);
+    let (o_arr, d_arr) = (to_arrays(&origins), to_arrays(&dirs));
+    let mut ends = vec![[0f32; 3]; origins.len()];
+    let mut hits = vec![false; origins.len()];
+    let opts = CastOptions { ignore_unknown: true, max_range: Some(20.0) };
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for _ in 0..args.reps {
+        let (d, h_om) = time(|| om.bench_cast_rays(&o_arr, &d_arr, true, 20.0, &mut ends, &mut hits));
+        a.push(d);
+        let (d, h_ol) = time(|| {
+            origins.iter().zip(&dirs).filter(|(&o, &dir)| ol.cast_ray(o, dir, opts).is_ok_and(|c| c.hit())).count()
+        });
+        b.push(d);
+        assert_eq!(h_om, h_ol, "castRay: different hit counts");
+    }
+    Row {
+        job: "castRay (20 m, ign. unknown)".into(),
+        octomap: median(a),
+        octolinear: median(b),
+        work: origins.len() as f64,
+        unit: "ray",
+    }
+    .print();
+
+    // ----- .ot write / read
+    let mb = om_ot.len() as f64 / 1e6;
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for _ in 0..args.reps {
+        let (d, v) = time(|| om.write_ot().expect("write"));
+        a.push(d);
+        drop(v);
+        let (d, v) = time(|| {
+            let mut v = Vec::with_capacity(ol_ot.len());
+            ot::write(&ol, &mut v).expect("write");
+            v
+        });
+        b.push(d);
+        drop(v);
+    }
+    Row { job: format!(".ot write ({:.1} MB)", mb), octomap: median(a), octolinear: median(b), work: mb, unit: "MB" }
+        .print();
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for _ in 0..args.reps {
+        let (d, t) = time(|| OracleTree::read_ot(&om_ot).expect("read"));
+        a.push(d);
+        drop(t);
+        let (d, t) = time(|| ot::read(&ol_ot[..]).expect("read"));
+        b.push(d);
+        drop(t);
+    }
+    Row { job: ".ot read".into(), octomap: median(a), octolinear: median(b), work: mb, unit: "MB" }.print();
+
+    // ----- .bt write (writeBinary: max-likelihood + prune, then write) / read
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    let mut bt_bytes = Vec::new();
+    for _ in 0..args.reps {
+        // OctoMap's writeBinary changes the tree: write from a fresh copy
+        let mut copy = OracleTree::read_ot(&om_ot).expect("read");
+        let (d, v) = time(|| copy.write_bt().expect("write"));
+        a.push(d);
+        drop(copy);
+        let (d, w) = time(|| {
+            let mut w = Vec::with_capacity(v.len());
+            bt::write(&ol, &mut w).expect("write");
+            w
+        });
+        b.push(d);
+        assert!(v == w, ".bt bytes differ");
+        bt_bytes = w;
+    }
+    let mb = bt_bytes.len() as f64 / 1e6;
+    Row { job: format!(".bt write ({:.2} MB)", mb), octomap: median(a), octolinear: median(b), work: mb, unit: "MB" }
+        .print();
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for _ in 0..args.reps {
+        let (d, t) = time(|| OracleTree::read_bt(&bt_bytes).expect("read"));
+        a.push(d);
+        drop(t);
+        let (d, t) = time(|| bt::read(&bt_bytes[..]).expect("read"));
+        b.push(d);
+        drop(t);
+    }
+    Row { job: ".bt read".into(), octomap: median(a), octolinear: median(b), work: mb, unit: "MB" }.print();
+
+    // ----- memory
+    let nodes = ol.size();
+    assert_eq!(om.size() as usize, nodes);
+    let om_mem = om.memory_usage() as usize;
+    let before = ol.memory_usage();
+    ol.compact();
+    let after = ol.memory_usage();
+    println!();
+    println!(
+        "memory, {} nodes: OctoMap memoryUsage() {:.1} MB ({:.1} B/node); \
+         octolinear memory_usage() {:.1} MB ({:.2} B/node) as built, \
+         {:.1} MB ({:.2} B/node) after compact() — {:.1}x smaller",
+        nodes,
+        om_mem as f64 / 1e6,
+        om_mem as f64 / nodes as f64,
+        before as f64 / 1e6,
+        before as f64 / nodes as f64,
+        after as f64 / 1e6,
+        after as f64 / nodes as f64,
+        om_mem as f64 / after as f64,
+    );
+}
+
+fn main() {
+    if !octolinear_oracle::available() {
+        println!(
+            "side_by_side: skipped, OctoMap oracle unavailable \
+             (install: apt-get install -y liboctomap-dev)"
+        );
+        return;
+    }
+    let args = Args::parse();
+    println!(
+        "side_by_side: OctoMap {} (system library via the oracle shim) vs octolinear; \
+         median of {} runs ({} for insertion); times in ms; speed-up = OctoMap time / \
+         octolinear time, of the medians and (min) of the fastest runs; rates from the medians",
+        octolinear_oracle::octomap_version().unwrap_or("?"),
+        args.reps,
+        args.insert_reps
+    );
+    for &kind in &args.scenes {
+        let n = match kind {
+            SceneKind::Indoor => args.indoor_scans,
+            SceneKind::Outdoor => args.outdoor_scans,
+        };
+        let scans = scans(kind, n);
+        for &res in &args.resolutions {
+            run_case(&args, kind, res, &scans);
+        }
+    }
+    println!();
+    println!(
+        "peak RSS of the process (VmHWM): {} — OctoMap and octolinear trees live in the \
+         same process, so this is not separable per library",
+        peak_rss()
+    );
+}
+
+fn peak_rss() -> String {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines().find(|l| l.starts_with("VmHWM:")).map(|l| l.trim_start_matches("VmHWM:").trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown".into())
+}
