@@ -9,7 +9,8 @@
 use crate::geometry::Point3;
 use crate::key::{Key, KeyError, KeySpace, KEY_CENTER};
 use crate::morton::MortonCode;
-use crate::tree::OccupancyTree;
+use crate::sensor::SensorModel;
+use crate::tree::{Found, OccupancyTree};
 
 /// `origin + direction * (float) range`, in float.
 #[inline(always)]
@@ -240,49 +241,7 @@ impl OccupancyTree {
 
     /// Follows a ray until it meets an occupied voxel, as OctoMap's `castRay`.
     pub fn cast_ray(&self, origin: Point3, direction: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
-        let keys = self.key_space();
-        let start = keys.key(origin)?;
-        match self.search(start, 0) {
-            Some(n) if self.is_occupied(n.value) => return Ok(CastOutcome::Occupied { end: keys.key_to_point(start) }),
-            Some(_) => {}
-            None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end: keys.key_to_point(start) }),
-            None => {}
-        }
-        let direction = direction.normalized();
-        let mut dda = Dda::new(keys, origin, start, direction, false);
-        if dda.step == [0; 3] {
-            return Err(CastError::ZeroDirection);
-        }
-        let max_range = opts.max_range.unwrap_or(-1.0);
-        let max_range_set = max_range > 0.0;
-        let max_range_sq = max_range * max_range;
-        let o = [origin.x, origin.y, origin.z];
-        loop {
-            let dim = min_axis(&dda.t_max);
-            let k = dda.key.0[dim];
-            if (dda.step[dim] < 0 && k == 0) || (dda.step[dim] > 0 && u32::from(k) == 2 * KEY_CENTER - 1) {
-                return Ok(CastOutcome::LeftMap { end: keys.key_to_point(dda.key) });
-            }
-            dda.advance();
-            let end = keys.key_to_point(dda.key);
-            if max_range_set {
-                let e = [end.x, end.y, end.z];
-                let mut dist_sq = 0.0f64;
-                for j in 0..3 {
-                    let d = e[j] - o[j];
-                    dist_sq += f64::from(d * d);
-                }
-                if dist_sq > max_range_sq {
-                    return Ok(CastOutcome::MaxRange { end });
-                }
-            }
-            match self.search(dda.key, 0) {
-                Some(n) if self.is_occupied(n.value) => return Ok(CastOutcome::Occupied { end }),
-                Some(_) => {}
-                None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end }),
-                None => {}
-            }
-        }
+        cast_ray_with(self.key_space(), self.sensor(), |k| self.search(k, 0), origin, direction, opts)
     }
 
     /// Where a ray from `origin` along `direction` enters the voxel centred
@@ -325,5 +284,60 @@ impl OccupancyTree {
             let t = (out_d + delta) as f32;
             Point3::new(d[0] * t + o[0], d[1] * t + o[1], d[2] * t + o[2])
         })
+    }
+}
+
+/// OctoMap's `castRay` over any map, given its voxel search (depth 16):
+/// shared by the arena tree and the memory-mapped view, so both step
+/// exactly alike.
+pub(crate) fn cast_ray_with(
+    keys: &KeySpace,
+    sensor: &SensorModel,
+    mut search: impl FnMut(Key) -> Option<Found>,
+    origin: Point3,
+    direction: Point3,
+    opts: CastOptions,
+) -> Result<CastOutcome, CastError> {
+    let start = keys.key(origin)?;
+    match search(start) {
+        Some(n) if sensor.is_occupied(n.value) => return Ok(CastOutcome::Occupied { end: keys.key_to_point(start) }),
+        Some(_) => {}
+        None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end: keys.key_to_point(start) }),
+        None => {}
+    }
+    let direction = direction.normalized();
+    let mut dda = Dda::new(keys, origin, start, direction, false);
+    if dda.step == [0; 3] {
+        return Err(CastError::ZeroDirection);
+    }
+    let max_range = opts.max_range.unwrap_or(-1.0);
+    let max_range_set = max_range > 0.0;
+    let max_range_sq = max_range * max_range;
+    let o = [origin.x, origin.y, origin.z];
+    loop {
+        let dim = min_axis(&dda.t_max);
+        let k = dda.key.0[dim];
+        if (dda.step[dim] < 0 && k == 0) || (dda.step[dim] > 0 && u32::from(k) == 2 * KEY_CENTER - 1) {
+            return Ok(CastOutcome::LeftMap { end: keys.key_to_point(dda.key) });
+        }
+        dda.advance();
+        let end = keys.key_to_point(dda.key);
+        if max_range_set {
+            let e = [end.x, end.y, end.z];
+            let mut dist_sq = 0.0f64;
+            for j in 0..3 {
+                let d = e[j] - o[j];
+                dist_sq += f64::from(d * d);
+            }
+            if dist_sq > max_range_sq {
+                return Ok(CastOutcome::MaxRange { end });
+            }
+        }
+        match search(dda.key) {
+            Some(n) if sensor.is_occupied(n.value) => return Ok(CastOutcome::Occupied { end }),
+            Some(_) => {}
+            None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end }),
+            None => {}
+        }
     }
 }

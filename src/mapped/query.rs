@@ -183,58 +183,6 @@ impl<'a, N: Nav> RawIter<'a, N> {
     }
 }
 
-/// `origin + ...` DDA state of `castRay` (the border offset added in
-/// double, unlike `computeRayKeys`). Duplicated from `ray.rs`, whose `Dda`
-/// is private.
-struct Dda {
-    key: Key,
-    step: [i32; 3],
-    t_max: [f64; 3],
-    t_delta: [f64; 3],
-}
-
-/// Index of the smallest `t_max`, ties going to the higher axis.
-#[inline(always)]
-fn min_axis(t: &[f64; 3]) -> usize {
-    if t[0] < t[1] {
-        if t[0] < t[2] {
-            0
-        } else {
-            2
-        }
-    } else if t[1] < t[2] {
-        1
-    } else {
-        2
-    }
-}
-
-impl Dda {
-    fn new(keys: &KeySpace, origin: Point3, key: Key, direction: Point3) -> Self {
-        let o = [origin.x, origin.y, origin.z];
-        let d = [direction.x, direction.y, direction.z];
-        let mut step = [0; 3];
-        let mut t_max = [f64::MAX; 3];
-        let mut t_delta = [f64::MAX; 3];
-        for i in 0..3 {
-            step[i] = if d[i] > 0.0 {
-                1
-            } else if d[i] < 0.0 {
-                -1
-            } else {
-                0
-            };
-            if step[i] != 0 {
-                let offset = f64::from(step[i]) * keys.resolution() * 0.5;
-                let border = keys.key_to_coord(key.0[i]) + offset;
-                t_max[i] = (border - f64::from(o[i])) / f64::from(d[i]);
-                t_delta[i] = keys.resolution() / f64::from(d[i].abs());
-            }
-        }
-        Dda { key, step, t_max, t_delta }
-    }
-}
-
 /// OctoMap's `castRay` on any map (bit-identical to
 /// `OccupancyTree::cast_ray`): follows the ray from `origin` until an
 /// occupied voxel, unknown space (unless ignored), the maximum range or
@@ -245,61 +193,7 @@ pub fn cast_ray<M: OccupancyLookup + ?Sized>(
     direction: Point3,
     opts: CastOptions,
 ) -> Result<CastOutcome, CastError> {
-    cast_ray_with(map.key_space(), map.sensor(), |k| map.search(k, 0), origin, direction, opts)
-}
-
-/// [`cast_ray`] with the voxel search given as a closure (depth 16).
-pub(crate) fn cast_ray_with(
-    keys: &KeySpace,
-    sensor: &SensorModel,
-    mut search: impl FnMut(Key) -> Option<Found>,
-    origin: Point3,
-    direction: Point3,
-    opts: CastOptions,
-) -> Result<CastOutcome, CastError> {
-    let start = keys.key(origin)?;
-    match search(start) {
-        Some(n) if sensor.is_occupied(n.value) => return Ok(CastOutcome::Occupied { end: keys.key_to_point(start) }),
-        Some(_) => {}
-        None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end: keys.key_to_point(start) }),
-        None => {}
-    }
-    let direction = direction.normalized();
-    let mut dda = Dda::new(keys, origin, start, direction);
-    if dda.step == [0; 3] {
-        return Err(CastError::ZeroDirection);
-    }
-    let max_range = opts.max_range.unwrap_or(-1.0);
-    let max_range_set = max_range > 0.0;
-    let max_range_sq = max_range * max_range;
-    let o = [origin.x, origin.y, origin.z];
-    loop {
-        let dim = min_axis(&dda.t_max);
-        let k = dda.key.0[dim];
-        if (dda.step[dim] < 0 && k == 0) || (dda.step[dim] > 0 && u32::from(k) == 2 * KEY_CENTER - 1) {
-            return Ok(CastOutcome::LeftMap { end: keys.key_to_point(dda.key) });
-        }
-        dda.key.0[dim] = dda.key.0[dim].wrapping_add(dda.step[dim] as u16);
-        dda.t_max[dim] += dda.t_delta[dim];
-        let end = keys.key_to_point(dda.key);
-        if max_range_set {
-            let e = [end.x, end.y, end.z];
-            let mut dist_sq = 0.0f64;
-            for j in 0..3 {
-                let d = e[j] - o[j];
-                dist_sq += f64::from(d * d);
-            }
-            if dist_sq > max_range_sq {
-                return Ok(CastOutcome::MaxRange { end });
-            }
-        }
-        match search(dda.key) {
-            Some(n) if sensor.is_occupied(n.value) => return Ok(CastOutcome::Occupied { end }),
-            Some(_) => {}
-            None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end }),
-            None => {}
-        }
-    }
+    crate::ray::cast_ray_with(map.key_space(), map.sensor(), |k| map.search(k, 0), origin, direction, opts)
 }
 
 /// Depth-16 searches that restart from the deepest node shared with the
