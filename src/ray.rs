@@ -241,7 +241,8 @@ impl OccupancyTree {
 
     /// Follows a ray until it meets an occupied voxel, as OctoMap's `castRay`.
     pub fn cast_ray(&self, origin: Point3, direction: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
-        cast_ray_with(self.key_space(), self.sensor(), |k| self.search(k, 0), origin, direction, opts)
+        let mut path = crate::tree::PathSearch::new(self);
+        cast_ray_with(self.key_space(), self.sensor(), |k| path.search(k), origin, direction, opts)
     }
 
     /// Where a ray from `origin` along `direction` enters the voxel centred
@@ -313,6 +314,10 @@ pub(crate) fn cast_ray_with(
     let max_range = opts.max_range.unwrap_or(-1.0);
     let max_range_set = max_range > 0.0;
     let max_range_sq = max_range * max_range;
+    // A voxel entered at ray parameter `t` has its centre within `t` plus a
+    // half diagonal (< one resolution) of the origin; below this bound the
+    // exact float test of OctoMap cannot fire and is skipped.
+    let surely_inside = (max_range - keys.resolution()) * (1.0 - 1e-6);
     let o = [origin.x, origin.y, origin.z];
     loop {
         let dim = min_axis(&dda.t_max);
@@ -320,9 +325,11 @@ pub(crate) fn cast_ray_with(
         if (dda.step[dim] < 0 && k == 0) || (dda.step[dim] > 0 && u32::from(k) == 2 * KEY_CENTER - 1) {
             return Ok(CastOutcome::LeftMap { end: keys.key_to_point(dda.key) });
         }
-        dda.advance();
-        let end = keys.key_to_point(dda.key);
-        if max_range_set {
+        let t_entry = dda.t_max[dim];
+        dda.key.0[dim] = k.wrapping_add(dda.step[dim] as u16);
+        dda.t_max[dim] += dda.t_delta[dim];
+        if max_range_set && t_entry >= surely_inside {
+            let end = keys.key_to_point(dda.key);
             let e = [end.x, end.y, end.z];
             let mut dist_sq = 0.0f64;
             for j in 0..3 {
@@ -334,9 +341,11 @@ pub(crate) fn cast_ray_with(
             }
         }
         match search(dda.key) {
-            Some(n) if sensor.is_occupied(n.value) => return Ok(CastOutcome::Occupied { end }),
+            Some(n) if sensor.is_occupied(n.value) => {
+                return Ok(CastOutcome::Occupied { end: keys.key_to_point(dda.key) })
+            }
             Some(_) => {}
-            None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end }),
+            None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end: keys.key_to_point(dda.key) }),
             None => {}
         }
     }

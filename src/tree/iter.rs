@@ -56,13 +56,27 @@ impl NodeItem<'_> {
 }
 
 /// Iterator over nodes or leaves; see [`OccupancyTree::nodes`].
+///
+/// Keeps one frame per level (the parent's key, the id of its next child
+/// and the children still to visit) instead of a stack of pushed children,
+/// so a node costs one mask test and one key step.
 pub struct NodeIter<'a> {
     arena: Option<&'a NodeArena>,
     keys: &'a KeySpace,
-    stack: Vec<(NodeId, Key, u8)>,
+    /// `frames[..len]`: frame `d` walks the children of a node at depth `d`.
+    frames: [Frame; TREE_DEPTH as usize],
+    len: usize,
+    root_pending: bool,
     max_depth: u8,
     leaves_only: bool,
     bbx: Option<KeyBox>,
+}
+
+#[derive(Clone, Copy, Default)]
+struct Frame {
+    key: Key,
+    next: NodeId,
+    remaining: u8,
 }
 
 impl<'a> NodeIter<'a> {
@@ -78,11 +92,21 @@ impl<'a> NodeIter<'a> {
         bbx: Option<KeyBox>,
     ) -> Self {
         let max_depth = if max_depth == 0 || max_depth > TREE_DEPTH { TREE_DEPTH } else { max_depth };
-        let mut stack = Vec::with_capacity(8 * TREE_DEPTH as usize + 1);
-        if arena.is_some() {
-            stack.push((ROOT, Key::ROOT, 0));
+        NodeIter {
+            arena,
+            keys,
+            frames: [Frame::default(); TREE_DEPTH as usize],
+            len: 0,
+            root_pending: arena.is_some(),
+            max_depth,
+            leaves_only,
+            bbx,
         }
-        NodeIter { arena, keys, stack, max_depth, leaves_only, bbx }
+    }
+
+    #[inline(always)]
+    fn item(&self, a: &NodeArena, n: NodeId, key: Key, depth: u8, is_leaf: bool) -> NodeItem<'a> {
+        NodeItem { key, depth, value: a.value(n), extra: a.extra(n), is_leaf, keys: self.keys }
     }
 }
 
@@ -92,26 +116,44 @@ impl<'a> Iterator for NodeIter<'a> {
     #[inline]
     fn next(&mut self) -> Option<NodeItem<'a>> {
         let a = self.arena?;
-        while let Some((n, key, depth)) = self.stack.pop() {
-            let mask = a.mask(n);
+        if self.root_pending {
+            self.root_pending = false;
+            let mask = a.mask(ROOT);
+            if mask != 0 {
+                self.frames[0] = Frame { key: Key::ROOT, next: a.first_child(ROOT), remaining: mask };
+                self.len = 1;
+                if self.leaves_only {
+                    return self.next();
+                }
+            }
+            return Some(self.item(a, ROOT, Key::ROOT, 0, mask == 0));
+        }
+        while self.len > 0 {
+            let parent_depth = (self.len - 1) as u8;
+            let f = &mut self.frames[self.len - 1];
+            if f.remaining == 0 {
+                self.len -= 1;
+                continue;
+            }
+            let pos = f.remaining.trailing_zeros() as usize;
+            f.remaining &= f.remaining - 1;
+            let id = f.next;
+            f.next += 1;
+            let key = f.key.child_key(pos, parent_depth);
+            let depth = parent_depth + 1;
+            if self.bbx.is_some_and(|b| !b.overlaps(key, depth)) {
+                continue;
+            }
+            let mask = a.mask(id);
             let is_leaf = mask == 0 || depth >= self.max_depth;
             if !is_leaf {
-                let first = a.first_child(n);
-                let mut id = first + mask.count_ones();
-                for pos in (0..8).rev() {
-                    if mask & (1 << pos) != 0 {
-                        id -= 1;
-                        let ck = key.child_key(pos, depth);
-                        if self.bbx.is_none_or(|b| b.overlaps(ck, depth + 1)) {
-                            self.stack.push((id, ck, depth + 1));
-                        }
-                    }
-                }
+                self.frames[self.len] = Frame { key, next: a.first_child(id), remaining: mask };
+                self.len += 1;
                 if self.leaves_only {
                     continue;
                 }
             }
-            return Some(NodeItem { key, depth, value: a.value(n), extra: a.extra(n), is_leaf, keys: self.keys });
+            return Some(self.item(a, id, key, depth, is_leaf));
         }
         None
     }

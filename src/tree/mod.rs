@@ -2,10 +2,12 @@
 
 mod arena;
 mod counting;
+mod cursor;
 mod iter;
 
 pub use arena::{ArenaUsage, NodeArena, NodeId};
 pub use counting::CountingTree;
+pub(crate) use cursor::PathSearch;
 pub use iter::{KeyBox, NodeItem, NodeIter};
 
 use crate::geometry::Point3;
