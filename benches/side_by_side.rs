@@ -126,7 +126,7 @@ impl Row {
         let rate = |d: Duration| self.work / secs(d);
         let (a, b) = (self.octomap.median, self.octolinear.median);
         println!(
-            "| {:<28} | {:>10.2} | {:>10.2} | {:>7.2}x | {:>7.2}x | {:>12} | {:>12} |",
+            "| {:<36} | {:>10.2} | {:>10.2} | {:>7.2}x | {:>7.2}x | {:>12} | {:>12} |",
             self.job,
             secs(a) * 1e3,
             secs(b) * 1e3,
@@ -150,10 +150,10 @@ fn fmt_rate(r: f64, unit: &str) -> String {
 
 fn header() {
     println!(
-        "| {:<28} | {:>10} | {:>10} | {:>8} | {:>8} | {:>12} | {:>12} |",
+        "| {:<36} | {:>10} | {:>10} | {:>8} | {:>8} | {:>12} | {:>12} |",
         "job", "OctoMap ms", "octolin. ms", "speed-up", "(min)", "OctoMap", "octolinear"
     );
-    println!("|{:-<30}|{:->12}|{:->12}|{:->10}|{:->10}|{:->14}|{:->14}|", "", ":", ":", ":", ":", ":", ":");
+    println!("|{:-<38}|{:->12}|{:->12}|{:->10}|{:->10}|{:->14}|{:->14}|", "", ":", ":", ":", ":", ":", ":");
 }
 
 fn ot_bytes(tree: &OccupancyTree) -> Vec<u8> {
@@ -218,57 +218,8 @@ fn run_case(args: &Args, kind: SceneKind, res: f64, scans: &[Scan]) {
         Row { job: job.into(), octomap: om_ins, octolinear: d, work: npoints as f64, unit: "pt" }.print();
     }
 
-    // ----- random search (half leaf centres, half uniform in the bounds)
     let queries = query_points(&ol, args.queries, 11);
-    let q_arr = to_arrays(&queries);
-    let mut out = vec![0f32; queries.len()];
-    let (mut a, mut b) = (Vec::new(), Vec::new());
-    for _ in 0..args.reps {
-        let (d, n_om) = time(|| om.bench_search(&q_arr, 0, &mut out));
-        a.push(d);
-        let (d, n_ol) = time(|| {
-            let mut n = 0usize;
-            for &p in &queries {
-                if let Ok(Some(f)) = ol.search_point(p, 0) {
-                    n += 1;
-                    black_box(f.value);
-                }
-            }
-            n
-        });
-        b.push(d);
-        assert_eq!(n_om, n_ol, "search: different hit counts");
-    }
-    Row {
-        job: "random search".into(),
-        octomap: median(a),
-        octolinear: median(b),
-        work: queries.len() as f64,
-        unit: "q",
-    }
-    .print();
-
-    // ----- full leaf iteration
-    let (mut a, mut b) = (Vec::new(), Vec::new());
-    let mut nleaves = 0;
-    for _ in 0..args.reps {
-        let (d, (n_om, s_om)) = time(|| om.bench_leaf_sum(0));
-        a.push(d);
-        let (d, (n_ol, s_ol)) = time(|| {
-            let mut n = 0usize;
-            let mut s = 0f64;
-            for l in ol.leaves(0) {
-                n += 1;
-                s += f64::from(l.value);
-            }
-            (n, s)
-        });
-        b.push(d);
-        assert_eq!((n_om, s_om), (n_ol, s_ol), "leaf iteration differs");
-        nleaves = n_ol;
-    }
-    Row { job: "leaf iteration".into(), octomap: median(a), octolinear: median(b), work: nleaves as f64, unit: "leaf" }
-        .print();
+    search_and_iterate(args, &om, &ol, &queries, "");
 
     // ----- castRay from sensor origins, through unknown space, 20 m
     let (origins, dirs) = rays(scans, args.rays, 5);
@@ -376,6 +327,94 @@ fn run_case(args: &Args, kind: SceneKind, res: f64, scans: &[Scan]) {
         after as f64 / nodes as f64,
         om_mem as f64 / after as f64,
     );
+    println!();
+    header();
+    search_and_iterate(args, &om, &ol, &queries, " (compacted)");
+}
+
+/// Random point search (one query at a time, then batched) and full leaf
+/// iteration on the same tree in both libraries.
+fn search_and_iterate(args: &Args, om: &OracleTree, ol: &OccupancyTree, queries: &[Point3], suffix: &str) {
+    // ----- random search (half leaf centres, half uniform in the bounds)
+    let q_arr = to_arrays(queries);
+    let mut out = vec![0f32; queries.len()];
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for _ in 0..args.reps {
+        let (d, n_om) = time(|| om.bench_search(&q_arr, 0, &mut out));
+        a.push(d);
+        let (d, n_ol) = time(|| {
+            let mut n = 0usize;
+            for &p in queries {
+                if let Ok(Some(f)) = ol.search_point(p, 0) {
+                    n += 1;
+                    black_box(f.value);
+                }
+            }
+            n
+        });
+        b.push(d);
+        assert_eq!(n_om, n_ol, "search: different hit counts");
+    }
+    Row {
+        job: format!("random search{suffix}"),
+        octomap: median(a),
+        octolinear: median(b),
+        work: queries.len() as f64,
+        unit: "q",
+    }
+    .print();
+
+    // ----- the same queries through search_many (eight descents in lockstep)
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    let (mut keys, mut found) = (Vec::with_capacity(queries.len()), Vec::with_capacity(queries.len()));
+    for _ in 0..args.reps {
+        let (d, n_om) = time(|| om.bench_search(&q_arr, 0, &mut out));
+        a.push(d);
+        let (d, n_ol) = time(|| {
+            keys.clear();
+            keys.extend(queries.iter().filter_map(|&p| ol.key(p).ok()));
+            ol.search_many(&keys, 0, &mut found);
+            found.iter().filter(|f| f.is_some()).count()
+        });
+        b.push(d);
+        assert_eq!(n_om, n_ol, "search_many: different hit counts");
+    }
+    Row {
+        job: format!("random search, batched{suffix}"),
+        octomap: median(a),
+        octolinear: median(b),
+        work: queries.len() as f64,
+        unit: "q",
+    }
+    .print();
+
+    // ----- full leaf iteration
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    let mut nleaves = 0;
+    for _ in 0..args.reps {
+        let (d, (n_om, s_om)) = time(|| om.bench_leaf_sum(0));
+        a.push(d);
+        let (d, (n_ol, s_ol)) = time(|| {
+            let mut n = 0usize;
+            let mut s = 0f64;
+            for l in ol.leaves(0) {
+                n += 1;
+                s += f64::from(l.value);
+            }
+            (n, s)
+        });
+        b.push(d);
+        assert_eq!((n_om, s_om), (n_ol, s_ol), "leaf iteration differs");
+        nleaves = n_ol;
+    }
+    Row {
+        job: format!("leaf iteration{suffix}"),
+        octomap: median(a),
+        octolinear: median(b),
+        work: nleaves as f64,
+        unit: "leaf",
+    }
+    .print();
 }
 
 fn main() {

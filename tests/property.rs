@@ -155,6 +155,16 @@ proptest! {
         }
         check_inner_nodes_hold_max(&tree)?;
         prop_assert_eq!(tree.calc_num_nodes(), tree.nodes(0).count());
+        // batched searches answer exactly as one search after another, at
+        // every depth, for stored voxels and for the neighbours of each
+        let mut probes: Vec<Key> = model.keys().copied().collect();
+        probes.extend(model.keys().map(|k| Key::new(k.0[0] ^ 1, k.0[1], k.0[2] ^ 2)));
+        let mut batch = Vec::new();
+        for depth in [0, 16, 15, 13, 9, 1] {
+            tree.search_many(&probes, depth, &mut batch);
+            let one_by_one: Vec<_> = probes.iter().map(|k| tree.search(*k, depth)).collect();
+            prop_assert_eq!(&batch, &one_by_one, "search_many at depth {}", depth);
+        }
     }
 
     #[test]

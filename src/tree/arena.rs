@@ -101,6 +101,12 @@ impl NodeArena {
         self.first_child[n as usize]
     }
 
+    /// The child masks and first-child ids of all slots, for tight loops.
+    #[inline(always)]
+    pub fn links(&self) -> (&[u8], &[NodeId]) {
+        (&self.masks, &self.first_child)
+    }
+
     /// Id of child `pos` of `n`, if it exists.
     #[inline(always)]
     pub fn child(&self, n: NodeId, pos: usize) -> Option<NodeId> {

@@ -12,6 +12,7 @@ pub use iter::{KeyBox, NodeItem, NodeIter};
 
 use crate::geometry::Point3;
 use crate::key::{adjust_key_to_depth, Key, KeyError, KeySpace, TREE_DEPTH};
+use crate::morton::MortonCode;
 use crate::sensor::SensorModel;
 use hashbrown::HashMap;
 
@@ -569,6 +570,62 @@ impl OccupancyTree {
             }
         }
         Some((node, depth, !a.has_children(node)))
+    }
+
+    /// [`Self::search`] for many keys at once, answers in `out` (cleared
+    /// first) in the order of `keys`. Eight descents advance in lockstep, so
+    /// the cache misses of one overlap those of the others: for random
+    /// queries this is several times the throughput of one `search` after
+    /// another.
+    pub fn search_many(&self, keys: &[Key], depth: u8, out: &mut Vec<Option<Found>>) {
+        const LANES: usize = 8;
+        out.clear();
+        let Some(a) = self.arena.as_ref() else {
+            out.resize(keys.len(), None);
+            return;
+        };
+        let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
+        let (masks, first_child) = a.links();
+        for chunk in keys.chunks(LANES) {
+            let mut code = [0u64; LANES];
+            for (c, k) in code.iter_mut().zip(chunk) {
+                let k = if depth == TREE_DEPTH { *k } else { adjust_key_to_depth(*k, depth) };
+                *c = MortonCode::encode(k).0;
+            }
+            let mut node = [ROOT; LANES];
+            let mut found: [Option<(NodeId, u8, bool)>; LANES] = [None; LANES];
+            let mut walking = (1u32 << chunk.len()) - 1;
+            for d in 0..depth {
+                let shift = 3 * (TREE_DEPTH - 1 - d);
+                let mut lanes = walking;
+                while lanes != 0 {
+                    let l = lanes.trailing_zeros() as usize;
+                    lanes &= lanes - 1;
+                    let n = node[l] as usize;
+                    let pos = (code[l] >> shift) & 7;
+                    let m = masks[n];
+                    if m & (1 << pos) != 0 {
+                        node[l] = first_child[n] + (u32::from(m) & ((1 << pos) - 1)).count_ones();
+                    } else {
+                        walking &= !(1 << l);
+                        if m == 0 {
+                            found[l] = Some((node[l], d, true));
+                        }
+                    }
+                }
+                if walking == 0 {
+                    break;
+                }
+            }
+            while walking != 0 {
+                let l = walking.trailing_zeros() as usize;
+                walking &= walking - 1;
+                found[l] = Some((node[l], depth, !a.has_children(node[l])));
+            }
+            out.extend(found[..chunk.len()].iter().map(|f| {
+                f.map(|(id, depth, is_leaf)| Found { value: a.value(id), depth, is_leaf, extra: a.extra(id) })
+            }));
+        }
     }
 
     /// [`Self::search`] at the voxel containing `p`.
