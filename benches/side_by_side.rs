@@ -9,6 +9,7 @@ mod common;
 
 use common::*;
 use octolinear::formats::{bt, ot};
+use octolinear::mapped;
 use octolinear::simulate::SceneKind;
 use octolinear::{CastOptions, OccupancyTree, Point3};
 use octolinear_oracle::{OracleTree, ScanBatch};
@@ -330,6 +331,84 @@ fn run_case(args: &Args, kind: SceneKind, res: f64, scans: &[Scan]) {
     println!();
     header();
     search_and_iterate(args, &om, &ol, &queries, " (compacted)");
+    mapped_rows(args, &om, &ol, &queries, scans);
+}
+
+/// Runs both jobs alternately `reps` times and checks that they agree.
+fn race<T: PartialEq + std::fmt::Debug>(
+    reps: usize,
+    what: &str,
+    mut octomap: impl FnMut() -> T,
+    mut octolinear: impl FnMut() -> T,
+) -> (Stat, Stat) {
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for _ in 0..reps {
+        let (d, x) = time(&mut octomap);
+        a.push(d);
+        let (d, y) = time(&mut octolinear);
+        b.push(d);
+        assert_eq!(x, y, "{what}: the libraries disagree");
+    }
+    (median(a), median(b))
+}
+
+/// The map written to `.olm` and queried in place (from a `Vec`; an mmap'd
+/// file runs the same code) against OctoMap's in-memory tree.
+fn mapped_rows(args: &Args, om: &OracleTree, ol: &OccupancyTree, queries: &[Point3], scans: &[Scan]) {
+    let bytes = mapped::to_bytes(ol, mapped::WriteOptions::default()).expect("write .olm");
+    let map = mapped::MappedMap::new(bytes).expect("open .olm");
+    let view = map.view();
+    println!();
+    println!("`.olm` ({:.1} MB), queried in place:", map.bytes().len() as f64 / 1e6);
+    println!();
+    header();
+    let q_arr = to_arrays(queries);
+    let mut out = vec![0f32; queries.len()];
+    let row = |job: &str, (octomap, octolinear): (Stat, Stat), work: usize, unit| {
+        Row { job: format!("mapped: {job}"), octomap, octolinear, work: work as f64, unit }.print()
+    };
+    let n = queries.len();
+    let times = race(
+        args.reps,
+        "search",
+        || om.bench_search(&q_arr, 0, &mut out),
+        || queries.iter().filter(|&&p| view.search_point(p, 0).is_ok_and(|f| f.is_some())).count(),
+    );
+    row("random search", times, n, "q");
+    let mut out = vec![0f32; queries.len()];
+    let (mut keys, mut found) = (Vec::new(), Vec::new());
+    let times = race(
+        args.reps,
+        "search_many",
+        || om.bench_search(&q_arr, 0, &mut out),
+        || {
+            keys.clear();
+            keys.extend(queries.iter().filter_map(|&p| view.key_space().key(p).ok()));
+            view.search_many(&keys, 0, &mut found);
+            found.iter().filter(|f| f.is_some()).count()
+        },
+    );
+    row("random search, batched", times, n, "q");
+    let leaves = ol.num_leaves();
+    let times = race(
+        args.reps,
+        "leaf iteration",
+        || om.bench_leaf_sum(0),
+        || view.leaves(0).fold((0, 0f64), |(n, s), l| (n + 1, s + f64::from(l.value))),
+    );
+    row("leaf iteration", times, leaves, "leaf");
+    let (origins, dirs) = rays(scans, args.rays, 5);
+    let (o_arr, d_arr) = (to_arrays(&origins), to_arrays(&dirs));
+    let mut ends = vec![[0f32; 3]; origins.len()];
+    let mut hits = vec![false; origins.len()];
+    let opts = CastOptions { ignore_unknown: true, max_range: Some(20.0) };
+    let times = race(
+        args.reps,
+        "castRay",
+        || om.bench_cast_rays(&o_arr, &d_arr, true, 20.0, &mut ends, &mut hits),
+        || origins.iter().zip(&dirs).filter(|(&o, &d)| view.cast_ray(o, d, opts).is_ok_and(|c| c.hit())).count(),
+    );
+    row("castRay (20 m, ign. unknown)", times, origins.len(), "ray");
 }
 
 /// Random point search (one query at a time, then batched) and full leaf

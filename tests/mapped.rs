@@ -72,6 +72,7 @@ trait Queries {
     fn lookup(&self) -> &dyn OccupancyLookup;
     fn items(&self, which: Iter, max_depth: u8) -> Vec<Item>;
     fn cast(&self, o: Point3, d: Point3, opts: CastOptions) -> Result<CastOutcome, CastError>;
+    fn search_many(&self, keys: &[Key], depth: u8) -> Vec<Option<Found>>;
 }
 
 #[derive(Clone, Copy)]
@@ -100,6 +101,11 @@ impl Queries for OccupancyTree {
     fn cast(&self, o: Point3, d: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
         self.cast_ray(o, d, opts)
     }
+    fn search_many(&self, keys: &[Key], depth: u8) -> Vec<Option<Found>> {
+        let mut out = Vec::new();
+        OccupancyTree::search_many(self, keys, depth, &mut out);
+        out
+    }
 }
 
 impl Queries for MapView<'_> {
@@ -116,6 +122,11 @@ impl Queries for MapView<'_> {
     fn cast(&self, o: Point3, d: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
         self.cast_ray(o, d, opts)
     }
+    fn search_many(&self, keys: &[Key], depth: u8) -> Vec<Option<Found>> {
+        let mut out = Vec::new();
+        MapView::search_many(self, keys, depth, &mut out);
+        out
+    }
 }
 
 impl<D: AsRef<[u8]>> Queries for MappedMap<D> {
@@ -127,6 +138,11 @@ impl<D: AsRef<[u8]>> Queries for MappedMap<D> {
     }
     fn cast(&self, o: Point3, d: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
         mapped::cast_ray(self, o, d, opts)
+    }
+    fn search_many(&self, keys: &[Key], depth: u8) -> Vec<Option<Found>> {
+        let mut out = Vec::new();
+        MappedMap::search_many(self, keys, depth, &mut out);
+        out
     }
 }
 
@@ -154,9 +170,12 @@ fn same_answers(what: &str, reference: &dyn Queries, other: &dyn Queries, seed: 
             _ => Key([0; 3].map(|_: u16| rng.next_u64() as u16)),
         });
     }
-    for &k in &keys {
-        for depth in [0, 16, 17, 15, 14, 12, 9, 5, 1] {
-            assert_eq!(found_bits(r.search(k, depth)), found_bits(o.search(k, depth)), "{what}: search({k}, {depth})");
+    for depth in [0, 16, 17, 15, 14, 12, 9, 5, 1] {
+        let batch = other.search_many(&keys, depth);
+        for (&k, b) in keys.iter().zip(batch) {
+            let expected = found_bits(r.search(k, depth));
+            assert_eq!(expected, found_bits(o.search(k, depth)), "{what}: search({k}, {depth})");
+            assert_eq!(expected, found_bits(b), "{what}: search_many, key {k}, depth {depth}");
         }
     }
     for d in [0, 16, 14, 13, 8, 3, 1] {

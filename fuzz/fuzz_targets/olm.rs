@@ -67,6 +67,13 @@ pub fn check(data: &[u8]) -> (bool, bool) {
     let verified = view.verify().is_ok();
     let keys = keys(data);
     let found = answers(|k, d| view.search(k, d), &keys);
+    // batched searches answer as single ones, even on corrupted bytes
+    let mut batch = Vec::new();
+    for d in [0, 16, 14, 3] {
+        view.search_many(&keys, d, &mut batch);
+        let single: Vec<_> = keys.iter().map(|&k| bits(view.search(k, d))).collect();
+        assert_eq!(batch.iter().map(|&f| bits(f)).collect::<Vec<_>>(), single);
+    }
     let leaves: Vec<_> = view.leaves(0).map(|l| (l.key, l.depth, l.value.to_bits())).collect();
     let nodes = view.nodes(13).count();
     let bbx = KeyBox { min: Key::new(32700, 32700, 32700), max: Key::new(32800, 32800, 32800) };

@@ -137,6 +137,11 @@ impl<D: AsRef<[u8]>> MappedMap<D> {
         self.view().search(key, depth)
     }
 
+    /// See [`MapView::search_many`].
+    pub fn search_many(&self, keys: &[Key], depth: u8, out: &mut Vec<Option<Found>>) {
+        self.view().search_many(keys, depth, out)
+    }
+
     /// See [`MapView::search_point`].
     pub fn search_point(&self, p: Point3, depth: u8) -> Result<Option<Found>, KeyError> {
         self.view().search_point(p, depth)
@@ -279,6 +284,12 @@ impl<'a> MapView<'a> {
     /// [`Self::search`] at the voxel containing `p`.
     pub fn search_point(&self, p: Point3, depth: u8) -> Result<Option<Found>, KeyError> {
         Ok(self.search(self.meta.keys.key(p)?, depth))
+    }
+
+    /// [`Self::search`] for many keys at once, answers in `out` in the order
+    /// of `keys` (as [`OccupancyTree::search_many`]).
+    pub fn search_many(&self, keys: &[Key], depth: u8, out: &mut Vec<Option<Found>>) {
+        with_nav!(self.nav, |nav| query::search_many(nav, keys, depth, out))
     }
 
     /// The root's value, `None` for an empty map.

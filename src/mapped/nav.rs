@@ -21,6 +21,11 @@ pub(crate) trait Nav: Copy {
     fn root(&self) -> Option<Node>;
     /// The node's log-odds and child mask.
     fn get(&self, n: Node) -> Option<(f32, u8)>;
+    /// The child mask alone (a descent needs the value only where it ends).
+    #[inline(always)]
+    fn mask(&self, n: Node) -> Option<u8> {
+        self.get(n).map(|(_, m)| m)
+    }
     /// Child `pos` (present in `mask`, the node's mask).
     fn child(&self, n: Node, mask: u8, pos: usize) -> Option<Node>;
     /// The children present in `mask`, in child order; returns how many.
@@ -80,6 +85,18 @@ impl RankNav<'_> {
         let mut s = u32_at(self.dir, 4 * b)?;
         let end = i >> 3;
         let mut w = (b << self.log2) >> 3;
+        if self.log2 == 6 {
+            // the default block is one 64-byte line of masks: sum its words
+            // before `end` without a data-dependent loop
+            if let Some(line) = self.masks.get(8 * w..8 * w + 64) {
+                let before = end - w;
+                for (k, word) in line.chunks_exact(8).enumerate() {
+                    let word = u64::from_le_bytes(word.try_into().ok()?);
+                    s = s.wrapping_add(if k < before { word.count_ones() } else { 0 });
+                }
+                w = end;
+            }
+        }
         while w < end {
             s = s.wrapping_add(u64_at(self.masks, 8 * w)?.count_ones());
             w += 1;
@@ -109,6 +126,11 @@ impl Nav for RankNav<'_> {
     fn get(&self, n: Node) -> Option<(f32, u8)> {
         let i = n.idx as usize;
         Some((f32_at(self.values, 4 * i)?, *self.masks.get(i)?))
+    }
+
+    #[inline(always)]
+    fn mask(&self, n: Node) -> Option<u8> {
+        self.masks.get(n.idx as usize).copied()
     }
 
     #[inline(always)]
@@ -183,6 +205,11 @@ impl Nav for PtrNav<'_> {
     fn get(&self, n: Node) -> Option<(f32, u8)> {
         let i = n.idx as usize;
         Some((f32_at(self.values, 4 * i)?, *self.masks.get(i)?))
+    }
+
+    #[inline(always)]
+    fn mask(&self, n: Node) -> Option<u8> {
+        self.masks.get(n.idx as usize).copied()
     }
 
     #[inline(always)]

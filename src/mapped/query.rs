@@ -53,19 +53,78 @@ pub(crate) fn search<N: Nav>(nav: N, key: Key, depth: u8) -> Option<Found> {
     let depth = normalize_depth(depth);
     let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
     let mut node = nav.root()?;
-    let (mut value, mut mask) = nav.get(node)?;
+    let mut mask = nav.mask(node)?;
     for d in 0..depth {
         let pos = key.child_index(d);
         if mask & (1 << pos) == 0 {
             if mask != 0 {
                 return None;
             }
-            return Some(Found { value, depth: d, is_leaf: true, extra: 0 });
+            return Some(Found { value: nav.get(node)?.0, depth: d, is_leaf: true, extra: 0 });
         }
         node = nav.child(node, mask, pos)?;
-        (value, mask) = nav.get(node)?;
+        mask = nav.mask(node)?;
     }
-    Some(Found { value, depth, is_leaf: mask == 0, extra: 0 })
+    Some(Found { value: nav.get(node)?.0, depth, is_leaf: mask == 0, extra: 0 })
+}
+
+/// [`search`] for many keys, eight descents in lockstep so that their
+/// cache misses overlap (as `OccupancyTree::search_many`).
+pub(crate) fn search_many<N: Nav>(nav: N, keys: &[Key], depth: u8, out: &mut Vec<Option<Found>>) {
+    const LANES: usize = 8;
+    out.clear();
+    let depth = normalize_depth(depth);
+    let Some(root) = nav.root().and_then(|r| Some((r, nav.mask(r)?))) else {
+        out.resize(keys.len(), None);
+        return;
+    };
+    for chunk in keys.chunks(LANES) {
+        let mut key = [Key::ROOT; LANES];
+        for (k, c) in key.iter_mut().zip(chunk) {
+            *k = if depth == TREE_DEPTH { *c } else { adjust_key_to_depth(*c, depth) };
+        }
+        let mut at = [root; LANES];
+        // lanes that end on a node, at the depth where they end
+        let mut ends = [depth; LANES];
+        let mut walking = (1u32 << chunk.len()) - 1;
+        let mut ended = walking;
+        for d in 0..depth {
+            let mut lanes = walking;
+            while lanes != 0 {
+                let l = lanes.trailing_zeros() as usize;
+                lanes &= lanes - 1;
+                let (node, mask) = at[l];
+                let pos = key[l].child_index(d);
+                if mask & (1 << pos) != 0 {
+                    // a corrupted file may end the walk: no answer, as `search`
+                    match nav.child(node, mask, pos).and_then(|c| Some((c, nav.mask(c)?))) {
+                        Some(next) => at[l] = next,
+                        None => {
+                            walking &= !(1 << l);
+                            ended &= !(1 << l);
+                        }
+                    }
+                } else {
+                    walking &= !(1 << l);
+                    ends[l] = d;
+                    if mask != 0 {
+                        ended &= !(1 << l);
+                    }
+                }
+            }
+            if walking == 0 {
+                break;
+            }
+        }
+        let mut found = [None; LANES];
+        while ended != 0 {
+            let l = ended.trailing_zeros() as usize;
+            ended &= ended - 1;
+            let (node, mask) = at[l];
+            found[l] = nav.get(node).map(|(value, _)| Found { value, depth: ends[l], is_leaf: mask == 0, extra: 0 });
+        }
+        out.extend_from_slice(&found[..chunk.len()]);
+    }
 }
 
 /// Does the node at `key`/`depth` overlap the box? (OctoMap's test, as
