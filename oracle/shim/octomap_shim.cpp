@@ -21,6 +21,7 @@
 #include <octomap/OcTree.h>
 #include <octomap/AbstractOcTree.h>
 #include <octomap/ColorOcTree.h>
+#include <octomap/MapCollection.h>
 #include <octomap/OcTreeStamped.h>
 
 #include <ctime>
@@ -905,6 +906,33 @@ int olo_stamped_dump(const OloStampedTree* h, OloStampedNode** out, size_t* coun
   *out = to_malloc(v);
   *count = v.size();
   return OLO_OK;
+  OLO_CATCH(OLO_EEXCEPTION)
+}
+
+// ---------------------------------------------------------------- MapCollection
+
+// MapCollection<MapNode<OcTree>>(path), then isOccupied and getOccupancy for
+// the n_pts points, and castRay(origin, direction, end, ignore_unknown,
+// max_range) for the n_rays rays (6 floats each: origin, direction; one max
+// range each). Returns the number of submaps read, or < 0. castRay's own
+// printf chatter goes to stdout.
+long olo_mapcoll_query(const char* path, const float* pts, size_t n_pts, uint8_t* occupied, double* occupancy,
+                       const float* rays, const double* max_ranges, size_t n_rays, int ignore_unknown,
+                       uint8_t* hits, float* ends) {
+  OLO_TRY
+  octomap::MapCollection<octomap::MapNode<OcTree> > coll(path);
+  for (size_t i = 0; i < n_pts; ++i) {
+    point3d q = P(pts + 3 * i);
+    occupied[i] = coll.isOccupied(q) ? 1 : 0;
+    occupancy[i] = coll.getOccupancy(q);
+  }
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (size_t i = 0; i < n_rays; ++i) {
+    point3d end(nan, nan, nan);
+    hits[i] = coll.castRay(P(rays + 6 * i), P(rays + 6 * i + 3), end, ignore_unknown != 0, max_ranges[i]) ? 1 : 0;
+    put(ends + 3 * i, end);
+  }
+  return (long)coll.size();
   OLO_CATCH(OLO_EEXCEPTION)
 }
 

@@ -411,6 +411,9 @@ mod ffi {
         fn olo_stamped_write(h: *const OloStampedTree, out: *mut *mut u8, len: *mut usize) -> i32;
         fn olo_stamped_dump(h: *const OloStampedTree, out: *mut *mut OloStampedNode, count: *mut usize) -> i32;
         fn olo_sizeof_stamped_node() -> usize;
+        fn olo_mapcoll_query(path: *const std::ffi::c_char, pts: *const f32, n_pts: usize, occupied: *mut u8,
+            occupancy: *mut f64, rays: *const f32, max_ranges: *const f64, n_rays: usize, ignore_unknown: i32,
+            hits: *mut u8, ends: *mut f32) -> i64;
     }
 }
 
@@ -1384,6 +1387,72 @@ impl OracleStampedTree {
             })
             .collect()
     }
+}
+
+// ------------------------------------------------------------------ MapCollection
+
+/// A ray for [`map_collection_query`]: `castRay(origin, direction, end,
+/// ignore_unknown, max_range)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CollectionRay {
+    pub origin: [f32; 3],
+    pub direction: [f32; 3],
+    pub max_range: f64,
+}
+
+/// What OctoMap's `MapCollection<MapNode<OcTree>>` answers.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CollectionAnswers {
+    /// Submaps read (`size()`).
+    pub submaps: usize,
+    /// `isOccupied` and `getOccupancy` per point.
+    pub points: Vec<(bool, f64)>,
+    /// `castRay`'s result and end point per ray (NaN when not written).
+    pub rays: Vec<(bool, [f32; 3])>,
+}
+
+/// Reads the collection file at `path` with OctoMap's `MapCollection` and
+/// asks it about `points` and `rays`. OctoMap prints a line per submap and
+/// ray to stdout.
+pub fn map_collection_query(
+    path: &std::path::Path,
+    points: &[[f32; 3]],
+    rays: &[CollectionRay],
+    ignore_unknown: bool,
+) -> Result<CollectionAnswers, OracleError> {
+    if !available() {
+        return Err(OracleError::Unavailable);
+    }
+    let path = std::ffi::CString::new(path.to_str().ok_or(OracleError::InvalidArgument("path is not UTF-8"))?)
+        .map_err(|_| OracleError::InvalidArgument("path holds a NUL byte"))?;
+    let (mut occ, mut prob) = (vec![0u8; points.len()], vec![0f64; points.len()]);
+    let flat: Vec<f32> = rays.iter().flat_map(|r| r.origin.into_iter().chain(r.direction)).collect();
+    let ranges: Vec<f64> = rays.iter().map(|r| r.max_range).collect();
+    let (mut hits, mut ends) = (vec![0u8; rays.len()], vec![[0f32; 3]; rays.len()]);
+    // SAFETY: a valid C string; every array has the length passed with it.
+    let n = unsafe {
+        ffi::olo_mapcoll_query(
+            path.as_ptr(),
+            points.as_ptr().cast(),
+            points.len(),
+            occ.as_mut_ptr(),
+            prob.as_mut_ptr(),
+            flat.as_ptr(),
+            ranges.as_ptr(),
+            rays.len(),
+            ignore_unknown.into(),
+            hits.as_mut_ptr(),
+            ends.as_mut_ptr().cast(),
+        )
+    };
+    if n < 0 {
+        return Err(OracleError::CppException);
+    }
+    Ok(CollectionAnswers {
+        submaps: n as usize,
+        points: occ.iter().zip(prob).map(|(&o, p)| (o != 0, p)).collect(),
+        rays: hits.iter().zip(ends).map(|(&h, e)| (h != 0, e)).collect(),
+    })
 }
 
 #[cfg(test)]
