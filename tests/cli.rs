@@ -1163,6 +1163,32 @@ fn build_color_reads_ply_and_pcd_colours() {
     let found = t.search_point(Point3::new(1.05, 0.25, -0.35), 0).unwrap().unwrap();
     assert!(t.is_occupied(found.value));
     assert_eq!(octolinear::tree::unpack_rgb(found.extra), [12, 200, 7]);
+    // .ot (ColorOcTree) -> .olm -> .ot gives the same bytes; query shows colours
+    ok(&["convert", f.p("k.ot"), f.p("k.olm")]);
+    ok(&["verify", f.p("k.olm")]);
+    ok(&["convert", f.p("k.olm"), f.p("k2.ot")]);
+    assert!(std::fs::read(f.path("k2.ot")).unwrap() == reference);
+    ok(&["build", "--color", "--points", s(&files[0]), "-o", f.p("direct.olm"), "--pose"]
+        .iter()
+        .chain(&pose)
+        .copied()
+        .collect::<Vec<_>>());
+    assert_eq!(std::fs::read(f.path("direct.olm")).unwrap(), std::fs::read(f.path("k.olm")).unwrap());
+    let q = f.write(
+        "q.xyz",
+        "1.05 0.25 -0.35
+100 100 100
+",
+    );
+    for map in ["lone.ot", "lone.olm"] {
+        if map == "lone.olm" {
+            ok(&["convert", f.p("lone.ot"), f.p("lone.olm")]);
+        }
+        let out = ok(&["query", f.p(map), "--points", q]);
+        let lines: Vec<&str> = out.lines().collect();
+        assert!(lines[0].starts_with("1.05,0.25,-0.35,occupied,") && lines[0].ends_with(",12,200,7"), "{map}: {out}");
+        assert_eq!(lines[1], "100,100,100,unknown,,,,", "{map}");
+    }
     // without --color the same files build the plain map
     ok(&["build", "--points", s(&files[0]), "-o", f.p("plain.ot")]);
     assert!(read_tree(f.p("plain.ot")).kind() == octolinear::NodeKind::Plain);

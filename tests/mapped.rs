@@ -583,12 +583,17 @@ fn golden_queries_from_mapped_files() {
 // ----- header checks ---------------------------------------------------------------
 
 fn sample_bytes(opts: WriteOptions) -> Vec<u8> {
-    let tree = simulated(
+    sample_bytes_of(opts, NodeKind::Plain)
+}
+
+fn sample_bytes_of(opts: WriteOptions, kind: NodeKind) -> Vec<u8> {
+    let tree = simulated_kind(
         SceneKind::Indoor,
         1,
         3,
         0.2,
         &LidarConfig { beams: 4, horizontal_steps: 60, ..LidarConfig::indoor() },
+        kind,
     );
     mapped::to_bytes(&tree, opts).unwrap()
 }
@@ -844,12 +849,19 @@ fn corrupted_files_never_panic() {
     let mut total = 0;
     let mut opened = 0;
     let mut verified = 0;
-    for (label, opts) in all_options() {
-        let base = sample_bytes(opts);
+    // every layout of a plain map; colour and stamped maps in both full layouts
+    let mut bases: Vec<(String, Vec<u8>)> =
+        all_options().into_iter().map(|(label, opts)| (label.to_string(), sample_bytes(opts))).collect();
+    for kind in [NodeKind::Color, NodeKind::Stamped] {
+        for (label, opts) in [("full/rank", WriteOptions::default()), ("full/pointers", WriteOptions::pointers())] {
+            bases.push((format!("{kind:?} {label}"), sample_bytes_of(opts, kind)));
+        }
+    }
+    for (label, base) in &bases {
         let mut rng = SplitMix64(0x0c70_11ea_u64 ^ base.len() as u64);
-        assert_eq!(exercise(&base), (true, true), "{label}");
+        assert_eq!(exercise(base), (true, true), "{label}");
         for i in 0..1200u64 {
-            let m = mutate(&base, i % 8, &mut rng);
+            let m = mutate(base, i % 8, &mut rng);
             let (o, v) = exercise(&m);
             total += 1;
             opened += usize::from(o);
@@ -868,7 +880,7 @@ fn corrupted_files_never_panic() {
         total += 1;
     }
     eprintln!("{total} mutants: {opened} opened, {verified} verified");
-    assert!(total >= 6000);
+    assert!(total >= 10_000);
     assert!(opened > total / 4, "the mutants should reach past the header");
 }
 
@@ -893,7 +905,21 @@ fn write_fuzz_seeds() {
             Point3::new(0.05 + 0.1 * (i & 1) as f32, 0.05 + 0.1 * ((i >> 1) & 1) as f32, 0.05 + 0.1 * (i >> 2) as f32);
         block.update_point(p, true, Default::default()).unwrap();
     }
-    trees.push(("block", block));
+    trees.push(("block", block.clone()));
+    // a colour block with a few colours, and a stamped one
+    let mut color = block.converted(NodeKind::Color);
+    color.expand();
+    for (i, leaf) in block.leaves(0).map(|l| l.key).collect::<Vec<_>>().into_iter().enumerate().take(5) {
+        color.set_color(leaf, [40 * i as u8, 255 - 30 * i as u8, 7]);
+    }
+    color.update_inner_occupancy();
+    trees.push(("color", color));
+    let mut stamped = OccupancyTree::with_kind(0.1, SensorModel::default(), NodeKind::Stamped).unwrap();
+    for (i, p) in [(0.05, 0.05, 0.05), (0.3, -0.2, 0.1), (-0.4, 0.25, 0.05)].into_iter().enumerate() {
+        stamped.set_clock(octolinear::Clock::Fixed(1000 + i as u32));
+        stamped.update_point(Point3::new(p.0, p.1, p.2), true, Default::default()).unwrap();
+    }
+    trees.push(("stamped", stamped));
     for (name, tree) in &trees {
         for (label, opts) in all_options() {
             let b = mapped::to_bytes(tree, opts).unwrap();
