@@ -22,6 +22,7 @@ pub mod collection;
 pub mod formats;
 pub mod geometry;
 pub mod key;
+mod keyorder;
 pub mod mapped;
 pub mod morton;
 pub mod ray;

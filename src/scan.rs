@@ -141,7 +141,7 @@ impl UpdateBox {
     }
 
     #[inline]
-    fn contains_point(&self, p: Point3) -> bool {
+    pub(crate) fn contains_point(&self, p: Point3) -> bool {
         p.x >= self.min.x
             && p.y >= self.min.y
             && p.z >= self.min.z
@@ -151,7 +151,7 @@ impl UpdateBox {
     }
 
     #[inline]
-    fn contains_key(&self, k: Key) -> bool {
+    pub(crate) fn contains_key(&self, k: Key) -> bool {
         (0..3).all(|i| k.0[i] >= self.min_key.0[i] && k.0[i] <= self.max_key.0[i])
     }
 }
@@ -245,6 +245,10 @@ impl OccupancyTree {
         origin: Point3,
         opts: &ScanOptions,
     ) -> Result<ScanReport, ScanError> {
+        if self.kind() == crate::tree::NodeKind::Color {
+            // colours depend on the order of updates (see `keyorder`)
+            return self.insert_point_cloud_in_octomap_order(points, origin, opts);
+        }
         let (update, report) = self.compute_update(points, origin, opts)?;
         let (free, occupied) = update.into_sorted_codes();
         let sensor = *self.sensor();

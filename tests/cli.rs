@@ -1014,6 +1014,209 @@ fn build_reads_point_cloud_formats_with_poses() {
     fail_usage(&["build", "-o", f.p("x.bt")], "required");
 }
 
+fn colors_of(pts: &[[f32; 3]]) -> Vec<[u8; 3]> {
+    (0..pts.len()).map(|i| [(i * 37 % 256) as u8, (i * 91 % 256) as u8, (i * 13 % 256) as u8]).collect()
+}
+
+/// The same coloured scan in every colour encoding `build --color` reads.
+fn write_colored_files(f: &Fixture, pts: &[[f32; 3]], cols: &[[u8; 3]]) -> Vec<PathBuf> {
+    let n = pts.len();
+    let mut files = Vec::new();
+    let mut add = |name: &str, bytes: Vec<u8>| {
+        f.write(name, bytes);
+        files.push(f.path(name));
+    };
+    // PLY ascii, uchar colours between other properties, a face element after
+    let mut ply = format!(
+        "ply\nformat ascii 1.0\nelement vertex {n}\nproperty float x\nproperty uchar blue\nproperty float y\n\
+         property float z\nproperty uchar green\nproperty float nx\nproperty uchar red\n\
+         element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+    );
+    for (p, c) in pts.iter().zip(cols) {
+        ply += &format!("{} {} {} {} {} 0.5 {}\n", p[0], c[2], p[1], p[2], c[1], c[0]);
+    }
+    ply += "3 0 1 2\n";
+    add("k_ascii.ply", ply.into_bytes());
+    // PLY big endian, ushort colours
+    let mut b = format!(
+        "ply\nformat binary_big_endian 1.0\nelement vertex {n}\nproperty ushort red\nproperty ushort green\n\
+         property ushort blue\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+    )
+    .into_bytes();
+    for (p, c) in pts.iter().zip(cols) {
+        for v in c {
+            b.extend(u16::from(*v).to_be_bytes());
+        }
+        for v in p {
+            b.extend(v.to_be_bytes());
+        }
+    }
+    add("k_be.ply", b);
+    // PLY little endian, float colours in 0..1, a list before them
+    let mut b = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {n}\nproperty double x\nproperty double y\n\
+         property double z\nproperty list uchar int idx\nproperty float red\nproperty float green\nproperty float blue\n\
+         end_header\n"
+    )
+    .into_bytes();
+    for (p, c) in pts.iter().zip(cols) {
+        for v in p {
+            b.extend(f64::from(*v).to_le_bytes());
+        }
+        b.push(2);
+        b.extend(7i32.to_le_bytes());
+        b.extend(8i32.to_le_bytes());
+        for v in c {
+            b.extend((f32::from(*v) / 255.0).to_le_bytes());
+        }
+    }
+    add("k_le.ply", b);
+    let packed =
+        |c: &[u8; 3], alpha: u32| (alpha << 24) | (u32::from(c[0]) << 16) | (u32::from(c[1]) << 8) | u32::from(c[2]);
+    let head = |fields: &str, size: &str, ty: &str, data: &str| {
+        format!(
+            "# .PCD v0.7\nVERSION 0.7\nFIELDS {fields}\nSIZE {size}\nTYPE {ty}\nCOUNT 1 1 1 1\nWIDTH {n}\nHEIGHT 1\n\
+             VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {data}\n"
+        )
+    };
+    // PCD ascii: rgb as the float PCL prints (the packed bits), and as U
+    let mut t = head("x y z rgb", "4 4 4 4", "F F F F", "ascii");
+    let mut u = head("x y rgb z", "4 4 4 4", "F F U F", "ascii");
+    for (p, c) in pts.iter().zip(cols) {
+        t += &format!("{} {} {} {:e}\n", p[0], p[1], p[2], f32::from_bits(packed(c, 0)));
+        u += &format!("{} {} {} {}\n", p[0], p[1], packed(c, 0x7f), p[2]);
+    }
+    add("k_f.pcd", t.into_bytes());
+    add("k_u.pcd", u.into_bytes());
+    // PCD binary, rgb typed F
+    let mut b = head("x y z rgb", "4 4 4 4", "F F F F", "binary").into_bytes();
+    for (p, c) in pts.iter().zip(cols) {
+        for v in p {
+            b.extend(v.to_le_bytes());
+        }
+        b.extend(packed(c, 0).to_le_bytes());
+    }
+    add("k_bin.pcd", b);
+    // PCD binary_compressed, rgba with alpha
+    let mut raw = Vec::new();
+    for axis in 0..3 {
+        for p in pts {
+            raw.extend(p[axis].to_le_bytes());
+        }
+    }
+    for c in cols {
+        raw.extend(packed(c, 0xff).to_le_bytes());
+    }
+    let comp = lzf_compress(&raw);
+    let mut b = head("x y z rgba", "4 4 4 4", "F F F U", "binary_compressed").into_bytes();
+    b.extend((comp.len() as u32).to_le_bytes());
+    b.extend((raw.len() as u32).to_le_bytes());
+    b.extend(&comp);
+    add("k_comp.pcd", b);
+    files
+}
+
+#[test]
+fn build_color_reads_ply_and_pcd_colours() {
+    let f = Fixture::new();
+    let pts = cloud();
+    let cols = colors_of(&pts);
+    let files = write_colored_files(&f, &pts, &cols);
+    let pose = ["0.5", "-0.25", "0.125", "0", "0.25", "0.5"];
+    // the reference, through the library: insertPointCloud, integrateNodeColor
+    // per point, updateInnerOccupancy (graph2tree's sensor model, read back)
+    let mut g = graph::ScanGraph::new();
+    let cloud = octolinear::PointCloud { points: pts.iter().map(|p| Point3::from_array(*p)).collect() };
+    let pose6 = octolinear::Pose6D::from_euler(0.5, -0.25, 0.125, 0.0, 0.25, 0.5);
+    g.add_node(cloud, pose6);
+    let (world, origin) = g.nodes[0].graph2tree();
+    let sensor = octolinear::SensorModel::from_probabilities(&octolinear::SensorProbabilities {
+        occupancy_threshold: 0.5,
+        ..octolinear::SensorModel::default().probabilities()
+    })
+    .unwrap();
+    let mut t = OccupancyTree::with_kind(0.1, sensor, octolinear::NodeKind::Color).unwrap();
+    t.insert_point_cloud(&world.points, origin, &Default::default()).unwrap();
+    for (p, c) in world.points.iter().zip(&cols) {
+        let k = t.key(*p).unwrap();
+        t.integrate_color(k, *c);
+    }
+    t.update_inner_occupancy();
+    let mut reference = Vec::new();
+    ot::write(&t, &mut reference).unwrap();
+    assert!(reference.windows(16).any(|w| w == b"\nid ColorOcTree\n"));
+    for file in &files {
+        let mut args = vec!["build", "--color", "--points", s(file), "-o", f.p("k.ot"), "--pose"];
+        args.extend(pose);
+        let j = json(&ok(&[&args[..], &["--json"]].concat()));
+        assert_eq!(j["tree_type"], "ColorOcTree");
+        assert!(std::fs::read(f.path("k.ot")).unwrap() == reference, "{}", file.display());
+    }
+    // the colour of a lone point's voxel is the point's colour
+    let lone = f.write(
+        "lone.ply",
+        "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n\
+         property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n1.05 0.25 -0.35 12 200 7\n",
+    );
+    ok(&["build", "--color", "--points", lone, "-o", f.p("lone.ot")]);
+    let t = read_tree(f.p("lone.ot"));
+    let found = t.search_point(Point3::new(1.05, 0.25, -0.35), 0).unwrap().unwrap();
+    assert!(t.is_occupied(found.value));
+    assert_eq!(octolinear::tree::unpack_rgb(found.extra), [12, 200, 7]);
+    // .ot (ColorOcTree) -> .olm -> .ot gives the same bytes; query shows colours
+    ok(&["convert", f.p("k.ot"), f.p("k.olm")]);
+    ok(&["verify", f.p("k.olm")]);
+    ok(&["convert", f.p("k.olm"), f.p("k2.ot")]);
+    assert!(std::fs::read(f.path("k2.ot")).unwrap() == reference);
+    ok(&["build", "--color", "--points", s(&files[0]), "-o", f.p("direct.olm"), "--pose"]
+        .iter()
+        .chain(&pose)
+        .copied()
+        .collect::<Vec<_>>());
+    assert_eq!(std::fs::read(f.path("direct.olm")).unwrap(), std::fs::read(f.path("k.olm")).unwrap());
+    let q = f.write(
+        "q.xyz",
+        "1.05 0.25 -0.35
+100 100 100
+",
+    );
+    for map in ["lone.ot", "lone.olm"] {
+        if map == "lone.olm" {
+            ok(&["convert", f.p("lone.ot"), f.p("lone.olm")]);
+        }
+        let out = ok(&["query", f.p(map), "--points", q]);
+        let lines: Vec<&str> = out.lines().collect();
+        assert!(lines[0].starts_with("1.05,0.25,-0.35,occupied,") && lines[0].ends_with(",12,200,7"), "{map}: {out}");
+        assert_eq!(lines[1], "100,100,100,unknown,,,,", "{map}");
+    }
+    // without --color the same files build the plain map
+    ok(&["build", "--points", s(&files[0]), "-o", f.p("plain.ot")]);
+    assert!(read_tree(f.p("plain.ot")).kind() == octolinear::NodeKind::Plain);
+
+    // errors
+    fail(&["build", "--color", "--points", s(&files[0]), "-o", f.p("k.bt")], "a colour map needs .ot or .olm");
+    let xyz = f.write("k.xyz", "1 2 3\n");
+    fail(&["build", "--color", "--points", xyz, "-o", f.p("k.ot")], "--color needs colours");
+    let red_only = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n\
+                    property uchar red\nend_header\n1 2 3 4\n";
+    fail(&["build", "--color", "--points", f.write("r.ply", red_only), "-o", f.p("k.ot")], "this file has none");
+    let big = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n\
+               property ushort red\nproperty ushort green\nproperty ushort blue\nend_header\n1 2 3 4 300 5\n";
+    fail(&["build", "--color", "--points", f.write("big.ply", big), "-o", f.p("k.ot")], "vertex 0 green: colour 300");
+    ok(&["build", "--points", f.p("big.ply"), "-o", f.p("k.ot")]);
+    let fl = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n\
+              property float red\nproperty float green\nproperty float blue\nend_header\n1 2 3 0.5 1.5 0\n";
+    fail(
+        &["build", "--color", "--points", f.write("fl.ply", fl), "-o", f.p("k.ot")],
+        "float colour 1.5 is outside 0..1",
+    );
+    let short = "FIELDS x y z rgb\nSIZE 4 4 4 2\nTYPE F F F U\nPOINTS 1\nDATA ascii\n1 2 3 4\n";
+    fail(&["build", "--color", "--points", f.write("s.pcd", short), "-o", f.p("k.ot")], "needs SIZE 4 COUNT 1");
+    let nan = "FIELDS x y z rgb\nSIZE 4 4 4 4\nTYPE F F F F\nPOINTS 1\nDATA ascii\n1 2 3 nan\n";
+    fail(&["build", "--color", "--points", f.write("n.pcd", nan), "-o", f.p("k.ot")], "point 0: cannot read rgb");
+    fail(&["build", f.p("s.graph"), "--color", "-o", f.p("k.ot")], "--color needs --points");
+}
+
 // ----- errors shared by every map reader and the build flags ------------------------------------
 
 #[test]

@@ -14,7 +14,7 @@ use octolinear::formats::{bt, ot};
 use octolinear::mapped::{self, format, MapItem, MapView, MappedMap, OccupancyLookup, OlmError, Variant, WriteOptions};
 use octolinear::ray::CastError;
 use octolinear::simulate::{simulate, LidarConfig, SceneKind, SplitMix64};
-use octolinear::{CastOptions, CastOutcome, Found, Key, KeyBox, OccupancyTree, Point3};
+use octolinear::{CastOptions, CastOutcome, Found, Key, KeyBox, NodeKind, OccupancyTree, Point3};
 use octolinear::{ScanOptions, SensorModel};
 use std::fmt::Write as _;
 
@@ -25,11 +25,31 @@ fn small_lidar() -> LidarConfig {
 }
 
 fn simulated(kind: SceneKind, scans: usize, seed: u64, res: f64, cfg: &LidarConfig) -> OccupancyTree {
+    simulated_kind(kind, scans, seed, res, cfg, NodeKind::Plain)
+}
+
+/// A simulated map of any node kind: colour maps get a colour per end
+/// point (from its position) and their inner colours; stamped maps a
+/// different second per scan.
+fn simulated_kind(
+    kind: SceneKind,
+    scans: usize,
+    seed: u64,
+    res: f64,
+    cfg: &LidarConfig,
+    node_kind: NodeKind,
+) -> OccupancyTree {
     let graph = simulate(kind, scans, seed, cfg).unwrap();
-    let mut tree = OccupancyTree::new(res).unwrap();
-    for node in &graph.nodes {
+    let mut tree = OccupancyTree::with_kind(res, SensorModel::default(), node_kind).unwrap();
+    for (i, node) in graph.nodes.iter().enumerate() {
+        tree.set_clock(octolinear::Clock::Fixed(1_700_000_000 + 7 * i as u32));
         let (cloud, origin) = node.graph2tree();
-        tree.insert_point_cloud(&cloud.points, origin, &ScanOptions::default()).unwrap();
+        let colors: Vec<[u8; 3]> =
+            cloud.points.iter().map(|p| [(p.x * 40.0) as u8, (p.y * 40.0) as u8, (p.z * 90.0) as u8]).collect();
+        tree.insert_colored_point_cloud(&cloud.points, &colors, origin, &ScanOptions::default()).unwrap();
+    }
+    if node_kind == NodeKind::Color {
+        tree.update_inner_occupancy();
     }
     tree
 }
@@ -46,11 +66,23 @@ fn bt_bytes(tree: &OccupancyTree) -> Vec<u8> {
     v
 }
 
+/// `writeBinaryConst`: the tree as it is (for trees already maximum
+/// likelihood and pruned; pruning a stamped tree again after its stamps are
+/// gone would merge more).
+fn bt_const(tree: &OccupancyTree) -> Vec<u8> {
+    let mut v = Vec::new();
+    bt::write_const(tree, &mut v).unwrap();
+    v
+}
+
+/// What the maximum-likelihood variant holds: the tree converted and pruned
+/// as `writeBinary` does (stamps take part in pruning), then without its
+/// colours or stamps (white, 0), which `.bt` does not store.
 fn ml_of(tree: &OccupancyTree) -> OccupancyTree {
     let mut t = tree.clone();
     t.to_max_likelihood();
     t.prune();
-    t
+    t.converted(NodeKind::Plain).converted(tree.kind())
 }
 
 fn all_options() -> Vec<(&'static str, WriteOptions)> {
@@ -65,7 +97,7 @@ fn all_options() -> Vec<(&'static str, WriteOptions)> {
 
 // ----- one query suite for every implementation -------------------------------
 
-type Item = (Key, u8, u32, bool);
+type Item = (Key, u8, u32, bool, u32);
 
 /// The queries compared between implementations.
 trait Queries {
@@ -83,7 +115,7 @@ enum Iter {
 }
 
 fn item(i: MapItem<'_>) -> Item {
-    (i.key, i.depth, i.value.to_bits(), i.is_leaf)
+    (i.key, i.depth, i.value.to_bits(), i.is_leaf, i.extra)
 }
 
 impl Queries for OccupancyTree {
@@ -91,7 +123,7 @@ impl Queries for OccupancyTree {
         self
     }
     fn items(&self, which: Iter, d: u8) -> Vec<Item> {
-        let f = |n: octolinear::tree::NodeItem<'_>| (n.key, n.depth, n.value.to_bits(), n.is_leaf);
+        let f = |n: octolinear::tree::NodeItem<'_>| (n.key, n.depth, n.value.to_bits(), n.is_leaf, n.extra);
         match which {
             Iter::Leaves => self.leaves(d).map(f).collect(),
             Iter::Nodes => self.nodes(d).map(f).collect(),
@@ -146,8 +178,8 @@ impl<D: AsRef<[u8]>> Queries for MappedMap<D> {
     }
 }
 
-fn found_bits(f: Option<Found>) -> Option<(u32, u8, bool)> {
-    f.map(|f| (f.value.to_bits(), f.depth, f.is_leaf))
+fn found_bits(f: Option<Found>) -> Option<(u32, u8, bool, u32)> {
+    f.map(|f| (f.value.to_bits(), f.depth, f.is_leaf, f.extra))
 }
 
 /// Runs every query on `reference` and `other` and compares bit for bit.
@@ -244,10 +276,16 @@ fn check_all_backings(name: &str, tree: &OccupancyTree) {
         let back = mm.to_tree().unwrap();
         assert_eq!(back.sensor(), tree.sensor());
         match opts.variant {
-            Variant::Full => assert_eq!(ot_bytes(&back), ot_bytes(tree), "{what}: .ot"),
+            Variant::Full => {
+                assert_eq!(ot_bytes(&back), ot_bytes(tree), "{what}: .ot");
+                assert_eq!(back.kind(), tree.kind(), "{what}: kind");
+                // stamps are not in .ot: compare every node's extra
+                let extras = |t: &OccupancyTree| t.nodes(0).map(|n| n.extra).collect::<Vec<_>>();
+                assert!(extras(&back) == extras(tree), "{what}: colours or stamps differ");
+            }
             Variant::MaxLikelihood => {
                 assert_eq!(ot_bytes(&back), ot_bytes(&ml), "{what}: ML .ot");
-                assert_eq!(bt_bytes(&back), bt_bytes(tree), "{what}: .bt")
+                assert_eq!(bt_const(&back), bt_bytes(tree), "{what}: .bt")
             }
         }
     }
@@ -258,6 +296,37 @@ fn simulated_indoor_maps_answer_like_the_tree() {
     let tree = simulated(SceneKind::Indoor, 3, 5, 0.1, &small_lidar());
     assert!(tree.num_leaves() > 1000);
     check_all_backings("indoor 0.1", &tree);
+}
+
+#[test]
+fn colour_and_stamped_maps_answer_like_the_tree() {
+    for kind in [NodeKind::Color, NodeKind::Stamped] {
+        let tree = simulated_kind(SceneKind::Indoor, 3, 21, 0.1, &small_lidar(), kind);
+        let distinct: std::collections::HashSet<u32> = tree.nodes(0).map(|n| n.extra).collect();
+        assert!(distinct.len() >= 3, "{kind:?}: extras worth comparing");
+        check_all_backings(&format!("indoor {kind:?}"), &tree);
+        let bytes = mapped::to_bytes(&tree, WriteOptions::default()).unwrap();
+        let map = MappedMap::new(&bytes[..]).unwrap();
+        let view = map.view();
+        assert_eq!(view.kind().node_kind(), kind);
+        // the colour / stamp accessors
+        for leaf in tree.leaves(0).step_by(97) {
+            match kind {
+                NodeKind::Color => {
+                    assert_eq!(view.color(leaf.key, leaf.depth), Some(octolinear::tree::unpack_rgb(leaf.extra)));
+                    assert_eq!(view.stamp(leaf.key, leaf.depth), None);
+                }
+                _ => {
+                    assert_eq!(view.stamp(leaf.key, leaf.depth), Some(leaf.extra));
+                    assert_eq!(view.color(leaf.key, leaf.depth), None);
+                }
+            }
+        }
+        // the ML variant keeps the type but, as .bt, no colours or stamps
+        let ml = MappedMap::new(mapped::to_bytes(&tree, WriteOptions::max_likelihood()).unwrap()).unwrap();
+        assert_eq!(ml.header().kind, format::TreeKind::of(kind));
+        assert!(ml.view().leaves(0).all(|l| l.extra == if kind == NodeKind::Color { 0xff_ffff } else { 0 }));
+    }
 }
 
 #[test]
@@ -327,6 +396,7 @@ fn golden_ot_files_round_trip() {
     };
     let mut f = Failures::default();
     let (mut files, mut identical) = (0, 0);
+    let mut kinds = std::collections::BTreeMap::new();
     for case in g.manifest["cases"].as_array().unwrap() {
         let id = case["id"].as_str().unwrap();
         for file in case["files"].as_array().unwrap() {
@@ -336,12 +406,10 @@ fn golden_ot_files_round_trip() {
             let name = file["name"].as_str().unwrap();
             let bytes = g.load(case, name).unwrap();
             let Ok(ot::AnyTree::Occupancy(tree)) = ot::read(&bytes[..]) else {
-                continue; // color, counting and stamped trees are not OcTrees
+                continue; // counting trees hold no occupancy
             };
-            if tree.kind() != octolinear::NodeKind::Plain {
-                continue; // colour and stamped trees have no .olm sections yet
-            }
             files += 1;
+            *kinds.entry(format!("{:?}", tree.kind())).or_insert(0) += 1;
             let plain = ot_bytes(&tree);
             identical += usize::from(plain == bytes);
             for (label, opts) in all_options() {
@@ -362,11 +430,12 @@ fn golden_ot_files_round_trip() {
             // the ML variant equals what writeBinary stores
             let olm = mapped::to_bytes(&tree, WriteOptions::max_likelihood()).unwrap();
             let back = MappedMap::new(olm).unwrap().to_tree().unwrap();
-            f.check(bt_bytes(&back) == bt_bytes(&tree), || format!("{id}/{name} ml: .bt bytes differ after .olm"));
+            f.check(bt_const(&back) == bt_bytes(&tree), || format!("{id}/{name} ml: .bt bytes differ after .olm"));
         }
     }
-    eprintln!("{files} golden .ot files, {identical} rewritten byte-identically by the .ot writer");
+    eprintln!("{files} golden .ot files ({kinds:?}), {identical} rewritten byte-identically by the .ot writer");
     assert!(files > 50);
+    assert!(kinds.get("Color").is_some_and(|&n| n > 0) && kinds.get("Stamped").is_some_and(|&n| n > 0), "{kinds:?}");
     f.finish("golden .ot round trips");
 }
 
@@ -533,12 +602,17 @@ fn golden_queries_from_mapped_files() {
 // ----- header checks ---------------------------------------------------------------
 
 fn sample_bytes(opts: WriteOptions) -> Vec<u8> {
-    let tree = simulated(
+    sample_bytes_of(opts, NodeKind::Plain)
+}
+
+fn sample_bytes_of(opts: WriteOptions, kind: NodeKind) -> Vec<u8> {
+    let tree = simulated_kind(
         SceneKind::Indoor,
         1,
         3,
         0.2,
         &LidarConfig { beams: 4, horizontal_steps: 60, ..LidarConfig::indoor() },
+        kind,
     );
     mapped::to_bytes(&tree, opts).unwrap()
 }
@@ -588,12 +662,17 @@ fn header_checks_name_the_problem() {
     let mut b = good.clone();
     b[30] ^= 1;
     assert!(matches!(err(&b), OlmError::HeaderChecksum { .. }));
+    // a colour or stamped kind without its section, an unknown kind
     for kind in [1u8, 2] {
         let mut b = good.clone();
         b[20] = kind;
         fix_header_crc(&mut b);
-        assert!(matches!(err(&b), OlmError::UnsupportedKind(k) if k == kind));
+        assert!(matches!(err(&b), OlmError::Section { kind: 7 | 8, .. }), "{:?}", err(&b));
     }
+    let mut b = good.clone();
+    b[20] = 3;
+    fix_header_crc(&mut b);
+    assert!(matches!(err(&b), OlmError::BadField { field: "tree_kind", .. }));
     let mut b = good.clone();
     b.push(0);
     assert!(matches!(err(&b), OlmError::FileLength { .. }));
@@ -789,12 +868,19 @@ fn corrupted_files_never_panic() {
     let mut total = 0;
     let mut opened = 0;
     let mut verified = 0;
-    for (label, opts) in all_options() {
-        let base = sample_bytes(opts);
+    // every layout of a plain map; colour and stamped maps in both full layouts
+    let mut bases: Vec<(String, Vec<u8>)> =
+        all_options().into_iter().map(|(label, opts)| (label.to_string(), sample_bytes(opts))).collect();
+    for kind in [NodeKind::Color, NodeKind::Stamped] {
+        for (label, opts) in [("full/rank", WriteOptions::default()), ("full/pointers", WriteOptions::pointers())] {
+            bases.push((format!("{kind:?} {label}"), sample_bytes_of(opts, kind)));
+        }
+    }
+    for (label, base) in &bases {
         let mut rng = SplitMix64(0x0c70_11ea_u64 ^ base.len() as u64);
-        assert_eq!(exercise(&base), (true, true), "{label}");
+        assert_eq!(exercise(base), (true, true), "{label}");
         for i in 0..1200u64 {
-            let m = mutate(&base, i % 8, &mut rng);
+            let m = mutate(base, i % 8, &mut rng);
             let (o, v) = exercise(&m);
             total += 1;
             opened += usize::from(o);
@@ -813,7 +899,7 @@ fn corrupted_files_never_panic() {
         total += 1;
     }
     eprintln!("{total} mutants: {opened} opened, {verified} verified");
-    assert!(total >= 6000);
+    assert!(total >= 10_000);
     assert!(opened > total / 4, "the mutants should reach past the header");
 }
 
@@ -838,7 +924,21 @@ fn write_fuzz_seeds() {
             Point3::new(0.05 + 0.1 * (i & 1) as f32, 0.05 + 0.1 * ((i >> 1) & 1) as f32, 0.05 + 0.1 * (i >> 2) as f32);
         block.update_point(p, true, Default::default()).unwrap();
     }
-    trees.push(("block", block));
+    trees.push(("block", block.clone()));
+    // a colour block with a few colours, and a stamped one
+    let mut color = block.converted(NodeKind::Color);
+    color.expand();
+    for (i, leaf) in block.leaves(0).map(|l| l.key).collect::<Vec<_>>().into_iter().enumerate().take(5) {
+        color.set_color(leaf, [40 * i as u8, 255 - 30 * i as u8, 7]);
+    }
+    color.update_inner_occupancy();
+    trees.push(("color", color));
+    let mut stamped = OccupancyTree::with_kind(0.1, SensorModel::default(), NodeKind::Stamped).unwrap();
+    for (i, p) in [(0.05, 0.05, 0.05), (0.3, -0.2, 0.1), (-0.4, 0.25, 0.05)].into_iter().enumerate() {
+        stamped.set_clock(octolinear::Clock::Fixed(1000 + i as u32));
+        stamped.update_point(Point3::new(p.0, p.1, p.2), true, Default::default()).unwrap();
+    }
+    trees.push(("stamped", stamped));
     for (name, tree) in &trees {
         for (label, opts) in all_options() {
             let b = mapped::to_bytes(tree, opts).unwrap();

@@ -26,10 +26,11 @@ fn main() {
     }
 }
 
-type Answer = Option<(u32, u8, bool)>;
+/// Value bits, depth, leaf flag and colour or stamp.
+type Answer = Option<(u32, u8, bool, u32)>;
 
 fn bits(f: Option<Found>) -> Answer {
-    f.map(|f| (f.value.to_bits(), f.depth, f.is_leaf))
+    f.map(|f| (f.value.to_bits(), f.depth, f.is_leaf, f.extra))
 }
 
 /// Keys near the map centre, where small maps live, derived from the data.

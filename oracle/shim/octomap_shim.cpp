@@ -20,6 +20,11 @@
 #include <octomap/octomap.h>
 #include <octomap/OcTree.h>
 #include <octomap/AbstractOcTree.h>
+#include <octomap/ColorOcTree.h>
+#include <octomap/MapCollection.h>
+#include <octomap/OcTreeStamped.h>
+
+#include <ctime>
 
 #include <cmath>
 #include <cstdint>
@@ -124,7 +129,8 @@ bool valid_depth(unsigned depth) { return depth <= 16; }
 // Would computeRayKeys(origin, end) be safe w.r.t. the KeyRay capacity?
 // If either endpoint is outside the map computeRayKeys returns false early,
 // which is safe too.
-bool ray_ok(const OcTree* t, const point3d& origin, const point3d& end) {
+template <class TREE>
+bool ray_ok(const TREE* t, const point3d& origin, const point3d& end) {
   OcTreeKey ko, ke;
   if (!t->coordToKeyChecked(origin, ko) || !t->coordToKeyChecked(end, ke)) return true;
   long l1 = 0;
@@ -134,7 +140,8 @@ bool ray_ok(const OcTree* t, const point3d& origin, const point3d& end) {
 
 // Replicates the ray endpoints insertPointCloud would trace (computeUpdate /
 // computeDiscreteUpdate) and checks each against the KeyRay capacity.
-bool cloud_ok(const OcTree* t, const octomap::Pointcloud& pc, const point3d& origin, double maxrange,
+template <class TREE>
+bool cloud_ok(const TREE* t, const octomap::Pointcloud& pc, const point3d& origin, double maxrange,
               bool discretize) {
   for (size_t i = 0; i < pc.size(); ++i) {
     point3d p = pc[i];
@@ -693,5 +700,242 @@ size_t olo_sizeof_node(void) { return sizeof(OloNode); }
 size_t olo_sizeof_change(void) { return sizeof(OloChange); }
 size_t olo_sizeof_stats(void) { return sizeof(OloStats); }
 size_t olo_sizeof_sensor(void) { return sizeof(OloSensor); }
+
+// ---------------------------------------------------------------- ColorOcTree
+
+// An octomap::ColorOcTree; colours are uint8_t[3] (r, g, b) per point.
+struct OloColorTree {
+  octomap::ColorOcTree* tree;
+  explicit OloColorTree(octomap::ColorOcTree* t) : tree(t) {}
+  ~OloColorTree() { delete tree; }
+};
+
+// sensor 1: set the four probabilities in graph2tree order; 2: read the
+// defaults back from the fresh tree and set them again (graph2tree's default).
+OloColorTree* olo_color_new(double resolution, int sensor, double clamp_min, double clamp_max, double prob_hit,
+                            double prob_miss) {
+  OLO_TRY
+  octomap::ColorOcTree* t = new octomap::ColorOcTree(resolution);
+  OloColorTree* h = new OloColorTree(t);
+  if (sensor == 2) {
+    clamp_min = t->getClampingThresMin();
+    clamp_max = t->getClampingThresMax();
+    prob_hit = t->getProbHit();
+    prob_miss = t->getProbMiss();
+  }
+  if (sensor) {
+    t->setClampingThresMin(clamp_min);
+    t->setClampingThresMax(clamp_max);
+    t->setProbHit(prob_hit);
+    t->setProbMiss(prob_miss);
+  }
+  return h;
+  OLO_CATCH(nullptr)
+}
+
+void olo_color_free(OloColorTree* h) { delete h; }
+
+int olo_color_insert_point_cloud(OloColorTree* h, const float* xyz, size_t n, const float* origin, double maxrange,
+                                 int lazy_eval, int discretize) {
+  OLO_TRY
+  octomap::Pointcloud pc;
+  fill_cloud(pc, xyz, n);
+  point3d o = P(origin);
+  if (!cloud_ok(h->tree, pc, o, maxrange, discretize != 0)) return OLO_ERAY_TOO_LONG;
+  h->tree->insertPointCloud(pc, o, maxrange, lazy_eval != 0, discretize != 0);
+  return OLO_OK;
+  OLO_CATCH(OLO_EEXCEPTION)
+}
+
+// which: 0 = integrateNodeColor, 1 = averageNodeColor, 2 = setNodeColor, each
+// through the (x, y, z, r, g, b) overload, for the n points in order.
+// Returns how many calls found a node (non-NULL), or < 0.
+long olo_color_apply(OloColorTree* h, int which, const float* xyz, const uint8_t* rgb, size_t n) {
+  if (which < 0 || which > 2) return OLO_EINVAL;
+  OLO_TRY
+  long found = 0;
+  for (size_t i = 0; i < n; ++i) {
+    float x = xyz[3 * i], y = xyz[3 * i + 1], z = xyz[3 * i + 2];
+    uint8_t r = rgb[3 * i], g = rgb[3 * i + 1], b = rgb[3 * i + 2];
+    octomap::ColorOcTreeNode* node = nullptr;
+    switch (which) {
+      case 0: node = h->tree->integrateNodeColor(x, y, z, r, g, b); break;
+      case 1: node = h->tree->averageNodeColor(x, y, z, r, g, b); break;
+      default: node = h->tree->setNodeColor(x, y, z, r, g, b); break;
+    }
+    if (node) ++found;
+  }
+  return found;
+  OLO_CATCH(OLO_EEXCEPTION)
+}
+
+int olo_color_update_node(OloColorTree* h, const float* p, int occupied, int lazy_eval) {
+  OLO_TRY
+  return h->tree->updateNode(P(p), occupied != 0, lazy_eval != 0) ? 1 : 0;
+  OLO_CATCH(OLO_EEXCEPTION)
+}
+
+// which: 0 = updateInnerOccupancy, 1 = prune, 2 = expand, 3 = toMaxLikelihood.
+int olo_color_op(OloColorTree* h, int which) {
+  OLO_TRY
+  switch (which) {
+    case 0: h->tree->updateInnerOccupancy(); break;
+    case 1: h->tree->prune(); break;
+    case 2: h->tree->expand(); break;
+    case 3: h->tree->toMaxLikelihood(); break;
+    default: return OLO_EINVAL;
+  }
+  return OLO_OK;
+  OLO_CATCH(OLO_EEXCEPTION)
+}
+
+// write(std::ostream&): the .ot bytes (id ColorOcTree).
+int olo_color_write(const OloColorTree* h, uint8_t** out, size_t* out_len) {
+  OLO_TRY
+  *out = nullptr;
+  *out_len = 0;
+  std::ostringstream os(std::ios_base::out | std::ios_base::binary);
+  if (!h->tree->write(os) || !os) return OLO_EFAILED;
+  return stream_out(os.str(), out, out_len);
+  OLO_CATCH(OLO_EEXCEPTION)
+}
+
+// Returns 1 if found (writes log-odds and colour), 0 if not, < 0 on error.
+int olo_color_search(const OloColorTree* h, const float* p, unsigned depth, float* logodds, uint8_t* rgb) {
+  if (!valid_depth(depth)) return OLO_EINVAL;
+  OLO_TRY
+  octomap::ColorOcTreeNode* n = h->tree->search(P(p), depth);
+  if (!n) return 0;
+  *logodds = n->getLogOdds();
+  octomap::ColorOcTreeNode::Color c = n->getColor();
+  rgb[0] = c.r;
+  rgb[1] = c.g;
+  rgb[2] = c.b;
+  return 1;
+  OLO_CATCH(OLO_EEXCEPTION)
+}
+
+// ---------------------------------------------------------------- OcTreeStamped
+
+// An octomap::OcTreeStamped. Its stamps are time(NULL); every mutating call
+// reports time(NULL) before and after (t[0], t[1]) so that a caller can tell
+// whether a single second was used throughout.
+struct OloStampedTree {
+  octomap::OcTreeStamped* tree;
+  explicit OloStampedTree(octomap::OcTreeStamped* t) : tree(t) {}
+  ~OloStampedTree() { delete tree; }
+};
+
+struct OloStampedNode {
+  uint16_t key[3];
+  uint8_t depth;
+  uint8_t is_leaf;
+  float logodds;
+  uint32_t stamp;
+};
+
+OloStampedTree* olo_stamped_new(double resolution) {
+  OLO_TRY
+  return new OloStampedTree(new octomap::OcTreeStamped(resolution));
+  OLO_CATCH(nullptr)
+}
+
+void olo_stamped_free(OloStampedTree* h) { delete h; }
+
+int olo_stamped_insert_point_cloud(OloStampedTree* h, const float* xyz, size_t n, const float* origin,
+                                   double maxrange, int lazy_eval, int discretize, uint32_t* t) {
+  OLO_TRY
+  octomap::Pointcloud pc;
+  fill_cloud(pc, xyz, n);
+  point3d o = P(origin);
+  if (!cloud_ok(h->tree, pc, o, maxrange, discretize != 0)) return OLO_ERAY_TOO_LONG;
+  t[0] = (uint32_t)time(NULL);
+  h->tree->insertPointCloud(pc, o, maxrange, lazy_eval != 0, discretize != 0);
+  t[1] = (uint32_t)time(NULL);
+  return OLO_OK;
+  OLO_CATCH(OLO_EEXCEPTION)
+}
+
+int olo_stamped_update_node(OloStampedTree* h, const float* p, int occupied, int lazy_eval, uint32_t* t) {
+  OLO_TRY
+  t[0] = (uint32_t)time(NULL);
+  int r = h->tree->updateNode(P(p), occupied != 0, lazy_eval != 0) ? 1 : 0;
+  t[1] = (uint32_t)time(NULL);
+  return r;
+  OLO_CATCH(OLO_EEXCEPTION)
+}
+
+// which: 0 = updateInnerOccupancy, 1 = prune, 2 = degradeOutdatedNodes(arg).
+int olo_stamped_op(OloStampedTree* h, int which, unsigned arg, uint32_t* t) {
+  OLO_TRY
+  t[0] = (uint32_t)time(NULL);
+  switch (which) {
+    case 0: h->tree->updateInnerOccupancy(); break;
+    case 1: h->tree->prune(); break;
+    case 2: h->tree->degradeOutdatedNodes(arg); break;
+    default: return OLO_EINVAL;
+  }
+  t[1] = (uint32_t)time(NULL);
+  return OLO_OK;
+  OLO_CATCH(OLO_EEXCEPTION)
+}
+
+int olo_stamped_write(const OloStampedTree* h, uint8_t** out, size_t* out_len) {
+  OLO_TRY
+  *out = nullptr;
+  *out_len = 0;
+  std::ostringstream os(std::ios_base::out | std::ios_base::binary);
+  if (!h->tree->write(os) || !os) return OLO_EFAILED;
+  return stream_out(os.str(), out, out_len);
+  OLO_CATCH(OLO_EEXCEPTION)
+}
+
+// Every node (begin_tree), with its stamp.
+int olo_stamped_dump(const OloStampedTree* h, OloStampedNode** out, size_t* count) {
+  *out = nullptr;
+  *count = 0;
+  OLO_TRY
+  std::vector<OloStampedNode> v;
+  const octomap::OcTreeStamped* t = h->tree;
+  for (octomap::OcTreeStamped::tree_iterator it = t->begin_tree(), end = t->end_tree(); it != end; ++it) {
+    const OcTreeKey& k = it.getKey();
+    OloStampedNode n = {{k[0], k[1], k[2]}, (uint8_t)it.getDepth(), (uint8_t)(it.isLeaf() ? 1 : 0),
+                        it->getLogOdds(), it->getTimestamp()};
+    v.push_back(n);
+  }
+  *out = to_malloc(v);
+  *count = v.size();
+  return OLO_OK;
+  OLO_CATCH(OLO_EEXCEPTION)
+}
+
+// ---------------------------------------------------------------- MapCollection
+
+// MapCollection<MapNode<OcTree>>(path), then isOccupied and getOccupancy for
+// the n_pts points, and castRay(origin, direction, end, ignore_unknown,
+// max_range) for the n_rays rays (6 floats each: origin, direction; one max
+// range each). Returns the number of submaps read, or < 0. castRay's own
+// printf chatter goes to stdout.
+long olo_mapcoll_query(const char* path, const float* pts, size_t n_pts, uint8_t* occupied, double* occupancy,
+                       const float* rays, const double* max_ranges, size_t n_rays, int ignore_unknown,
+                       uint8_t* hits, float* ends) {
+  OLO_TRY
+  octomap::MapCollection<octomap::MapNode<OcTree> > coll(path);
+  for (size_t i = 0; i < n_pts; ++i) {
+    point3d q = P(pts + 3 * i);
+    occupied[i] = coll.isOccupied(q) ? 1 : 0;
+    occupancy[i] = coll.getOccupancy(q);
+  }
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (size_t i = 0; i < n_rays; ++i) {
+    point3d end(nan, nan, nan);
+    hits[i] = coll.castRay(P(rays + 6 * i), P(rays + 6 * i + 3), end, ignore_unknown != 0, max_ranges[i]) ? 1 : 0;
+    put(ends + 3 * i, end);
+  }
+  return (long)coll.size();
+  OLO_CATCH(OLO_EEXCEPTION)
+}
+
+size_t olo_sizeof_stamped_node(void) { return sizeof(OloStampedNode); }
 
 }  // extern "C"

@@ -231,6 +231,28 @@ mod ffi {
         pub logodds: f32,
     }
 
+    /// Opaque shim handle (`struct OloColorTree` in C++).
+    #[repr(C)]
+    pub struct OloColorTree {
+        _private: [u8; 0],
+    }
+
+    /// Opaque shim handle (`struct OloStampedTree` in C++).
+    #[repr(C)]
+    pub struct OloStampedTree {
+        _private: [u8; 0],
+    }
+
+    #[repr(C)]
+    #[derive(Clone, Copy)]
+    pub struct OloStampedNode {
+        pub key: [u16; 3],
+        pub depth: u8,
+        pub is_leaf: u8,
+        pub logodds: f32,
+        pub stamp: u32,
+    }
+
     #[repr(C)]
     #[derive(Clone, Copy)]
     pub struct OloChange {
@@ -368,6 +390,30 @@ mod ffi {
         fn olo_sizeof_change() -> usize;
         fn olo_sizeof_stats() -> usize;
         fn olo_sizeof_sensor() -> usize;
+        fn olo_color_new(resolution: f64, sensor: i32, cmin: f64, cmax: f64, hit: f64, miss: f64)
+            -> *mut OloColorTree;
+        fn olo_color_free(h: *mut OloColorTree);
+        fn olo_color_insert_point_cloud(h: *mut OloColorTree, xyz: *const f32, n: usize, origin: *const f32,
+            maxrange: f64, lazy: i32, discretize: i32) -> i32;
+        fn olo_color_apply(h: *mut OloColorTree, which: i32, xyz: *const f32, rgb: *const u8, n: usize) -> i64;
+        fn olo_color_update_node(h: *mut OloColorTree, p: *const f32, occupied: i32, lazy: i32) -> i32;
+        fn olo_color_op(h: *mut OloColorTree, which: i32) -> i32;
+        fn olo_color_write(h: *const OloColorTree, out: *mut *mut u8, len: *mut usize) -> i32;
+        fn olo_color_search(h: *const OloColorTree, p: *const f32, depth: u32, logodds: *mut f32, rgb: *mut u8)
+            -> i32;
+        fn olo_stamped_new(resolution: f64) -> *mut OloStampedTree;
+        fn olo_stamped_free(h: *mut OloStampedTree);
+        fn olo_stamped_insert_point_cloud(h: *mut OloStampedTree, xyz: *const f32, n: usize, origin: *const f32,
+            maxrange: f64, lazy: i32, discretize: i32, t: *mut u32) -> i32;
+        fn olo_stamped_update_node(h: *mut OloStampedTree, p: *const f32, occupied: i32, lazy: i32, t: *mut u32)
+            -> i32;
+        fn olo_stamped_op(h: *mut OloStampedTree, which: i32, arg: u32, t: *mut u32) -> i32;
+        fn olo_stamped_write(h: *const OloStampedTree, out: *mut *mut u8, len: *mut usize) -> i32;
+        fn olo_stamped_dump(h: *const OloStampedTree, out: *mut *mut OloStampedNode, count: *mut usize) -> i32;
+        fn olo_sizeof_stamped_node() -> usize;
+        fn olo_mapcoll_query(path: *const std::ffi::c_char, pts: *const f32, n_pts: usize, occupied: *mut u8,
+            occupancy: *mut f64, rays: *const f32, max_ranges: *const f64, n_rays: usize, ignore_unknown: i32,
+            hits: *mut u8, ends: *mut f32) -> i64;
     }
 }
 
@@ -1041,6 +1087,374 @@ impl OracleTree {
     }
 }
 
+// ------------------------------------------------------------------ ColorOcTree
+
+/// How [`OracleColorTree::apply_colors`] sets colours (OctoMap's three
+/// `ColorOcTree` colour setters, through their `(x, y, z, r, g, b)` overloads).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ColorOp {
+    /// `integrateNodeColor`
+    Integrate,
+    /// `averageNodeColor`
+    Average,
+    /// `setNodeColor`
+    Set,
+}
+
+/// An `octomap::ColorOcTree` owned through the shim.
+pub struct OracleColorTree {
+    ptr: NonNull<ffi::OloColorTree>,
+}
+
+impl Drop for OracleColorTree {
+    fn drop(&mut self) {
+        // SAFETY: `ptr` came from `olo_color_new` and is freed exactly once.
+        unsafe { ffi::olo_color_free(self.ptr.as_ptr()) }
+    }
+}
+
+impl fmt::Debug for OracleColorTree {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("OracleColorTree").finish_non_exhaustive()
+    }
+}
+
+impl OracleColorTree {
+    /// `ColorOcTree(resolution)`, then, with `sensor`, the probabilities set
+    /// in graph2tree order.
+    pub fn new(resolution: f64, sensor: Option<&SensorParams>) -> Result<Self, OracleError> {
+        if !available() {
+            return Err(OracleError::Unavailable);
+        }
+        validate_resolution(resolution)?;
+        let s = sensor.copied().unwrap_or_default();
+        if sensor.is_some() {
+            validate_sensor(&s)?;
+        }
+        // SAFETY: plain values; returns an owned handle or null.
+        let p = unsafe {
+            ffi::olo_color_new(resolution, sensor.is_some().into(), s.clamp_min, s.clamp_max, s.prob_hit, s.prob_miss)
+        };
+        NonNull::new(p).map(|ptr| OracleColorTree { ptr }).ok_or(OracleError::CppException)
+    }
+
+    /// `ColorOcTree(resolution)` with the sensor model read back and set
+    /// again in graph2tree order (what `octolinear build` does by default).
+    pub fn with_graph2tree_default(resolution: f64) -> Result<Self, OracleError> {
+        if !available() {
+            return Err(OracleError::Unavailable);
+        }
+        validate_resolution(resolution)?;
+        // SAFETY: plain values; returns an owned handle or null.
+        let p = unsafe { ffi::olo_color_new(resolution, 2, 0.0, 0.0, 0.0, 0.0) };
+        NonNull::new(p).map(|ptr| OracleColorTree { ptr }).ok_or(OracleError::CppException)
+    }
+
+    /// `insertPointCloud(points, origin, maxrange, lazy_eval, discretize)`.
+    pub fn insert_point_cloud(
+        &mut self,
+        points: &[[f32; 3]],
+        origin: [f32; 3],
+        maxrange: f64,
+        lazy_eval: bool,
+        discretize: bool,
+    ) -> Result<(), OracleError> {
+        // SAFETY: valid handle; `points` is `len` contiguous [f32; 3]; the shim copies it.
+        let code = unsafe {
+            ffi::olo_color_insert_point_cloud(
+                self.ptr.as_ptr(),
+                points.as_ptr().cast(),
+                points.len(),
+                origin.as_ptr(),
+                maxrange,
+                lazy_eval.into(),
+                discretize.into(),
+            )
+        };
+        status(code, "insertPointCloud")
+    }
+
+    /// Calls the colour setter `op` for every point with its colour, in
+    /// order; returns how many found a node.
+    pub fn apply_colors(&mut self, op: ColorOp, points: &[[f32; 3]], colors: &[[u8; 3]]) -> usize {
+        assert_eq!(points.len(), colors.len(), "one colour per point");
+        let which = match op {
+            ColorOp::Integrate => 0,
+            ColorOp::Average => 1,
+            ColorOp::Set => 2,
+        };
+        // SAFETY: valid handle; both arrays hold `len` elements of 3 values.
+        let r = unsafe {
+            ffi::olo_color_apply(self.ptr.as_ptr(), which, points.as_ptr().cast(), colors.as_ptr().cast(), points.len())
+        };
+        assert!(r >= 0, "colour setter failed");
+        r as usize
+    }
+
+    /// `updateNode(point, occupied, lazy_eval)`; `false` if outside the map.
+    pub fn update_node(&mut self, p: [f32; 3], occupied: bool, lazy_eval: bool) -> bool {
+        // SAFETY: valid handle and point.
+        must(
+            unsafe { ffi::olo_color_update_node(self.ptr.as_ptr(), p.as_ptr(), occupied.into(), lazy_eval.into()) },
+            "updateNode",
+        ) == 1
+    }
+
+    fn op(&mut self, which: i32, what: &'static str) {
+        // SAFETY: valid handle.
+        must(unsafe { ffi::olo_color_op(self.ptr.as_ptr(), which) }, what);
+    }
+
+    /// `updateInnerOccupancy()` (ColorOcTree's: also averages inner colours).
+    pub fn update_inner_occupancy(&mut self) {
+        self.op(0, "updateInnerOccupancy")
+    }
+
+    pub fn prune(&mut self) {
+        self.op(1, "prune")
+    }
+
+    pub fn expand(&mut self) {
+        self.op(2, "expand")
+    }
+
+    pub fn to_max_likelihood(&mut self) {
+        self.op(3, "toMaxLikelihood")
+    }
+
+    /// `write(std::ostream&)`: the `.ot` bytes, id `ColorOcTree`.
+    pub fn write_ot(&self) -> Result<Vec<u8>, OracleError> {
+        let (mut p, mut n) = (std::ptr::null_mut(), 0usize);
+        // SAFETY: valid handle and out-pointers.
+        status(unsafe { ffi::olo_color_write(self.ptr.as_ptr(), &mut p, &mut n) }, "write")?;
+        // SAFETY: the shim returned a malloc'ed buffer of `n` bytes (or null).
+        Ok(unsafe { take_vec(p, n) })
+    }
+
+    /// `search(point, depth)`: log-odds and colour.
+    pub fn search(&self, p: [f32; 3], depth: u8) -> Option<(f32, [u8; 3])> {
+        let d = check_depth(depth);
+        let (mut v, mut rgb) = (0f32, [0u8; 3]);
+        // SAFETY: valid handle and out-pointers (rgb holds 3 bytes).
+        let r = unsafe { ffi::olo_color_search(self.ptr.as_ptr(), p.as_ptr(), d, &mut v, rgb.as_mut_ptr()) };
+        (must(r, "search") == 1).then_some((v, rgb))
+    }
+}
+
+// ------------------------------------------------------------------ OcTreeStamped
+
+/// One node of [`OracleStampedTree::nodes`] (`begin_tree` order).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StampedNode {
+    pub key: [u16; 3],
+    pub depth: u8,
+    pub is_leaf: bool,
+    pub logodds: f32,
+    pub stamp: u32,
+}
+
+/// The wall clock (`time(NULL)`) OctoMap read before and after a call;
+/// when equal, every stamp the call wrote is that second.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Seconds {
+    pub before: u32,
+    pub after: u32,
+}
+
+impl Seconds {
+    /// The one second the call ran in, if it did not straddle two.
+    pub fn single(self) -> Option<u32> {
+        (self.before == self.after).then_some(self.before)
+    }
+}
+
+/// An `octomap::OcTreeStamped` owned through the shim (OctoMap's default
+/// sensor model). Stamps are OctoMap's own `time(NULL)`.
+pub struct OracleStampedTree {
+    ptr: NonNull<ffi::OloStampedTree>,
+}
+
+impl Drop for OracleStampedTree {
+    fn drop(&mut self) {
+        // SAFETY: `ptr` came from `olo_stamped_new` and is freed exactly once.
+        unsafe { ffi::olo_stamped_free(self.ptr.as_ptr()) }
+    }
+}
+
+impl fmt::Debug for OracleStampedTree {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("OracleStampedTree").finish_non_exhaustive()
+    }
+}
+
+impl OracleStampedTree {
+    pub fn new(resolution: f64) -> Result<Self, OracleError> {
+        if !available() {
+            return Err(OracleError::Unavailable);
+        }
+        validate_resolution(resolution)?;
+        // SAFETY: plain value; returns an owned handle or null.
+        let p = unsafe { ffi::olo_stamped_new(resolution) };
+        NonNull::new(p).map(|ptr| OracleStampedTree { ptr }).ok_or(OracleError::CppException)
+    }
+
+    /// `insertPointCloud(points, origin, maxrange, lazy_eval, discretize)`.
+    pub fn insert_point_cloud(
+        &mut self,
+        points: &[[f32; 3]],
+        origin: [f32; 3],
+        maxrange: f64,
+        lazy_eval: bool,
+        discretize: bool,
+    ) -> Result<Seconds, OracleError> {
+        let mut t = [0u32; 2];
+        // SAFETY: valid handle; `points` is `len` contiguous [f32; 3]; `t` holds two u32.
+        let code = unsafe {
+            ffi::olo_stamped_insert_point_cloud(
+                self.ptr.as_ptr(),
+                points.as_ptr().cast(),
+                points.len(),
+                origin.as_ptr(),
+                maxrange,
+                lazy_eval.into(),
+                discretize.into(),
+                t.as_mut_ptr(),
+            )
+        };
+        status(code, "insertPointCloud")?;
+        Ok(Seconds { before: t[0], after: t[1] })
+    }
+
+    /// `updateNode(point, occupied, lazy_eval)`: whether a node was found, and when.
+    pub fn update_node(&mut self, p: [f32; 3], occupied: bool, lazy_eval: bool) -> (bool, Seconds) {
+        let mut t = [0u32; 2];
+        // SAFETY: valid handle, point and `t`.
+        let r = unsafe {
+            ffi::olo_stamped_update_node(
+                self.ptr.as_ptr(),
+                p.as_ptr(),
+                occupied.into(),
+                lazy_eval.into(),
+                t.as_mut_ptr(),
+            )
+        };
+        (must(r, "updateNode") == 1, Seconds { before: t[0], after: t[1] })
+    }
+
+    fn op(&mut self, which: i32, arg: u32, what: &'static str) -> Seconds {
+        let mut t = [0u32; 2];
+        // SAFETY: valid handle and `t`.
+        must(unsafe { ffi::olo_stamped_op(self.ptr.as_ptr(), which, arg, t.as_mut_ptr()) }, what);
+        Seconds { before: t[0], after: t[1] }
+    }
+
+    pub fn update_inner_occupancy(&mut self) -> Seconds {
+        self.op(0, 0, "updateInnerOccupancy")
+    }
+
+    pub fn prune(&mut self) -> Seconds {
+        self.op(1, 0, "prune")
+    }
+
+    /// `degradeOutdatedNodes(max_age)`.
+    pub fn degrade_outdated_nodes(&mut self, max_age: u32) -> Seconds {
+        self.op(2, max_age, "degradeOutdatedNodes")
+    }
+
+    /// `write(std::ostream&)`: the `.ot` bytes, id `OcTreeStamped` (no stamps).
+    pub fn write_ot(&self) -> Result<Vec<u8>, OracleError> {
+        let (mut p, mut n) = (std::ptr::null_mut(), 0usize);
+        // SAFETY: valid handle and out-pointers.
+        status(unsafe { ffi::olo_stamped_write(self.ptr.as_ptr(), &mut p, &mut n) }, "write")?;
+        // SAFETY: the shim returned a malloc'ed buffer of `n` bytes (or null).
+        Ok(unsafe { take_vec(p, n) })
+    }
+
+    /// Every node (`begin_tree`) with its stamp.
+    pub fn nodes(&self) -> Vec<StampedNode> {
+        let (mut p, mut n) = (std::ptr::null_mut(), 0usize);
+        // SAFETY: valid handle and out-pointers.
+        must(unsafe { ffi::olo_stamped_dump(self.ptr.as_ptr(), &mut p, &mut n) }, "begin_tree");
+        // SAFETY: the shim returned a malloc'ed array of `n` nodes (or null).
+        let v = unsafe { take_vec(p, n) };
+        v.iter()
+            .map(|x| StampedNode {
+                key: x.key,
+                depth: x.depth,
+                is_leaf: x.is_leaf != 0,
+                logodds: x.logodds,
+                stamp: x.stamp,
+            })
+            .collect()
+    }
+}
+
+// ------------------------------------------------------------------ MapCollection
+
+/// A ray for [`map_collection_query`]: `castRay(origin, direction, end,
+/// ignore_unknown, max_range)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CollectionRay {
+    pub origin: [f32; 3],
+    pub direction: [f32; 3],
+    pub max_range: f64,
+}
+
+/// What OctoMap's `MapCollection<MapNode<OcTree>>` answers.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CollectionAnswers {
+    /// Submaps read (`size()`).
+    pub submaps: usize,
+    /// `isOccupied` and `getOccupancy` per point.
+    pub points: Vec<(bool, f64)>,
+    /// `castRay`'s result and end point per ray (NaN when not written).
+    pub rays: Vec<(bool, [f32; 3])>,
+}
+
+/// Reads the collection file at `path` with OctoMap's `MapCollection` and
+/// asks it about `points` and `rays`. OctoMap prints a line per submap and
+/// ray to stdout.
+pub fn map_collection_query(
+    path: &std::path::Path,
+    points: &[[f32; 3]],
+    rays: &[CollectionRay],
+    ignore_unknown: bool,
+) -> Result<CollectionAnswers, OracleError> {
+    if !available() {
+        return Err(OracleError::Unavailable);
+    }
+    let path = std::ffi::CString::new(path.to_str().ok_or(OracleError::InvalidArgument("path is not UTF-8"))?)
+        .map_err(|_| OracleError::InvalidArgument("path holds a NUL byte"))?;
+    let (mut occ, mut prob) = (vec![0u8; points.len()], vec![0f64; points.len()]);
+    let flat: Vec<f32> = rays.iter().flat_map(|r| r.origin.into_iter().chain(r.direction)).collect();
+    let ranges: Vec<f64> = rays.iter().map(|r| r.max_range).collect();
+    let (mut hits, mut ends) = (vec![0u8; rays.len()], vec![[0f32; 3]; rays.len()]);
+    // SAFETY: a valid C string; every array has the length passed with it.
+    let n = unsafe {
+        ffi::olo_mapcoll_query(
+            path.as_ptr(),
+            points.as_ptr().cast(),
+            points.len(),
+            occ.as_mut_ptr(),
+            prob.as_mut_ptr(),
+            flat.as_ptr(),
+            ranges.as_ptr(),
+            rays.len(),
+            ignore_unknown.into(),
+            hits.as_mut_ptr(),
+            ends.as_mut_ptr().cast(),
+        )
+    };
+    if n < 0 {
+        return Err(OracleError::CppException);
+    }
+    Ok(CollectionAnswers {
+        submaps: n as usize,
+        points: occ.iter().zip(prob).map(|(&o, p)| (o != 0, p)).collect(),
+        rays: hits.iter().zip(ends).map(|(&h, e)| (h != 0, e)).collect(),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1074,6 +1488,7 @@ mod tests {
             assert_eq!(ffi::olo_sizeof_change(), std::mem::size_of::<ffi::OloChange>());
             assert_eq!(ffi::olo_sizeof_stats(), std::mem::size_of::<ffi::OloStats>());
             assert_eq!(ffi::olo_sizeof_sensor(), std::mem::size_of::<ffi::OloSensor>());
+            assert_eq!(ffi::olo_sizeof_stamped_node(), std::mem::size_of::<ffi::OloStampedNode>());
         }
     }
 }

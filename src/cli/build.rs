@@ -5,10 +5,10 @@ use super::common::{progress, save_map, MapFormat};
 use super::input;
 use anyhow::{bail, Context, Result};
 use octolinear::formats::graph;
-use octolinear::formats::{bt, write_atomically};
+use octolinear::formats::{bt, ot, write_atomically};
 use octolinear::scan::OutOfMap;
 use octolinear::sensor::{SensorModel, SensorProbabilities};
-use octolinear::{BoundsRule, InnerNodes, OccupancyTree, Pose6D, ScanGraph, ScanOptions};
+use octolinear::{BoundsRule, InnerNodes, NodeKind, OccupancyTree, Point3, Pose6D, ScanGraph, ScanOptions};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -21,10 +21,21 @@ use std::time::Instant;
 ///
 /// `.ot` output is the full probabilistic tree, `.bt` the compact
 /// maximum-likelihood tree; both are byte-identical to what OctoMap writes.
+/// `.olm` output is the full tree in octolinear's memory-mapped format.
+///
+/// With --color the map is a ColorOcTree, built as OctoMap users do: per
+/// scan insertPointCloud, then integrateNodeColor for every point in file
+/// order, and updateInnerOccupancy once at the end (inner colours are the
+/// average of their children). Colours come from PLY red/green/blue vertex
+/// properties and PCD rgb/rgba fields; every --points file must have them.
+/// Without --color, colours in the files are ignored. Colour maps are
+/// written as .ot (id ColorOcTree) or .olm; .bt cannot hold colours.
 ///
 /// Example: octolinear build scans.graph -o map.bt --res 0.05 --max-range 20
 ///
 /// Example: octolinear build --points a.ply b.pcd --trajectory traj.txt -o map.bt
+///
+/// Example: octolinear build --points room.ply --color -o room.ot
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub struct Args {
@@ -76,6 +87,10 @@ pub struct Args {
     /// them) or `error` (refuse the scan).
     #[arg(long, value_enum, default_value = "octomap")]
     out_of_map: OutOfMapArg,
+    /// Build a colour map (ColorOcTree) from the colours of the --points
+    /// files (PLY red/green/blue, PCD rgb/rgba); output .ot or .olm.
+    #[arg(long)]
+    color: bool,
     /// Print the statistics as one JSON object instead of text.
     #[arg(long)]
     json: bool,
@@ -144,8 +159,9 @@ fn print_statistics(title: &str, s: &serde_json::Value) {
     println!("Size: {} x {} x {} m^3\n", m[0], m[1], m[2]);
 }
 
-/// The `--points` files as a scan graph, each with its pose.
-fn point_files(a: &Args) -> Result<ScanGraph> {
+/// The `--points` files as a scan graph, each with its pose, and with
+/// --color each scan's colours.
+fn point_files(a: &Args) -> Result<(ScanGraph, Vec<input::Colors>)> {
     let poses = match (&a.pose, &a.trajectory) {
         (Some(p), _) => vec![input::pose(p)?; a.points.len()],
         (None, Some(t)) => {
@@ -158,16 +174,44 @@ fn point_files(a: &Args) -> Result<ScanGraph> {
         (None, None) => vec![Pose6D::IDENTITY; a.points.len()],
     };
     let mut g = ScanGraph::new();
+    let mut colors = Vec::new();
     for (path, pose) in a.points.iter().zip(poses) {
-        g.add_node(input::read_points(path)?, pose);
+        let scan = input::read_scan(path, a.color)?;
+        if a.color {
+            let c = scan.colors.with_context(|| {
+                format!(
+                    "{}: --color needs colours (PLY red/green/blue, PCD rgb or rgba), this file has none",
+                    path.display()
+                )
+            })?;
+            colors.push(c);
+        }
+        g.add_node(scan.cloud, pose);
     }
-    Ok(g)
+    Ok((g, colors))
+}
+
+/// `integrateNodeColor(x, y, z, r, g, b)` for every point, in order: points
+/// outside the map or without a node are skipped, as OctoMap's returns NULL.
+fn integrate_colors(tree: &mut OccupancyTree, points: &[Point3], colors: &[[u8; 3]]) {
+    for (p, rgb) in points.iter().zip(colors) {
+        if let Ok(k) = tree.key(*p) {
+            tree.integrate_color(k, *rgb);
+        }
+    }
 }
 
 pub fn run(a: Args) -> Result<()> {
     let format = MapFormat::of(&a.output)?;
     let sensor = sensor_model(&a)?;
-    let mut tree = OccupancyTree::with_sensor(a.res, sensor)?;
+    if a.color && a.input.is_some() {
+        bail!("--color needs --points files with colours (a .graph file has none)");
+    }
+    if a.color && format == MapFormat::Bt {
+        bail!("{}: a colour map needs .ot or .olm output (.bt holds no colours)", a.output.display());
+    }
+    let kind = if a.color { NodeKind::Color } else { NodeKind::Plain };
+    let mut tree = OccupancyTree::with_kind(a.res, sensor, kind)?;
     if a.threads == Some(0) {
         bail!("--threads must be at least 1");
     }
@@ -176,12 +220,16 @@ pub fn run(a: Args) -> Result<()> {
             bail!("--max-range must be a finite number, got {r}");
         }
     }
-    let (mut g, input) = match &a.input {
+    let (mut g, mut colors, input) = match &a.input {
         Some(input) => (
             graph::read_file(input).with_context(|| format!("cannot read {}", input.display()))?,
+            Vec::new(),
             input.display().to_string(),
         ),
-        None => (point_files(&a)?, format!("{} point files", a.points.len())),
+        None => {
+            let (g, colors) = point_files(&a)?;
+            (g, colors, format!("{} point files", a.points.len()))
+        }
     };
     let n = a.scans.unwrap_or(g.nodes.len()).min(g.nodes.len());
     let points: usize = g.nodes[..n].iter().map(|s| s.scan.points.len()).sum();
@@ -200,6 +248,8 @@ pub fn run(a: Args) -> Result<()> {
     let bar = progress(n as u64, "inserting scans");
     let (mut non_finite, mut skipped_out_of_map, start) = (0, 0, Instant::now());
     g.nodes.truncate(n);
+    colors.truncate(n);
+    let mut colors = colors.into_iter();
     for mut node in std::mem::take(&mut g.nodes) {
         let (cloud, origin) = node.graph2tree();
         node.scan = Default::default(); // release each scan once transformed
@@ -208,6 +258,9 @@ pub fn run(a: Args) -> Result<()> {
         } else {
             tree.insert_point_cloud(&cloud.points, origin, &opts).with_context(|| format!("scan {}", node.id))?
         };
+        if let Some(c) = colors.next() {
+            integrate_colors(&mut tree, &cloud.points, &c);
+        }
         non_finite += report.non_finite;
         skipped_out_of_map += report.out_of_map;
         if a.compress_ml {
@@ -216,13 +269,17 @@ pub fn run(a: Args) -> Result<()> {
         }
         bar.inc(1);
     }
+    if a.color {
+        // inner nodes: maximum occupancy and average colour of their children
+        tree.update_inner_occupancy();
+    }
     let seconds = start.elapsed().as_secs_f64();
     bar.finish_and_clear();
     // one tree throughout (no copies): peak memory is the tree, compacted
     // in place, plus a scan's key sets
     tree.compact();
     let full = statistics(&tree);
-    if format == MapFormat::Ot {
+    if format != MapFormat::Bt {
         save_map(&tree, &a.output)?;
     }
     tree.to_max_likelihood();
@@ -236,7 +293,8 @@ pub fn run(a: Args) -> Result<()> {
     }
     if a.json {
         let out = serde_json::json!({
-            "input": input, "output": a.output, "scans": n, "points": points,
+            "input": input, "output": a.output, "tree_type": ot::TreeKind::of(kind).id(),
+            "scans": n, "points": points,
             "non_finite_points_skipped": non_finite,
             "out_of_map_points_skipped": skipped_out_of_map,
             "insert_seconds": seconds,

@@ -38,7 +38,12 @@ pub fn load_map(path: &Path) -> Result<LoadedMap> {
     if format == MapFormat::Olm {
         let tree =
             octolinear::mapped::read_file(path).with_context(|| format!("{}: not a valid .olm map", path.display()))?;
-        return Ok(LoadedMap { tree, kind: "OcTree (.olm, memory-mapped)" });
+        let kind = match tree.kind() {
+            octolinear::NodeKind::Plain => "OcTree (.olm, memory-mapped)",
+            octolinear::NodeKind::Color => "ColorOcTree (.olm, memory-mapped)",
+            octolinear::NodeKind::Stamped => "OcTreeStamped (.olm, memory-mapped)",
+        };
+        return Ok(LoadedMap { tree, kind });
     }
     let file = File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
     let r = BufReader::with_capacity(1 << 16, file);

@@ -3,7 +3,7 @@
 use super::common::{load_map, save_map, MapFormat};
 use anyhow::{bail, Context, Result};
 use octolinear::formats::xyz;
-use octolinear::{BoundsRule, OccupancyTree};
+use octolinear::{BoundsRule, NodeKind, OccupancyTree};
 use std::path::PathBuf;
 
 /// Print the kind, resolution and statistics of a map (.bt or .ot).
@@ -84,7 +84,10 @@ pub fn run(a: Args) -> Result<()> {
     Ok(())
 }
 
-/// Convert a map between formats, chosen by extension (.bt, .ot).
+/// Convert a map between formats, chosen by extension (.bt, .ot, .olm).
+///
+/// Colour and stamped trees keep their colours and stamps in .ot and .olm;
+/// .bt holds occupancy only.
 ///
 /// Example: octolinear convert map.ot map.bt
 #[derive(clap::Args)]
@@ -101,7 +104,9 @@ pub fn convert(a: ConvertArgs) -> Result<()> {
 /// Look up points in a map: prints `x,y,z,state,logodds_bits` per point.
 ///
 /// `state` is occupied, free or unknown; `logodds_bits` the f32 bits in hex
-/// (empty when unknown).
+/// (empty when unknown). Colour maps (ColorOcTree) add `,r,g,b` (decimal,
+/// white when never set) and stamped maps (OcTreeStamped) `,stamp`; these
+/// fields are empty when unknown.
 ///
 /// Example: octolinear query map.bt --points points.xyz
 #[derive(clap::Args)]
@@ -118,15 +123,18 @@ pub fn query(a: QueryArgs) -> Result<()> {
     let pts = xyz::read_file(&a.points).with_context(|| format!("cannot read {}", a.points.display()))?;
     // `.olm` maps are queried where they lie, without a parse step
     let (loaded, mapped);
+    let kind;
     let lookup: Box<dyn Fn(octolinear::Point3) -> (Option<Found>, bool)> = if MapFormat::of(&a.map)? == MapFormat::Olm {
         mapped =
             octolinear::mapped::open(&a.map).with_context(|| format!("{}: not a valid .olm map", a.map.display()))?;
+        kind = mapped.view().kind().node_kind();
         Box::new(|p| match mapped.search_point(p, 0) {
             Ok(Some(f)) => (Some(f), mapped.view().is_occupied(f.value)),
             _ => (None, false),
         })
     } else {
         loaded = load_map(&a.map)?;
+        kind = loaded.tree.kind();
         Box::new(|p| match loaded.tree.search_point(p, 0) {
             Ok(Some(f)) => (Some(f), loaded.tree.is_occupied(f.value)),
             _ => (None, false),
@@ -135,12 +143,23 @@ pub fn query(a: QueryArgs) -> Result<()> {
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
     for p in &pts.points {
-        let (state, bits) = match lookup(*p) {
+        let found = lookup(*p);
+        let (state, bits) = match found {
             (Some(f), true) => ("occupied", format!("{:08x}", f.value.to_bits())),
             (Some(f), false) => ("free", format!("{:08x}", f.value.to_bits())),
             (None, _) => ("unknown", String::new()),
         };
-        writeln!(out, "{},{},{},{state},{bits}", p.x, p.y, p.z)?;
+        let extra = match (kind, found.0) {
+            (NodeKind::Plain, _) => String::new(),
+            (NodeKind::Color, Some(f)) => {
+                let [r, g, b] = octolinear::tree::unpack_rgb(f.extra);
+                format!(",{r},{g},{b}")
+            }
+            (NodeKind::Color, None) => ",,,".to_string(),
+            (NodeKind::Stamped, Some(f)) => format!(",{}", f.extra),
+            (NodeKind::Stamped, None) => ",".to_string(),
+        };
+        writeln!(out, "{},{},{},{state},{bits}{extra}", p.x, p.y, p.z)?;
     }
     out.flush()?;
     if pts.points.is_empty() {

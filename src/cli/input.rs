@@ -1,28 +1,48 @@
 //! Point cloud files for `build --points`: PLY (ASCII, binary little or big
 //! endian), PCD (ascii, binary, binary_compressed), LAS/LAZ and plain xyz,
 //! each with a sensor pose.
+//!
+//! Colours (for `build --color`) are read from PLY's `red`, `green`, `blue`
+//! vertex properties (integers 0..=255 of any integer type, or floats in
+//! 0..=1, scaled by 255 and rounded) and from PCD's `rgb` or `rgba` field
+//! (4 bytes holding `0x00RRGGBB` / `0xAARRGGBB` as PCL packs them, whether
+//! typed `F`, `U` or `I`; in ASCII files an `F` field is the float whose
+//! bits are the packed colour, as PCL prints it). Colours are only decoded
+//! when asked for, so a file with odd colour values still builds a plain map.
 
 use anyhow::{bail, Context, Result};
 use octolinear::formats::xyz;
 use octolinear::{Point3, PointCloud, Pose6D};
 use std::path::Path;
 
-/// Reads the points of a file, by extension.
-pub fn read_points(path: &Path) -> Result<PointCloud> {
+/// An RGB colour per point.
+pub type Colors = Vec<[u8; 3]>;
+
+/// The points of a file and, when asked for and present, their colours.
+pub struct Scan {
+    pub cloud: PointCloud,
+    /// One colour per point; `None` when not asked for or the file has none.
+    pub colors: Option<Colors>,
+}
+
+/// Reads the points of a file, by extension; with `colors`, also the
+/// points' colours where the format has them (PLY, PCD).
+pub fn read_scan(path: &Path, colors: bool) -> Result<Scan> {
     let ext = super::common::extension(path, &["ply", "pcd", "las", "laz", "xyz", "txt"])?;
     let ctx = || format!("{}: not a valid .{ext} file", path.display());
+    let plain = |cloud| Scan { cloud, colors: None };
     match ext.as_str() {
-        "las" | "laz" => return read_las(path).with_context(ctx),
+        "las" | "laz" => return read_las(path).map(plain).with_context(ctx),
         "xyz" | "txt" => {
             let f = std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
-            return xyz::read(std::io::BufReader::new(f)).with_context(ctx);
+            return xyz::read(std::io::BufReader::new(f)).map(plain).with_context(ctx);
         }
         _ => {}
     }
     let bytes = std::fs::read(path).with_context(|| format!("cannot open {}", path.display()))?;
     match ext.as_str() {
-        "ply" => read_ply(&bytes),
-        _ => read_pcd(&bytes),
+        "ply" => read_ply(&bytes, colors),
+        _ => read_pcd(&bytes, colors),
     }
     .with_context(ctx)
 }
@@ -148,8 +168,26 @@ struct PlyElement {
     props: Vec<PlyProperty>,
 }
 
-/// The vertices of a PLY file (x, y, z of the `vertex` element).
-pub fn read_ply(bytes: &[u8]) -> Result<PointCloud> {
+/// A colour channel's value as a byte: integers must lie in 0..=255,
+/// floats in 0..=1 (scaled by 255, rounded).
+fn color_byte(scalar: Scalar, v: f64, what: &str) -> Result<u8> {
+    let float = matches!(scalar, Scalar::F32 | Scalar::F64);
+    if float {
+        if !(0.0..=1.0).contains(&v) {
+            bail!("{what}: float colour {v} is outside 0..1");
+        }
+        Ok((v * 255.0).round() as u8)
+    } else {
+        if !(0.0..=255.0).contains(&v) {
+            bail!("{what}: colour {v} is outside 0..255");
+        }
+        Ok(v as u8)
+    }
+}
+
+/// The vertices of a PLY file (x, y, z of the `vertex` element) and, with
+/// `want_colors`, their `red`, `green`, `blue` properties if all three exist.
+pub fn read_ply(bytes: &[u8], want_colors: bool) -> Result<Scan> {
     let (lines, data) = header_lines(bytes, "end_header", 10_000)?;
     if lines.first() != Some(&"ply") {
         bail!("does not start with \"ply\"");
@@ -197,20 +235,51 @@ pub fn read_ply(bytes: &[u8]) -> Result<PointCloud> {
     }
     let format = format.context("header has no format line")?;
     let vi = elements.iter().position(|e| e.name == "vertex").context("no vertex element")?;
-    let names: Vec<&str> = elements[vi].props.iter().map(|p| p.name.as_str()).collect();
+    let vertex = &elements[vi];
+    let names: Vec<&str> = vertex.props.iter().map(|p| p.name.as_str()).collect();
     let idx = xyz_index(&names)?;
-    if idx.iter().any(|&i| elements[vi].props[i].list.is_some()) {
+    if idx.iter().any(|&i| vertex.props[i].list.is_some()) {
         bail!("vertex x/y/z are lists");
     }
-    let mut cloud = PointCloud::with_capacity(elements[vi].count.min(1 << 24));
+    // the colour properties, when asked for and all three present
+    let rgb_idx = if want_colors {
+        let find = |n: &str| names.iter().position(|&x| x == n);
+        match (find("red"), find("green"), find("blue")) {
+            (Some(r), Some(g), Some(b)) => {
+                if [r, g, b].iter().any(|&i| vertex.props[i].list.is_some()) {
+                    bail!("vertex red/green/blue are lists");
+                }
+                Some([r, g, b])
+            }
+            _ => None,
+        }
+    } else {
+        None
+    };
+    let mut cloud = PointCloud::with_capacity(vertex.count.min(1 << 24));
+    let mut colors = rgb_idx.map(|_| Vec::with_capacity(vertex.count.min(1 << 24)));
+    // wanted vertex properties: x, y, z, then red, green, blue if read
+    let wanted: Vec<usize> = idx.iter().chain(rgb_idx.iter().flatten()).copied().collect();
+    let mut push_vertex = |values: &[f64], row: usize| -> Result<()> {
+        cloud.push(point([values[0], values[1], values[2]]));
+        if let (Some(colors), Some(rgb_idx)) = (colors.as_mut(), rgb_idx) {
+            let mut c = [0u8; 3];
+            for k in 0..3 {
+                let p = &vertex.props[rgb_idx[k]];
+                c[k] = color_byte(p.scalar, values[3 + k], &format!("vertex {row} {}", p.name))?;
+            }
+            colors.push(c);
+        }
+        Ok(())
+    };
+    let mut picked = vec![0f64; wanted.len()];
     match format {
         None => {
             let text = std::str::from_utf8(&bytes[data..]).context("ASCII data is not text")?;
             let mut tokens = text.split_whitespace();
-            for e in &elements[..=vi] {
+            for (ei, e) in elements[..=vi].iter().enumerate() {
                 for row in 0..e.count {
-                    let mut values = Vec::with_capacity(e.props.len());
-                    for p in &e.props {
+                    for (pi, p) in e.props.iter().enumerate() {
                         let mut next = || -> Result<f64> {
                             let t = tokens
                                 .next()
@@ -223,19 +292,24 @@ pub fn read_ply(bytes: &[u8]) -> Result<PointCloud> {
                                 next()?;
                             }
                         }
-                        values.push(v);
+                        if ei == vi {
+                            for (slot, &w) in picked.iter_mut().zip(&wanted) {
+                                if w == pi {
+                                    *slot = v;
+                                }
+                            }
+                        }
                     }
-                    if e.name == "vertex" {
-                        cloud.push(point(idx.map(|i| values[i])));
+                    if ei == vi {
+                        push_vertex(&picked, row)?;
                     }
                 }
             }
         }
         Some(little) => {
             let mut at = data;
-            for e in &elements[..=vi] {
+            for (ei, e) in elements[..=vi].iter().enumerate() {
                 for row in 0..e.count {
-                    let mut xyz = [0f64; 3];
                     for (pi, p) in e.props.iter().enumerate() {
                         let truncated = || format!("data ends in {} {row} of {}", e.name, e.count);
                         let n = match p.list {
@@ -246,23 +320,25 @@ pub fn read_ply(bytes: &[u8]) -> Result<PointCloud> {
                             }
                             None => 1,
                         };
-                        let len = n * p.scalar.size();
-                        let b = bytes.get(at..at + len).with_context(truncated)?;
-                        if e.name == "vertex" && p.list.is_none() {
-                            if let Some(axis) = idx.iter().position(|&i| i == pi) {
-                                xyz[axis] = p.scalar.decode(b, little);
+                        let len = n.checked_mul(p.scalar.size()).with_context(truncated)?;
+                        let b = bytes.get(at..at.saturating_add(len)).with_context(truncated)?;
+                        if ei == vi && p.list.is_none() {
+                            for (slot, &w) in picked.iter_mut().zip(&wanted) {
+                                if w == pi {
+                                    *slot = p.scalar.decode(b, little);
+                                }
                             }
                         }
                         at += len;
                     }
-                    if e.name == "vertex" {
-                        cloud.push(point(xyz));
+                    if ei == vi {
+                        push_vertex(&picked, row)?;
                     }
                 }
             }
         }
     }
-    Ok(cloud)
+    Ok(Scan { cloud, colors })
 }
 
 // ----- PCD -----------------------------------------------------------------
@@ -308,8 +384,14 @@ pub fn lzf_decompress(input: &[u8], out_len: usize) -> Result<Vec<u8>> {
     Ok(out)
 }
 
-/// The x, y, z fields of a PCD file.
-pub fn read_pcd(bytes: &[u8]) -> Result<PointCloud> {
+/// A colour packed by PCL (`0x00RRGGBB`, alpha or padding in the top byte).
+fn unpack_pcl(v: u32) -> [u8; 3] {
+    [(v >> 16) as u8, (v >> 8) as u8, v as u8]
+}
+
+/// The x, y, z fields of a PCD file and, with `want_colors`, its `rgb` or
+/// `rgba` field if there is one.
+pub fn read_pcd(bytes: &[u8], want_colors: bool) -> Result<Scan> {
     let (lines, data) = header_lines(bytes, "DATA", 1000)?;
     let (mut fields, mut sizes, mut types, mut counts) = (vec![], vec![], vec![], vec![]);
     let (mut points, mut width, mut height, mut kind) = (None, None, None, "");
@@ -350,12 +432,27 @@ pub fn read_pcd(bytes: &[u8]) -> Result<PointCloud> {
         .map(|(t, &s)| Scalar::pcd(t, s).with_context(|| format!("unknown TYPE {t} of SIZE {s}")))
         .collect::<Result<_>>()?;
     let idx = xyz_index(&fields)?;
+    let rgb = if want_colors { fields.iter().position(|&f| f == "rgb" || f == "rgba") } else { None };
+    if let Some(c) = rgb {
+        if sizes[c] != 4 || counts[c] != 1 {
+            bail!(
+                "field {} has SIZE {} COUNT {}; a packed colour needs SIZE 4 COUNT 1",
+                fields[c],
+                sizes[c],
+                counts[c]
+            );
+        }
+    }
+    let mut colors = rgb.map(|_| Vec::with_capacity(n.min(1 << 24)));
     // byte offset of each field within a point, and the point size
     let mut offsets = Vec::with_capacity(fields.len());
-    let mut stride = 0;
+    if let Some(&i) = idx.iter().find(|&&i| counts[i] == 0) {
+        bail!("field {} has COUNT 0", fields[i]);
+    }
+    let mut stride = 0usize;
     for (s, c) in sizes.iter().zip(&counts) {
         offsets.push(stride);
-        stride += s * c;
+        stride = s.checked_mul(*c).and_then(|b| stride.checked_add(b)).context("point size overflows")?;
     }
     let mut cloud = PointCloud::with_capacity(n.min(1 << 24));
     match kind {
@@ -377,15 +474,30 @@ pub fn read_pcd(bytes: &[u8]) -> Result<PointCloud> {
                     [Some(Ok(x)), Some(Ok(y)), Some(Ok(z))] => cloud.push(point([x, y, z])),
                     _ => bail!("point {row}: cannot read x y z from {line:?}"),
                 }
+                if let (Some(colors), Some(c)) = (colors.as_mut(), rgb) {
+                    let t = t.get(token_of[c]).copied().unwrap_or("");
+                    let packed = match types[c] {
+                        "F" => t.parse::<f32>().ok().filter(|v| !v.is_nan()).map(f32::to_bits),
+                        "U" => t.parse::<u32>().ok(),
+                        _ => t.parse::<i32>().ok().map(|v| v as u32),
+                    };
+                    let packed =
+                        packed.with_context(|| format!("point {row}: cannot read {} from {t:?}", fields[c]))?;
+                    colors.push(unpack_pcl(packed));
+                }
             }
         }
         "binary" => {
             let need = n.checked_mul(stride).context("size overflows")?;
             let d = bytes
-                .get(data..data + need)
+                .get(data..data.saturating_add(need))
                 .with_context(|| format!("binary data holds {} bytes, {n} points need {need}", bytes.len() - data))?;
             for row in d.chunks_exact(stride) {
                 cloud.push(point(idx.map(|i| scalars[i].decode(&row[offsets[i]..], true))));
+                if let (Some(colors), Some(c)) = (colors.as_mut(), rgb) {
+                    let b = &row[offsets[c]..offsets[c] + 4];
+                    colors.push(unpack_pcl(u32::from_le_bytes([b[0], b[1], b[2], b[3]])));
+                }
             }
         }
         "binary_compressed" => {
@@ -412,11 +524,16 @@ pub fn read_pcd(bytes: &[u8]) -> Result<PointCloud> {
                     let at = field_start[i] + row * sizes[i] * counts[i];
                     scalars[i].decode(&d[at..], true)
                 })));
+                if let (Some(colors), Some(c)) = (colors.as_mut(), rgb) {
+                    let at = field_start[c] + row * 4;
+                    let b = &d[at..at + 4];
+                    colors.push(unpack_pcl(u32::from_le_bytes([b[0], b[1], b[2], b[3]])));
+                }
             }
         }
         other => bail!("unknown DATA kind {other:?}"),
     }
-    Ok(cloud)
+    Ok(Scan { cloud, colors })
 }
 
 // ----- LAS / LAZ -----------------------------------------------------------

@@ -59,13 +59,34 @@ pub(crate) mod field {
     pub const FILE_LENGTH: usize = 80;
 }
 
-/// The tree type stored. Only [`TreeKind::OcTree`] is implemented; the
-/// other ids are reserved so that files of those kinds are recognised.
+/// The tree type stored. The full variant of a colour or stamped tree has
+/// a [`SectionKind::Colors`] or [`SectionKind::Stamps`] section; the
+/// maximum-likelihood variant, like `.bt`, keeps only the type (nodes read
+/// back white, or with stamp 0).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TreeKind {
     OcTree = 0,
     ColorOcTree = 1,
     OcTreeStamped = 2,
+}
+
+impl TreeKind {
+    /// The node kind of the in-memory tree.
+    pub fn node_kind(self) -> crate::tree::NodeKind {
+        match self {
+            TreeKind::OcTree => crate::tree::NodeKind::Plain,
+            TreeKind::ColorOcTree => crate::tree::NodeKind::Color,
+            TreeKind::OcTreeStamped => crate::tree::NodeKind::Stamped,
+        }
+    }
+
+    pub fn of(kind: crate::tree::NodeKind) -> TreeKind {
+        match kind {
+            crate::tree::NodeKind::Plain => TreeKind::OcTree,
+            crate::tree::NodeKind::Color => TreeKind::ColorOcTree,
+            crate::tree::NodeKind::Stamped => TreeKind::OcTreeStamped,
+        }
+    }
 }
 
 /// What each node holds.
@@ -112,6 +133,11 @@ pub enum SectionKind {
     Labels = 5,
     /// One bit per inner node (1 = occupied), in `u64` words.
     InnerOccupancy = 6,
+    /// `ColorOcTree`: three bytes `r, g, b` per node (white = not set),
+    /// zero-padded to a multiple of 8 bytes.
+    Colors = 7,
+    /// `OcTreeStamped`: `u32` time stamp per node.
+    Stamps = 8,
 }
 
 impl SectionKind {
@@ -123,6 +149,8 @@ impl SectionKind {
             4 => SectionKind::FirstChild,
             5 => SectionKind::Labels,
             6 => SectionKind::InnerOccupancy,
+            7 => SectionKind::Colors,
+            8 => SectionKind::Stamps,
             _ => return None,
         })
     }
@@ -135,6 +163,8 @@ impl SectionKind {
             SectionKind::FirstChild => "first-child",
             SectionKind::Labels => "labels",
             SectionKind::InnerOccupancy => "inner-occupancy",
+            SectionKind::Colors => "colors",
+            SectionKind::Stamps => "stamps",
         }
     }
 }
@@ -184,14 +214,26 @@ pub(crate) fn round8(n: u64) -> u64 {
     n.div_ceil(8) * 8
 }
 
-/// The sections a (variant, index) pair needs, with their exact lengths.
+/// The sections a (kind, variant, index) triple needs, with their exact
+/// lengths.
 pub(crate) fn required_sections(
+    kind: TreeKind,
     variant: Variant,
     index: Index,
     nodes: u64,
     inner: u64,
     log2: u8,
 ) -> Vec<(SectionKind, u64)> {
+    let mut v = layout_sections(variant, index, nodes, inner, log2);
+    match (kind, variant) {
+        (TreeKind::ColorOcTree, Variant::Full) => v.push((SectionKind::Colors, round8(3 * nodes))),
+        (TreeKind::OcTreeStamped, Variant::Full) => v.push((SectionKind::Stamps, 4 * nodes)),
+        _ => {}
+    }
+    v
+}
+
+fn layout_sections(variant: Variant, index: Index, nodes: u64, inner: u64, log2: u8) -> Vec<(SectionKind, u64)> {
     match (variant, index) {
         (Variant::Full, Index::Rank) => vec![
             (SectionKind::Masks, round8(nodes)),
@@ -249,6 +291,8 @@ pub(crate) struct Ranges {
     pub first_child: Range<usize>,
     pub labels: Range<usize>,
     pub inner_occupancy: Range<usize>,
+    pub colors: Range<usize>,
+    pub stamps: Range<usize>,
 }
 
 impl Ranges {
@@ -260,6 +304,8 @@ impl Ranges {
             SectionKind::FirstChild => self.first_child = r,
             SectionKind::Labels => self.labels = r,
             SectionKind::InnerOccupancy => self.inner_occupancy = r,
+            SectionKind::Colors => self.colors = r,
+            SectionKind::Stamps => self.stamps = r,
         }
     }
 }
@@ -318,7 +364,8 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Meta, OlmError> {
     }
     let kind = match u8_at(field::TREE_KIND) {
         0 => TreeKind::OcTree,
-        k @ (1 | 2) => return Err(OlmError::UnsupportedKind(k)),
+        1 => TreeKind::ColorOcTree,
+        2 => TreeKind::OcTreeStamped,
         k => return Err(bad("tree_kind", k)),
     };
     let variant = match u8_at(field::VARIANT) {
@@ -436,7 +483,7 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Meta, OlmError> {
         }
     }
     let mut ranges = Ranges::default();
-    let required = required_sections(variant, index, node_count, inner_count, log2);
+    let required = required_sections(kind, variant, index, node_count, inner_count, log2);
     for (kind, want) in &required {
         let mut found = sections.iter().filter(|s| s.kind == *kind as u16);
         let Some(s) = found.next() else {

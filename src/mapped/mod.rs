@@ -58,7 +58,7 @@ use crate::ray::{CastError, CastOptions, CastOutcome};
 use crate::sensor::SensorModel;
 use crate::tree::{Found, KeyBox, OccupancyTree, PreorderBuilder};
 use format::Meta;
-use nav::{with_nav, AnyNav, MlNav, Nav, Node, PtrNav, RankNav};
+use nav::{with_nav, AnyNav, Extras, MlNav, Nav, Node, PtrNav, RankNav};
 use query::RawIter;
 use std::io;
 use std::path::Path;
@@ -78,8 +78,6 @@ pub enum OlmError {
     Endianness { found: u32 },
     #[error("header checksum mismatch: stored {stored:#010x}, computed {computed:#010x}")]
     HeaderChecksum { stored: u32, computed: u32 },
-    #[error("tree kind {0} is reserved (ColorOcTree = 1, OcTreeStamped = 2) but not supported yet")]
-    UnsupportedKind(u8),
     #[error("header field {field} is invalid: {value}")]
     BadField { field: &'static str, value: String },
     #[error("file is {actual} bytes but its header says {header} (truncated or extended)")]
@@ -191,6 +189,7 @@ pub struct MapView<'a> {
     data: &'a [u8],
     meta: &'a Meta,
     nav: AnyNav<'a>,
+    extras: Extras<'a>,
 }
 
 /// Depth-first iteration over a mapped file, in OctoMap's order.
@@ -217,7 +216,7 @@ impl<'a> Iterator for MapIter<'a> {
 
 impl<'a> MapView<'a> {
     fn from_parts(data: &'a [u8], meta: &'a Meta) -> Self {
-        MapView { data, meta, nav: AnyNav::new(data, meta) }
+        MapView { data, meta, nav: AnyNav::new(data, meta), extras: Extras::new(data, meta) }
     }
 
     pub fn header(&self) -> &'a Header {
@@ -242,6 +241,11 @@ impl<'a> MapView<'a> {
 
     pub fn variant(&self) -> Variant {
         self.meta.header.variant
+    }
+
+    /// `OcTree`, `ColorOcTree` or `OcTreeStamped`.
+    pub fn kind(&self) -> TreeKind {
+        self.meta.header.kind
     }
 
     /// OctoMap's `size()` counter of the tree that was written.
@@ -276,9 +280,29 @@ impl<'a> MapView<'a> {
     /// OctoMap's `search(key, depth)` (depth 0 means 16): the node at
     /// `depth` containing `key`, or the deepest existing leaf above it;
     /// `None` when the path ends at an inner node lacking the child.
+    /// `Found::extra` holds the node's colour or stamp, as the tree's.
     #[inline]
     pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
-        with_nav!(self.nav, |nav| query::search(nav, key, depth))
+        with_nav!(self.nav, |nav| query::search(nav, self.extras, key, depth))
+    }
+
+    /// The colour of the node [`Self::search`] finds (`getColor`; white
+    /// when never set); `None` when nothing is found or the map has no
+    /// colours.
+    pub fn color(&self, key: Key, depth: u8) -> Option<[u8; 3]> {
+        if self.meta.header.kind != TreeKind::ColorOcTree {
+            return None;
+        }
+        self.search(key, depth).map(|f| crate::tree::unpack_rgb(f.extra))
+    }
+
+    /// The time stamp of the node [`Self::search`] finds (`getTimestamp`);
+    /// `None` when nothing is found or the map has no stamps.
+    pub fn stamp(&self, key: Key, depth: u8) -> Option<u32> {
+        if self.meta.header.kind != TreeKind::OcTreeStamped {
+            return None;
+        }
+        self.search(key, depth).map(|f| f.extra)
     }
 
     /// [`Self::search`] at the voxel containing `p`.
@@ -289,7 +313,7 @@ impl<'a> MapView<'a> {
     /// [`Self::search`] for many keys at once, answers in `out` in the order
     /// of `keys` (as [`OccupancyTree::search_many`]).
     pub fn search_many(&self, keys: &[Key], depth: u8, out: &mut Vec<Option<Found>>) {
-        with_nav!(self.nav, |nav| query::search_many(nav, keys, depth, out))
+        with_nav!(self.nav, |nav| query::search_many(nav, self.extras, keys, depth, out))
     }
 
     /// The root's value, `None` for an empty map.
@@ -299,10 +323,11 @@ impl<'a> MapView<'a> {
 
     fn iter(&self, max_depth: u8, leaves_only: bool, bbx: Option<KeyBox>) -> MapIter<'a> {
         let keys = &self.meta.keys;
+        let e = self.extras;
         MapIter(match self.nav {
-            AnyNav::Rank(n) => IterInner::Rank(RawIter::new(n, keys, max_depth, leaves_only, bbx)),
-            AnyNav::Ptr(n) => IterInner::Ptr(RawIter::new(n, keys, max_depth, leaves_only, bbx)),
-            AnyNav::Ml(n) => IterInner::Ml(RawIter::new(n, keys, max_depth, leaves_only, bbx)),
+            AnyNav::Rank(n) => IterInner::Rank(RawIter::new(n, e, keys, max_depth, leaves_only, bbx)),
+            AnyNav::Ptr(n) => IterInner::Ptr(RawIter::new(n, e, keys, max_depth, leaves_only, bbx)),
+            AnyNav::Ml(n) => IterInner::Ml(RawIter::new(n, e, keys, max_depth, leaves_only, bbx)),
         })
     }
 
@@ -336,8 +361,8 @@ impl<'a> MapView<'a> {
     pub fn to_tree(&self) -> Result<OccupancyTree, OlmError> {
         self.verify()?;
         let h = &self.meta.header;
-        let mut builder = PreorderBuilder::new();
-        let pushed = with_nav!(self.nav, |nav| preorder(nav, &mut builder));
+        let mut builder = PreorderBuilder::with_kind(h.kind.node_kind());
+        let pushed = with_nav!(self.nav, |nav| preorder(nav, self.extras, &mut builder));
         pushed.map_err(OlmError::Structure)?;
         builder
             .finish(h.resolution, h.sensor)
@@ -347,7 +372,7 @@ impl<'a> MapView<'a> {
 }
 
 /// Feeds the nodes in depth-first pre-order to the builder.
-fn preorder<N: Nav>(nav: N, b: &mut PreorderBuilder) -> Result<(), String> {
+fn preorder<N: Nav>(nav: N, extras: Extras<'_>, b: &mut PreorderBuilder) -> Result<(), String> {
     let Some(root) = nav.root() else {
         return Ok(());
     };
@@ -360,7 +385,8 @@ fn preorder<N: Nav>(nav: N, b: &mut PreorderBuilder) -> Result<(), String> {
             return Err("more nodes reachable than announced".into());
         }
         let (value, mask) = nav.get(n).ok_or("node out of range")?;
-        b.push(value, mask, index).map_err(|e| e.to_string())?;
+        let extra = (extras.kind != TreeKind::OcTree).then(|| extras.get(n));
+        b.push_with_extra(value, extra, mask, index).map_err(|e| e.to_string())?;
         index += 1;
         if mask == 0 {
             nav.skip_seq(n, &mut seq[depth]);

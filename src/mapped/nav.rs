@@ -4,7 +4,8 @@
 //! or a child that would not lie strictly after its parent, ends the walk
 //! (`None`) instead of panicking. Verified files never take those exits.
 
-use super::format::{f32_at, u16_at, u32_at, u64_at, Index, Meta, Variant};
+use super::format::{f32_at, u16_at, u32_at, u64_at, Index, Meta, TreeKind, Variant};
+use crate::tree::{pack_rgb, WHITE};
 
 /// A node of the mapped tree. For the full layouts `idx` is the node's
 /// position in the node arrays; for maximum likelihood, `label` is the
@@ -366,6 +367,42 @@ impl Nav for MlNav<'_> {
             }
         }
         Some(k)
+    }
+}
+
+/// Per-node colours or stamps of the full layouts, by node index (the
+/// index of the node's value). Out-of-range reads (corrupted files) give
+/// the kind's default: white, stamp 0.
+#[derive(Clone, Copy)]
+pub(crate) struct Extras<'a> {
+    pub kind: TreeKind,
+    pub bytes: &'a [u8],
+}
+
+impl<'a> Extras<'a> {
+    pub fn new(data: &'a [u8], meta: &Meta) -> Self {
+        // maximum-likelihood maps have no section (`ranges` stay empty)
+        let r = match meta.header.kind {
+            TreeKind::OcTree => 0..0,
+            TreeKind::ColorOcTree => meta.ranges.colors.clone(),
+            TreeKind::OcTreeStamped => meta.ranges.stamps.clone(),
+        };
+        Extras { kind: meta.header.kind, bytes: section(data, &r) }
+    }
+
+    /// The node's extra as the tree stores it (`r | g << 8 | b << 16`, or
+    /// the stamp); 0 for plain maps.
+    #[inline(always)]
+    pub fn get(&self, n: Node) -> u32 {
+        let i = n.idx as usize;
+        match self.kind {
+            TreeKind::OcTree => 0,
+            TreeKind::ColorOcTree => match self.bytes.get(3 * i..3 * i + 3) {
+                Some(c) => pack_rgb([c[0], c[1], c[2]]),
+                None => WHITE,
+            },
+            TreeKind::OcTreeStamped => u32_at(self.bytes, 4 * i).unwrap_or(0),
+        }
     }
 }
 

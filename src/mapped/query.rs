@@ -6,7 +6,7 @@
 //! the header announces (a verified file never reaches that bound; a
 //! corrupted one whose child indices alias cannot make them run longer).
 
-use super::nav::{Nav, Node};
+use super::nav::{Extras, Nav, Node};
 use crate::geometry::Point3;
 use crate::key::{adjust_key_to_depth, Key, KeySpace, KEY_CENTER, TREE_DEPTH};
 use crate::ray::{CastError, CastOptions, CastOutcome};
@@ -47,9 +47,10 @@ pub(crate) fn normalize_depth(depth: u8) -> u8 {
     }
 }
 
-/// `search` on any layout (mirrors `OccupancyTree::search`).
+/// `search` on any layout (mirrors `OccupancyTree::search`), with the
+/// node found (its `extra` is left 0).
 #[inline(always)]
-pub(crate) fn search<N: Nav>(nav: N, key: Key, depth: u8) -> Option<Found> {
+pub(crate) fn search_node<N: Nav>(nav: N, key: Key, depth: u8) -> Option<(Found, Node)> {
     let depth = normalize_depth(depth);
     let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
     let mut node = nav.root()?;
@@ -60,17 +61,23 @@ pub(crate) fn search<N: Nav>(nav: N, key: Key, depth: u8) -> Option<Found> {
             if mask != 0 {
                 return None;
             }
-            return Some(Found { value: nav.get(node)?.0, depth: d, is_leaf: true, extra: 0 });
+            return Some((Found { value: nav.get(node)?.0, depth: d, is_leaf: true, extra: 0 }, node));
         }
         node = nav.child(node, mask, pos)?;
         mask = nav.mask(node)?;
     }
-    Some(Found { value: nav.get(node)?.0, depth, is_leaf: mask == 0, extra: 0 })
+    Some((Found { value: nav.get(node)?.0, depth, is_leaf: mask == 0, extra: 0 }, node))
+}
+
+/// `search` on any layout, the node's colour or stamp filled in.
+#[inline(always)]
+pub(crate) fn search<N: Nav>(nav: N, extras: Extras<'_>, key: Key, depth: u8) -> Option<Found> {
+    search_node(nav, key, depth).map(|(f, n)| Found { extra: extras.get(n), ..f })
 }
 
 /// [`search`] for many keys, eight descents in lockstep so that their
 /// cache misses overlap (as `OccupancyTree::search_many`).
-pub(crate) fn search_many<N: Nav>(nav: N, keys: &[Key], depth: u8, out: &mut Vec<Option<Found>>) {
+pub(crate) fn search_many<N: Nav>(nav: N, extras: Extras<'_>, keys: &[Key], depth: u8, out: &mut Vec<Option<Found>>) {
     const LANES: usize = 8;
     out.clear();
     let depth = normalize_depth(depth);
@@ -121,7 +128,12 @@ pub(crate) fn search_many<N: Nav>(nav: N, keys: &[Key], depth: u8, out: &mut Vec
             let l = ended.trailing_zeros() as usize;
             ended &= ended - 1;
             let (node, mask) = at[l];
-            found[l] = nav.get(node).map(|(value, _)| Found { value, depth: ends[l], is_leaf: mask == 0, extra: 0 });
+            found[l] = nav.get(node).map(|(value, _)| Found {
+                value,
+                depth: ends[l],
+                is_leaf: mask == 0,
+                extra: extras.get(node),
+            });
         }
         out.extend_from_slice(&found[..chunk.len()]);
     }
@@ -148,6 +160,9 @@ pub struct MapItem<'a> {
     pub value: f32,
     /// No children, or at the iteration's depth limit.
     pub is_leaf: bool,
+    /// Colour (`r | g << 8 | b << 16`) or time stamp, by the map's kind;
+    /// 0 for plain maps (as the tree's `NodeItem::extra`).
+    pub extra: u32,
     keys: &'a KeySpace,
 }
 
@@ -171,6 +186,7 @@ impl MapItem<'_> {
 /// Depth-first iteration over one layout.
 pub(crate) struct RawIter<'a, N: Nav> {
     nav: N,
+    extras: Extras<'a>,
     keys: &'a KeySpace,
     stack: Vec<(Node, Key, u8)>,
     max_depth: u8,
@@ -182,7 +198,14 @@ pub(crate) struct RawIter<'a, N: Nav> {
 }
 
 impl<'a, N: Nav> RawIter<'a, N> {
-    pub fn new(nav: N, keys: &'a KeySpace, max_depth: u8, leaves_only: bool, bbx: Option<KeyBox>) -> Self {
+    pub fn new(
+        nav: N,
+        extras: Extras<'a>,
+        keys: &'a KeySpace,
+        max_depth: u8,
+        leaves_only: bool,
+        bbx: Option<KeyBox>,
+    ) -> Self {
         let mut stack = Vec::new();
         if let Some(root) = nav.root() {
             stack.reserve(8 * TREE_DEPTH as usize + 1);
@@ -191,6 +214,7 @@ impl<'a, N: Nav> RawIter<'a, N> {
         RawIter {
             budget: nav.node_budget(),
             nav,
+            extras,
             keys,
             stack,
             max_depth: normalize_depth(max_depth),
@@ -236,7 +260,7 @@ impl<'a, N: Nav> RawIter<'a, N> {
                     continue;
                 }
             }
-            return Some(MapItem { key, depth, value, is_leaf, keys: self.keys });
+            return Some(MapItem { key, depth, value, is_leaf, extra: self.extras.get(n), keys: self.keys });
         }
         None
     }

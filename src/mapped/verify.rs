@@ -4,7 +4,7 @@
 //! that passes describes exactly one tree, and every query on it answers
 //! as that tree does.
 
-use super::format::{u16_at, u32_at, u64_at, Index, Meta, SectionKind, Variant, HEADER_LEN};
+use super::format::{u16_at, u32_at, u64_at, Index, Meta, SectionKind, TreeKind, Variant, HEADER_LEN};
 use super::nav::{count_inner, label_mask, AnyNav, MlNav, RankNav};
 use super::OlmError;
 use crate::key::TREE_DEPTH;
@@ -37,6 +37,10 @@ pub(crate) fn verify(data: &[u8], meta: &Meta) -> Result<VerifyReport, OlmError>
             return Err(OlmError::SectionChecksum { kind: s.kind, stored: s.crc32, computed });
         }
         checked += s.length;
+    }
+    if h.kind == TreeKind::ColorOcTree && h.variant == Variant::Full {
+        let colors = data.get(meta.ranges.colors.clone()).unwrap_or(&[]);
+        padding_is_zero(colors, (3 * h.node_count) as usize, SectionKind::Colors)?;
     }
     let mut report = match AnyNav::new(data, meta) {
         AnyNav::Rank(nav) => verify_rank(nav, meta)?,

@@ -64,14 +64,12 @@ pub fn to_bytes(tree: &OccupancyTree, opts: WriteOptions) -> io::Result<Vec<u8>>
 }
 
 /// Writes `tree` to a seekable writer positioned at the start of the file.
-/// The maximum-likelihood variant stores what OctoMap's `writeBinary`
-/// would: the tree converted to maximum likelihood and pruned (the
+/// The full variant keeps a colour tree's colours and a stamped tree's
+/// stamps. The maximum-likelihood variant stores what OctoMap's
+/// `writeBinary` would: the tree converted to maximum likelihood and pruned
+/// (by its kind's rules), and its type, but no colours or stamps (the
 /// caller's tree is not changed).
 pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOptions) -> io::Result<()> {
-    if tree.kind() != crate::tree::NodeKind::Plain {
-        // colours and stamps have reserved kind ids but no sections yet
-        return Err(invalid(format!("{:?} trees cannot be written as .olm yet", tree.kind())));
-    }
     let log2 = match opts.index {
         Index::Rank => {
             if !RANK_BLOCK_LOG2.contains(&opts.rank_block_log2) {
@@ -108,7 +106,8 @@ pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOption
         (_, Some(r)) => ml_label(r, sensor.clamping_max),
     };
     // section offsets: consecutive, each aligned
-    let required = required_sections(opts.variant, opts.index, nodes, inner, log2);
+    let kind = TreeKind::of(tree.kind());
+    let required = required_sections(kind, opts.variant, opts.index, nodes, inner, log2);
     let mut sections = Vec::with_capacity(required.len());
     let mut offset = HEADER_LEN as u64;
     for (kind, length) in &required {
@@ -119,6 +118,19 @@ pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOption
     let file_length = offset;
     let mut sinks: Vec<Sink> = sections.iter().map(|s| Sink::new(s.offset)).collect();
     let sink_of = |kind: SectionKind| required.iter().position(|(k, _)| *k == kind).expect("section planned");
+    // the colour or stamp sink, and how a node's extra is stored
+    let extra_sink = match (kind, opts.variant) {
+        (TreeKind::ColorOcTree, Variant::Full) => Some(sink_of(SectionKind::Colors)),
+        (TreeKind::OcTreeStamped, Variant::Full) => Some(sink_of(SectionKind::Stamps)),
+        _ => None,
+    };
+    let put_extra = |sinks: &mut [Sink], w: &mut W, n: NodeRef<'_>| -> io::Result<()> {
+        match (kind, extra_sink) {
+            (TreeKind::ColorOcTree, Some(e)) => sinks[e].put(w, &n.extra().to_le_bytes()[..3]),
+            (TreeKind::OcTreeStamped, Some(e)) => sinks[e].put(w, &n.extra().to_le_bytes()),
+            _ => Ok(()),
+        }
+    };
     match (opts.variant, opts.index) {
         (Variant::Full, Index::Rank) => {
             let (m, r, v) = (sink_of(SectionKind::Masks), sink_of(SectionKind::Rank), sink_of(SectionKind::Values));
@@ -132,6 +144,7 @@ pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOption
                 }
                 sinks[m].put(w, &[mask])?;
                 sinks[v].put(w, &n.value().to_le_bytes())?;
+                put_extra(&mut sinks, w, n)?;
                 children += u64::from(mask.count_ones());
                 i += 1;
                 Ok(())
@@ -147,6 +160,7 @@ pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOption
                 w,
                 &mut sinks,
                 [sink_of(SectionKind::Masks), sink_of(SectionKind::FirstChild), sink_of(SectionKind::Values)],
+                &put_extra,
             )?;
             sinks[sink_of(SectionKind::Masks)].pad(w, round8(nodes) - nodes)?;
         }
@@ -191,6 +205,9 @@ pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOption
             sinks[l].pad(w, round8(2 * inner) - 2 * inner)?;
         }
     }
+    if let (TreeKind::ColorOcTree, Some(e)) = (kind, extra_sink) {
+        sinks[e].pad(w, round8(3 * nodes) - 3 * nodes)?;
+    }
     for (sink, section) in sinks.iter_mut().zip(sections.iter_mut()) {
         sink.flush(w)?;
         debug_assert_eq!(sink.written, section.length, "section {}", section.kind);
@@ -204,7 +221,7 @@ pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOption
     }
     let header = Header {
         version: (VERSION_MAJOR, VERSION_MINOR),
-        kind: TreeKind::OcTree,
+        kind,
         variant: opts.variant,
         index: opts.index,
         rank_block_log2: log2,
@@ -299,6 +316,7 @@ fn write_pointers<W: Write + Seek>(
     w: &mut W,
     sinks: &mut [Sink],
     [m, fc, v]: [usize; 3],
+    put_extra: &impl Fn(&mut [Sink], &mut W, NodeRef<'_>) -> io::Result<()>,
 ) -> io::Result<()> {
     let Some(root) = tree.root() else {
         return Ok(());
@@ -319,7 +337,8 @@ fn write_pointers<W: Write + Seek>(
     let mut put = |sinks: &mut [Sink], n: NodeRef<'_>, first: u32| -> io::Result<()> {
         sinks[m].put(w, &[n.child_mask()])?;
         sinks[fc].put(w, &first.to_le_bytes())?;
-        sinks[v].put(w, &n.value().to_le_bytes())
+        sinks[v].put(w, &n.value().to_le_bytes())?;
+        put_extra(sinks, w, n)
     };
     put(sinks, root, u32::from(root.has_children()))?;
     // (node, its pre-order index, where its children group starts)
