@@ -1280,9 +1280,23 @@ fn olm_maps_convert_verify_and_answer_queries_like_the_source() {
     for (i, leaf) in tree.leaves(0).enumerate().filter(|(i, _)| i % 97 == 0) {
         let c = leaf.center_point();
         pts.push_str(&format!("{} {} {}\n", c.x, c.y, c.z + (i % 3) as f32 * 7.0));
+        if i % 5 == 0 {
+            pts.push_str("1e9 0 0\n"); // outside the map: unknown, between answered points
+        }
     }
     let points = f.write("q.xyz", pts);
     let from_ot = ok(&["query", f.p("a.ot"), "--points", points]);
+    // each line answers its own point, as one search after another would
+    let cloud = octolinear::formats::xyz::read_file(std::path::Path::new(points)).unwrap();
+    assert_eq!(from_ot.lines().count(), cloud.points.len());
+    for (line, p) in from_ot.lines().zip(&cloud.points) {
+        let expected = match tree.search_point(*p, 0) {
+            Ok(Some(found)) if tree.is_occupied(found.value) => format!("occupied,{:08x}", found.value.to_bits()),
+            Ok(Some(found)) => format!("free,{:08x}", found.value.to_bits()),
+            _ => "unknown,".to_string(),
+        };
+        assert!(line.ends_with(&expected), "{line}: expected {expected}");
+    }
     assert_eq!(ok(&["query", f.p("a.olm"), "--points", points]), from_ot);
     assert!(from_ot.contains(",occupied,") && from_ot.contains(",free,") && from_ot.contains(",unknown,"));
     let bytes = std::fs::read(f.path("a.olm")).unwrap();

@@ -3,7 +3,7 @@
 use super::common::{load_map, save_map, MapFormat};
 use anyhow::{bail, Context, Result};
 use octolinear::formats::xyz;
-use octolinear::{BoundsRule, NodeKind, OccupancyTree};
+use octolinear::{BoundsRule, Key, KeySpace, NodeKind, OccupancyTree};
 use std::path::PathBuf;
 
 /// Print the kind, resolution and statistics of a map (.bt or .ot).
@@ -118,32 +118,37 @@ pub struct QueryArgs {
 }
 
 pub fn query(a: QueryArgs) -> Result<()> {
-    use octolinear::Found;
     use std::io::Write;
     let pts = xyz::read_file(&a.points).with_context(|| format!("cannot read {}", a.points.display()))?;
-    // `.olm` maps are queried where they lie, without a parse step
+    // `.olm` maps are queried where they lie, without a parse step; both
+    // answer the whole batch with `search_many` (eight descents in flight);
+    // points outside the map (or not finite) are unknown
+    let keys_of = |ks: &KeySpace| -> Vec<Option<Key>> { pts.points.iter().map(|p| ks.key(*p).ok()).collect() };
+    let valid = |k: &[Option<Key>]| -> Vec<Key> { k.iter().flatten().copied().collect() };
     let (loaded, mapped);
-    let kind;
-    let lookup: Box<dyn Fn(octolinear::Point3) -> (Option<Found>, bool)> = if MapFormat::of(&a.map)? == MapFormat::Olm {
+    let mut answers = Vec::new();
+    let (kind, point_keys, occupied): (_, _, Box<dyn Fn(f32) -> bool>) = if MapFormat::of(&a.map)? == MapFormat::Olm {
         mapped =
             octolinear::mapped::open(&a.map).with_context(|| format!("{}: not a valid .olm map", a.map.display()))?;
-        kind = mapped.view().kind().node_kind();
-        Box::new(|p| match mapped.search_point(p, 0) {
-            Ok(Some(f)) => (Some(f), mapped.view().is_occupied(f.value)),
-            _ => (None, false),
-        })
+        let point_keys = keys_of(mapped.view().key_space());
+        mapped.search_many(&valid(&point_keys), 0, &mut answers);
+        (mapped.view().kind().node_kind(), point_keys, Box::new(|v| mapped.view().is_occupied(v)))
     } else {
         loaded = load_map(&a.map)?;
-        kind = loaded.tree.kind();
-        Box::new(|p| match loaded.tree.search_point(p, 0) {
-            Ok(Some(f)) => (Some(f), loaded.tree.is_occupied(f.value)),
-            _ => (None, false),
-        })
+        let point_keys = keys_of(loaded.tree.key_space());
+        loaded.tree.search_many(&valid(&point_keys), 0, &mut answers);
+        (loaded.tree.kind(), point_keys, Box::new(|v| loaded.tree.is_occupied(v)))
+    };
+    let mut answers = answers.into_iter();
+    let lookup = |k: &Option<Key>| match k.and_then(|_| answers.next().flatten()) {
+        Some(f) => (Some(f), occupied(f.value)),
+        None => (None, false),
     };
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
-    for p in &pts.points {
-        let found = lookup(*p);
+    let mut lookup = lookup;
+    for (p, k) in pts.points.iter().zip(&point_keys) {
+        let found = lookup(k);
         let (state, bits) = match found {
             (Some(f), true) => ("occupied", format!("{:08x}", f.value.to_bits())),
             (Some(f), false) => ("free", format!("{:08x}", f.value.to_bits())),
