@@ -10,7 +10,7 @@
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, BT_FIRST_LINE};
 use super::TreeFileError;
 use crate::sensor::SensorModel;
-use crate::tree::{NodeArena, NodeKind, OccupancyTree};
+use crate::tree::{default_extra, LabelFill, NodeKind, OccupancyTree};
 use std::io::{self, BufRead, Write};
 
 /// Reads a `.bt` file into a tree with the default sensor model.
@@ -40,7 +40,7 @@ pub fn read_with_sensor(r: impl BufRead, sensor: SensorModel) -> Result<Occupanc
         false => read_legacy_header(&mut r)?,
     };
     let tree = if size > 0 {
-        read_data(&mut r, resolution, sensor, NodeKind::Plain)?
+        read_data(&mut r, resolution, sensor, NodeKind::Plain, size)?
     } else {
         OccupancyTree::with_sensor(resolution, sensor)
             .map_err(|_| TreeFileError::BadResolution { value: resolution, offset: None })?
@@ -53,18 +53,50 @@ pub fn read_with_sensor(r: impl BufRead, sensor: SensorModel) -> Result<Occupanc
 
 /// Reads one tree's binary node stream, root first
 /// (`OccupancyOcTreeBase::readBinaryData`), into a tree of `kind` whose
-/// nodes keep that kind's default colour or stamp.
+/// nodes keep that kind's default colour or stamp. `size_hint` (the
+/// header's unchecked `size`) only sizes the arena.
 pub(crate) fn read_data<R: BufRead>(
     r: &mut CountingReader<R>,
     resolution: f64,
     sensor: SensorModel,
     kind: NodeKind,
+    size_hint: u64,
 ) -> Result<OccupancyTree, TreeFileError> {
     let mut tree = OccupancyTree::with_kind(resolution, sensor, kind)
         .map_err(|_| TreeFileError::BadResolution { value: resolution, offset: None })?;
-    let mut arena = OccupancyTree::new_arena(kind, sensor.clamping_max);
-    read_node(r, &mut arena, 0, 0, &sensor)?;
-    tree.set_arena(Some(arena));
+    let hint = usize::try_from(size_hint).unwrap_or(usize::MAX);
+    let mut fill =
+        LabelFill::new(default_extra(kind), hint, sensor.clamping_max, sensor.clamping_min, sensor.clamping_max);
+    // each record announces at most 8 nodes: reserve what the header says,
+    // as far as the bytes at hand can hold it
+    let at_hand = r.chunk()?.len() / 2;
+    fill.reserve(hint.min(at_hand.saturating_mul(8)));
+    let too_deep = |offset: u64| TreeFileError::TooDeep { offset };
+    loop {
+        let base = r.offset;
+        let buf = r.chunk()?;
+        let mut used = 0;
+        for rec in buf.chunks_exact(2) {
+            fill.push(u16::from_le_bytes([rec[0], rec[1]])).map_err(|_| too_deep(base + used as u64))?;
+            used += 2;
+            if fill.is_complete() {
+                break;
+            }
+        }
+        r.advance(used);
+        if fill.is_complete() {
+            break;
+        }
+        // a record split between two fills of the buffer (or the end)
+        let mut rec = [0u8; 2];
+        let offset = r.offset;
+        r.read_exact(&mut rec, "a node's child labels")?;
+        fill.push(u16::from_le_bytes(rec)).map_err(|_| too_deep(offset))?;
+        if fill.is_complete() {
+            break;
+        }
+    }
+    tree.set_arena_with_size(fill.finish().expect("complete"));
     Ok(tree)
 }
 
@@ -95,65 +127,172 @@ fn read_legacy_header<R: BufRead>(r: &mut CountingReader<R>) -> Result<(u64, f64
     Ok((u64::from(u32::from_le_bytes(b4)), res))
 }
 
-fn read_node<R: BufRead>(
-    r: &mut CountingReader<R>,
-    arena: &mut NodeArena,
-    id: u32,
-    depth: u8,
-    sensor: &SensorModel,
-) -> Result<(), TreeFileError> {
-    let offset = r.offset;
-    let mut b = [0u8; 2];
-    r.read_exact(&mut b, "a node's child labels")?;
-    let labels = u16::from_le_bytes(b);
-    let mut mask = 0u8;
-    for i in 0..8 {
-        if (labels >> (2 * i)) & 3 != 0 {
-            mask |= 1 << i;
-        }
-    }
-    if mask == 0 {
-        return Ok(());
-    }
-    if depth >= 16 {
-        return Err(TreeFileError::TooDeep { offset });
-    }
-    let first = arena.add_children(id, mask, 0.0);
-    let mut child = first;
-    for i in 0..8 {
-        match (labels >> (2 * i)) & 3 {
-            0 => continue,
-            1 => arena.set_value(child, sensor.clamping_min),
-            2 => arena.set_value(child, sensor.clamping_max),
-            _ => {}
-        }
-        child += 1;
-    }
-    let mut child = first;
-    for i in 0..8 {
-        match (labels >> (2 * i)) & 3 {
-            0 => continue,
-            3 => {
-                read_node(r, arena, child, depth + 1, sensor)?;
-                let max = (0..arena.mask(child).count_ones())
-                    .map(|j| arena.value(arena.first_child(child) + j))
-                    .fold(-f32::MAX, |m, v| if v > m { v } else { m });
-                arena.set_value(child, max);
-            }
-            _ => {}
-        }
-        child += 1;
-    }
-    Ok(())
-}
-
 /// Writes what OctoMap's `writeBinary` writes: the tree converted to
 /// maximum likelihood and pruned. The caller's tree is left unchanged.
-pub fn write(tree: &OccupancyTree, w: impl Write) -> io::Result<()> {
-    let mut ml = tree.clone();
-    ml.to_max_likelihood();
-    ml.prune();
-    write_const(&ml, w)
+pub fn write(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
+    let id = super::ot::TreeKind::of(tree.kind()).id();
+    let mut out = Vec::new();
+    let size = write_ml_data(tree, &mut out);
+    write_header(&mut w, BT_FIRST_LINE, id, size, tree.resolution())?;
+    w.write_all(&out)
+}
+
+/// Appends to `out` the node stream `toMaxLikelihood()` then `prune()`
+/// would leave, without copying or changing the tree; returns the node
+/// count (`size()`) that tree would have.
+///
+/// Two read-only passes: the first finds the depths `prune` would reach
+/// (it prunes level by level from depth 15 up and stops after the first
+/// level that merged nothing), the second writes the records, dropping the
+/// subtrees that pruning at those depths would merge.
+pub(crate) fn write_ml_data(tree: &OccupancyTree, out: &mut Vec<u8>) -> usize {
+    let Some(arena) = tree.arena() else {
+        return tree.size();
+    };
+    let (values, masks, first_child, extras) = arena.parts();
+    let sensor = *tree.sensor();
+    let ml = MlView { values, masks, first_child, extras, sensor };
+    let stamped = tree.kind() == NodeKind::Stamped;
+    let mut counts = [0usize; 16];
+    if stamped {
+        ml.count_merges::<true>(0, 0, &mut counts);
+    } else {
+        ml.count_merges::<false>(0, 0, &mut counts);
+    }
+    // as `OccupancyTree::prune`: the deepest level that merges nothing
+    // stops it; only the levels below that one merge
+    let stop = (1..16).rev().find(|&d| counts[d] == 0).unwrap_or(0);
+    let lowest = stop.max(1);
+    let merges: usize = counts[lowest..].iter().sum();
+    out.reserve(2 * (masks.len() / 8 + 1));
+    if stamped {
+        ml.emit::<true>(0, 0, lowest, out);
+    } else {
+        ml.emit::<false>(0, 0, lowest, out);
+    }
+    tree.size() - 8 * merges
+}
+
+/// The tree as `toMaxLikelihood()` would leave it, read in place.
+struct MlView<'a> {
+    values: &'a [f32],
+    masks: &'a [u8],
+    first_child: &'a [u32],
+    extras: &'a [u32],
+    sensor: SensorModel,
+}
+
+impl MlView<'_> {
+    /// The maximum-likelihood value of node `n`.
+    #[inline(always)]
+    fn value(&self, n: usize) -> f32 {
+        self.sensor.max_likelihood(self.values[n])
+    }
+
+    /// Stamps are compared when pruning stamped trees only.
+    #[inline(always)]
+    fn extra<const STAMPED: bool>(&self, n: usize) -> u32 {
+        if STAMPED {
+            self.extras[n]
+        } else {
+            0
+        }
+    }
+
+    /// What inner node `n` at `depth` would be once every level below it
+    /// is pruned: `Some((value, stamp))` when it would then merge into a
+    /// leaf. Counts such nodes per depth (the root never merges).
+    fn count_merges<const STAMPED: bool>(
+        &self,
+        n: usize,
+        depth: usize,
+        counts: &mut [usize; 16],
+    ) -> Option<(f32, u32)> {
+        let mask = self.masks[n];
+        let first = self.first_child[n] as usize;
+        let k = mask.count_ones() as usize;
+        let mut all = mask == 0xff;
+        let mut first_leaf = None;
+        for c in first..first + k {
+            let leaf = if self.masks[c] == 0 {
+                Some((self.value(c), self.extra::<STAMPED>(c)))
+            } else {
+                self.count_merges::<STAMPED>(c, depth + 1, counts)
+            };
+            match (leaf, first_leaf) {
+                (None, _) => all = false,
+                (Some(l), None) => first_leaf = Some(l),
+                (Some((v, e)), Some((v0, e0))) => {
+                    if v != v0 || e != e0 {
+                        all = false
+                    }
+                }
+            }
+        }
+        if all && depth >= 1 {
+            counts[depth] += 1;
+            first_leaf
+        } else {
+            None
+        }
+    }
+
+    /// Appends the record of inner node `n` at `depth` and those of its
+    /// subtree, pruned at depths `lowest` and below. Returns `Some` when
+    /// `n` itself merges: the caller then drops what was appended and
+    /// labels `n` a leaf of the returned value.
+    fn emit<const STAMPED: bool>(
+        &self,
+        n: usize,
+        depth: usize,
+        lowest: usize,
+        out: &mut Vec<u8>,
+    ) -> Option<(f32, u32)> {
+        let at = out.len();
+        out.extend_from_slice(&[0, 0]);
+        let mask = self.masks[n];
+        let mut c = self.first_child[n] as usize;
+        let mut all = mask == 0xff;
+        let mut first_leaf = None;
+        let mut labels = 0u16;
+        let mut rest = mask;
+        while rest != 0 {
+            let pos = rest.trailing_zeros();
+            rest &= rest - 1;
+            let leaf = if self.masks[c] == 0 {
+                Some((self.value(c), self.extra::<STAMPED>(c)))
+            } else {
+                let before = out.len();
+                let merged = self.emit::<STAMPED>(c, depth + 1, lowest, out);
+                if merged.is_some() {
+                    out.truncate(before);
+                }
+                merged
+            };
+            let label = match leaf {
+                None => 3,
+                Some((v, _)) if self.sensor.is_occupied(v) => 2,
+                Some(_) => 1,
+            };
+            labels |= label << (2 * pos);
+            match (leaf, first_leaf) {
+                (None, _) => all = false,
+                (Some(l), None) => first_leaf = Some(l),
+                (Some((v, e)), Some((v0, e0))) => {
+                    if v != v0 || e != e0 {
+                        all = false
+                    }
+                }
+            }
+            c += 1;
+        }
+        out[at..at + 2].copy_from_slice(&labels.to_le_bytes());
+        if all && depth >= lowest {
+            first_leaf
+        } else {
+            None
+        }
+    }
 }
 
 /// Writes the tree as it is (`writeBinaryConst`): leaves are labelled

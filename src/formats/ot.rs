@@ -114,7 +114,7 @@ pub fn read(r: impl BufRead) -> Result<AnyTree, TreeFileError> {
         // OctoMap reads no data then, whatever follows
         return empty(kind, header.resolution);
     }
-    read_data(&mut r, kind, header.resolution)
+    read_data(&mut r, kind, header.resolution, header.size)
 }
 
 /// An empty tree of `kind`.
@@ -139,28 +139,28 @@ fn node_kind(kind: TreeKind) -> NodeKind {
 
 /// Reads one tree's node stream, root first (`OcTreeBaseImpl::readData`):
 /// exactly the nodes the child masks announce, nothing after them.
+/// `size_hint` (the header's unchecked `size`) only sizes the arena.
 pub(crate) fn read_data<R: BufRead>(
     r: &mut CountingReader<R>,
     kind: TreeKind,
     resolution: f64,
+    size_hint: u64,
 ) -> Result<AnyTree, TreeFileError> {
-    let mut b = PreorderBuilder::with_kind(node_kind(kind));
-    let mut buf = [0u8; 8];
-    let len = kind.payload_len() + 1;
-    let mut index = 0;
-    while !b.is_complete() {
-        let offset = r.offset;
-        r.read_exact(&mut buf[..len], "a node")?;
-        let word = [buf[0], buf[1], buf[2], buf[3]];
-        let (value, extra) = match kind {
-            TreeKind::OcTree => (f32::from_le_bytes(word), None),
-            TreeKind::OcTreeStamped => (f32::from_le_bytes(word), Some(0)),
-            TreeKind::ColorOcTree => (f32::from_le_bytes(word), Some(u32::from_le_bytes([buf[4], buf[5], buf[6], 0]))),
-            TreeKind::CountingOcTree => (0.0, Some(u32::from_le_bytes(word))),
-        };
-        b.push_with_extra(value, extra, buf[len - 1], index).map_err(|_| TreeFileError::TooDeep { offset })?;
-        index += 1;
-    }
+    let b = match kind {
+        TreeKind::OcTree => {
+            read_nodes::<R, 5>(r, kind, size_hint, |n| (f32::from_le_bytes([n[0], n[1], n[2], n[3]]), None))?
+        }
+        TreeKind::OcTreeStamped => {
+            read_nodes::<R, 5>(r, kind, size_hint, |n| (f32::from_le_bytes([n[0], n[1], n[2], n[3]]), Some(0)))?
+        }
+        TreeKind::ColorOcTree => read_nodes::<R, 8>(r, kind, size_hint, |n| {
+            (f32::from_le_bytes([n[0], n[1], n[2], n[3]]), Some(u32::from_le_bytes([n[4], n[5], n[6], 0])))
+        })?,
+        TreeKind::CountingOcTree => {
+            read_nodes::<R, 5>(r, kind, size_hint, |n| (0.0, Some(u32::from_le_bytes([n[0], n[1], n[2], n[3]]))))?
+        }
+    };
+    debug_assert!(b.is_complete());
     let bad_res = |_| TreeFileError::BadResolution { value: resolution, offset: None };
     if kind == TreeKind::CountingOcTree {
         let arena = b.finish_arena().expect("complete");
@@ -168,6 +168,55 @@ pub(crate) fn read_data<R: BufRead>(
     }
     let tree = b.finish(resolution, SensorModel::default()).map_err(bad_res)?.expect("complete");
     Ok(AnyTree::Occupancy(tree))
+}
+
+/// The node records (`N` bytes each: payload, then the child mask) until
+/// the tree is complete, decoded by `decode`. Records are taken straight
+/// from the reader's buffer; only one that straddles two buffer fills is
+/// copied.
+fn read_nodes<R: BufRead, const N: usize>(
+    r: &mut CountingReader<R>,
+    kind: TreeKind,
+    size_hint: u64,
+    decode: impl Fn(&[u8; N]) -> (f32, Option<u32>),
+) -> Result<PreorderBuilder, TreeFileError> {
+    debug_assert_eq!(N, kind.payload_len() + 1);
+    let mut b = PreorderBuilder::with_hint(node_kind(kind), usize::try_from(size_hint).unwrap_or(usize::MAX));
+    // reserve at once what the header announces, as far as the bytes at
+    // hand can hold it (the whole rest when reading from memory)
+    let at_hand = r.chunk()?.len() / N;
+    b.reserve(usize::try_from(size_hint).unwrap_or(usize::MAX).min(at_hand));
+    let mut index = 0u64;
+    let too_deep = |offset: u64| TreeFileError::TooDeep { offset };
+    loop {
+        let base = r.offset;
+        let buf = r.chunk()?;
+        let mut used = 0;
+        for rec in buf.chunks_exact(N) {
+            let rec: &[u8; N] = rec.try_into().expect("chunks_exact");
+            let (value, extra) = decode(rec);
+            b.push_with_extra(value, extra, rec[N - 1], index).map_err(|_| too_deep(base + used as u64))?;
+            used += N;
+            index += 1;
+            if b.is_complete() {
+                break;
+            }
+        }
+        r.advance(used);
+        if b.is_complete() {
+            return Ok(b);
+        }
+        // a record split between two fills of the buffer (or the end)
+        let mut rec = [0u8; N];
+        let offset = r.offset;
+        r.read_exact(&mut rec, "a node")?;
+        let (value, extra) = decode(&rec);
+        b.push_with_extra(value, extra, rec[N - 1], index).map_err(|_| too_deep(offset))?;
+        index += 1;
+        if b.is_complete() {
+            return Ok(b);
+        }
+    }
 }
 
 /// Writes `tree` as OctoMap's `write` does, under its type's id.
