@@ -8,7 +8,7 @@
 //! not stored: readers restore the clamping bounds. See `formats/bt.md`.
 
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, BT_FIRST_LINE};
-use super::TreeFileError;
+use super::{prefetch, TreeFileError};
 use crate::sensor::SensorModel;
 use crate::tree::{default_extra, LabelFill, NodeKind, OccupancyTree};
 use std::io::{self, BufRead, Write};
@@ -141,36 +141,39 @@ pub fn write(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
 /// would leave, without copying or changing the tree; returns the node
 /// count (`size()`) that tree would have.
 ///
-/// Two read-only passes: the first finds the depths `prune` would reach
-/// (it prunes level by level from depth 15 up and stops after the first
-/// level that merged nothing), the second writes the records, dropping the
-/// subtrees that pruning at those depths would merge.
+/// `prune` merges level by level from depth 15 up and stops after the
+/// first level that merged nothing. One read-only pass writes the records
+/// as if pruning went all the way up, dropping the subtrees that merge, and
+/// counts the merges per depth. That is the answer unless a level above
+/// the one where `prune` stops would merge something; then a second pass
+/// writes the records with merges below that level only.
 pub(crate) fn write_ml_data(tree: &OccupancyTree, out: &mut Vec<u8>) -> usize {
     let Some(arena) = tree.arena() else {
         return tree.size();
     };
     let (values, masks, first_child, extras) = arena.parts();
-    let sensor = *tree.sensor();
-    let ml = MlView { values, masks, first_child, extras, sensor };
+    let ml = MlView { values, masks, first_child, extras, sensor: *tree.sensor() };
     let stamped = tree.kind() == NodeKind::Stamped;
+    let emit = |lowest: usize, out: &mut Vec<u8>, counts: &mut [usize; 16]| {
+        if stamped {
+            ml.emit::<true>(0, 0, lowest, out, counts);
+        } else {
+            ml.emit::<false>(0, 0, lowest, out, counts);
+        }
+    };
+    out.reserve(2 * (masks.len() / 8 + 1));
+    let start = out.len();
     let mut counts = [0usize; 16];
-    if stamped {
-        ml.count_merges::<true>(0, 0, &mut counts);
-    } else {
-        ml.count_merges::<false>(0, 0, &mut counts);
-    }
+    emit(1, out, &mut counts);
     // as `OccupancyTree::prune`: the deepest level that merges nothing
     // stops it; only the levels below that one merge
     let stop = (1..16).rev().find(|&d| counts[d] == 0).unwrap_or(0);
     let lowest = stop.max(1);
-    let merges: usize = counts[lowest..].iter().sum();
-    out.reserve(2 * (masks.len() / 8 + 1));
-    if stamped {
-        ml.emit::<true>(0, 0, lowest, out);
-    } else {
-        ml.emit::<false>(0, 0, lowest, out);
+    if counts[1..lowest].iter().any(|&c| c > 0) {
+        out.truncate(start);
+        emit(lowest, out, &mut [0; 16]);
     }
-    tree.size() - 8 * merges
+    tree.size() - 8 * counts[lowest..].iter().sum::<usize>()
 }
 
 /// The tree as `toMaxLikelihood()` would leave it, read in place.
@@ -199,59 +202,36 @@ impl MlView<'_> {
         }
     }
 
-    /// What inner node `n` at `depth` would be once every level below it
-    /// is pruned: `Some((value, stamp))` when it would then merge into a
-    /// leaf. Counts such nodes per depth (the root never merges).
-    fn count_merges<const STAMPED: bool>(
-        &self,
-        n: usize,
-        depth: usize,
-        counts: &mut [usize; 16],
-    ) -> Option<(f32, u32)> {
-        let mask = self.masks[n];
-        let first = self.first_child[n] as usize;
-        let k = mask.count_ones() as usize;
-        let mut all = mask == 0xff;
-        let mut first_leaf = None;
-        for c in first..first + k {
-            let leaf = if self.masks[c] == 0 {
-                Some((self.value(c), self.extra::<STAMPED>(c)))
-            } else {
-                self.count_merges::<STAMPED>(c, depth + 1, counts)
-            };
-            match (leaf, first_leaf) {
-                (None, _) => all = false,
-                (Some(l), None) => first_leaf = Some(l),
-                (Some((v, e)), Some((v0, e0))) => {
-                    if v != v0 || e != e0 {
-                        all = false
-                    }
-                }
-            }
-        }
-        if all && depth >= 1 {
-            counts[depth] += 1;
-            first_leaf
-        } else {
-            None
-        }
-    }
-
     /// Appends the record of inner node `n` at `depth` and those of its
-    /// subtree, pruned at depths `lowest` and below. Returns `Some` when
-    /// `n` itself merges: the caller then drops what was appended and
-    /// labels `n` a leaf of the returned value.
+    /// subtree, merging the nodes at depth `lowest` or deeper that merge
+    /// once every level below them is pruned, and counts those per depth.
+    /// Returns `Some((value, stamp))` when `n` itself merges: the caller
+    /// then drops what was appended and labels `n` a leaf of that value.
     fn emit<const STAMPED: bool>(
         &self,
         n: usize,
         depth: usize,
         lowest: usize,
         out: &mut Vec<u8>,
+        counts: &mut [usize; 16],
     ) -> Option<(f32, u32)> {
         let at = out.len();
         out.extend_from_slice(&[0, 0]);
         let mask = self.masks[n];
         let mut c = self.first_child[n] as usize;
+        // ask for the child groups of the inner children now, all at once,
+        // rather than one after the other as the recursion reaches them
+        for g in c..c + mask.count_ones() as usize {
+            if self.masks[g] != 0 {
+                let fc = self.first_child[g] as usize;
+                prefetch(self.masks, fc);
+                prefetch(self.values, fc);
+                prefetch(self.first_child, fc);
+                if STAMPED {
+                    prefetch(self.extras, fc);
+                }
+            }
+        }
         let mut all = mask == 0xff;
         let mut first_leaf = None;
         let mut labels = 0u16;
@@ -263,7 +243,7 @@ impl MlView<'_> {
                 Some((self.value(c), self.extra::<STAMPED>(c)))
             } else {
                 let before = out.len();
-                let merged = self.emit::<STAMPED>(c, depth + 1, lowest, out);
+                let merged = self.emit::<STAMPED>(c, depth + 1, lowest, out, counts);
                 if merged.is_some() {
                     out.truncate(before);
                 }
@@ -288,6 +268,7 @@ impl MlView<'_> {
         }
         out[at..at + 2].copy_from_slice(&labels.to_le_bytes());
         if all && depth >= lowest {
+            counts[depth] += 1;
             first_leaf
         } else {
             None
@@ -309,38 +290,53 @@ pub(crate) fn write_data(tree: &OccupancyTree, mut w: impl Write) -> io::Result<
     let Some(arena) = tree.arena() else {
         return Ok(());
     };
-    let sensor = tree.sensor();
-    let mut out = Vec::with_capacity(1 << 16);
-    let mut stack = vec![0u32];
-    while let Some(n) = stack.pop() {
-        let mut labels = 0u16;
-        let mask = arena.mask(n);
-        let first = arena.first_child(n);
-        let mut child = first;
-        for i in 0..8 {
-            if mask & (1 << i) == 0 {
-                continue;
-            }
-            let label = if arena.has_children(child) {
-                3
-            } else if sensor.is_occupied(arena.value(child)) {
-                2
-            } else {
-                1
-            };
-            labels |= label << (2 * i);
-            child += 1;
-        }
-        out.extend_from_slice(&labels.to_le_bytes());
-        for i in (0..mask.count_ones()).rev() {
-            if arena.has_children(first + i) {
-                stack.push(first + i);
-            }
-        }
-        if out.len() >= (1 << 16) - 4 {
-            w.write_all(&out)?;
-            out.clear();
+    let (values, masks, first_child, _) = arena.parts();
+    let mut out = Vec::with_capacity(2 * (masks.len() / 8 + 1));
+    write_const_node(masks, first_child, values, tree.sensor(), 0, &mut out);
+    w.write_all(&out)
+}
+
+/// Appends the record of node `n` (which has children) and those of its
+/// subtree: children with children are labelled 3, leaves 2 when occupied,
+/// else 1.
+fn write_const_node(
+    masks: &[u8],
+    first_child: &[u32],
+    values: &[f32],
+    sensor: &SensorModel,
+    n: usize,
+    out: &mut Vec<u8>,
+) {
+    let mask = masks[n];
+    let first = first_child[n] as usize;
+    let group = first..first + mask.count_ones() as usize;
+    // ask for the inner children's groups before the recursion needs them
+    for c in group.clone() {
+        if masks[c] != 0 {
+            let fc = first_child[c] as usize;
+            prefetch(masks, fc);
+            prefetch(values, fc);
+            prefetch(first_child, fc);
         }
     }
-    w.write_all(&out)
+    let mut labels = 0u16;
+    let mut rest = mask;
+    for c in group.clone() {
+        let pos = rest.trailing_zeros();
+        rest &= rest - 1;
+        let label = if masks[c] != 0 {
+            3
+        } else if sensor.is_occupied(values[c]) {
+            2
+        } else {
+            1
+        };
+        labels |= label << (2 * pos);
+    }
+    out.extend_from_slice(&labels.to_le_bytes());
+    for c in group {
+        if masks[c] != 0 {
+            write_const_node(masks, first_child, values, sensor, c, out);
+        }
+    }
 }
