@@ -9,7 +9,7 @@
 //! whose id is `OcTreeBase`, a little-endian `u32` count. See `formats/ot.md`.
 
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, OT_FIRST_LINE};
-use super::TreeFileError;
+use super::{prefetch, TreeFileError};
 use crate::sensor::SensorModel;
 use crate::tree::{CountingTree, NodeKind, NodeRef, OccupancyTree, PreorderBuilder};
 use std::io::{self, BufRead, Write};
@@ -228,13 +228,18 @@ pub fn write(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
 
 /// Writes the node stream alone, without header (`writeData`).
 pub(crate) fn write_data(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
-    let kind = TreeKind::of(tree.kind());
-    write_nodes(tree.root(), &mut w, |n, out| {
-        out.extend_from_slice(&n.value().to_le_bytes());
-        if kind == TreeKind::ColorOcTree {
-            out.extend_from_slice(&n.extra().to_le_bytes()[..3]);
-        }
-    })
+    let Some(root) = tree.root() else { return Ok(()) };
+    let (arena, _) = root.arena_id();
+    let (values, _, _, extras) = arena.parts();
+    if TreeKind::of(tree.kind()) == TreeKind::ColorOcTree {
+        write_nodes(root, &mut w, |n| {
+            let [v0, v1, v2, v3] = values[n].to_le_bytes();
+            let [r, g, b, _] = extras[n].to_le_bytes();
+            [v0, v1, v2, v3, r, g, b]
+        })
+    } else {
+        write_nodes(root, &mut w, |n| values[n].to_le_bytes())
+    }
 }
 
 /// Writes a counting tree (`id OcTreeBase`, `u32` counts).
@@ -245,28 +250,73 @@ pub fn write_counting(tree: &CountingTree, mut w: impl Write) -> io::Result<()> 
 
 /// A counting tree's node stream alone, without header.
 pub(crate) fn write_counting_data(tree: &CountingTree, mut w: impl Write) -> io::Result<()> {
-    write_nodes(tree.root(), &mut w, |n, out| out.extend_from_slice(&n.extra().to_le_bytes()))
+    let Some(root) = tree.root() else { return Ok(()) };
+    let (arena, _) = root.arena_id();
+    let (_, _, _, extras) = arena.parts();
+    write_nodes(root, &mut w, |n| extras[n].to_le_bytes())
 }
 
-/// The pre-order node stream: payload, then the child-existence byte.
-fn write_nodes(
-    root: Option<NodeRef<'_>>,
+/// The pre-order node stream below `root`: each node's payload, then its
+/// child-existence byte.
+fn write_nodes<const P: usize>(
+    root: NodeRef<'_>,
     w: &mut impl Write,
-    payload: impl Fn(&NodeRef<'_>, &mut Vec<u8>),
+    payload: impl Fn(usize) -> [u8; P],
 ) -> io::Result<()> {
-    let Some(root) = root else { return Ok(()) };
-    let mut out = Vec::with_capacity(1 << 16);
-    let mut stack = vec![root];
-    while let Some(n) = stack.pop() {
-        payload(&n, &mut out);
-        out.push(n.child_mask());
-        for rank in (0..n.child_count()).rev() {
-            stack.extend(n.nth_child(rank));
+    let (arena, id) = root.arena_id();
+    let (values, masks, first_child, extras) = arena.parts();
+    let mut out = NodeStream { masks, first_child, values, extras, payload, out: Vec::with_capacity(FLUSH_AT + 64), w };
+    out.node(id as usize)?;
+    out.w.write_all(&out.out)
+}
+
+/// Bytes gathered before they go to the writer.
+const FLUSH_AT: usize = 1 << 16;
+
+struct NodeStream<'a, F, W> {
+    masks: &'a [u8],
+    first_child: &'a [u32],
+    /// What payloads are made of (only prefetched here).
+    values: &'a [f32],
+    extras: &'a [u32],
+    payload: F,
+    out: Vec<u8>,
+    w: W,
+}
+
+impl<const P: usize, F: Fn(usize) -> [u8; P], W: Write> NodeStream<'_, F, W> {
+    /// Node `n` and its subtree.
+    fn node(&mut self, n: usize) -> io::Result<()> {
+        let mask = self.masks[n];
+        self.out.extend_from_slice(&(self.payload)(n));
+        self.out.push(mask);
+        if mask == 0 {
+            return Ok(());
         }
-        if out.len() >= (1 << 16) - 16 {
-            w.write_all(&out)?;
-            out.clear();
+        let first = self.first_child[n] as usize;
+        let group = first..first + mask.count_ones() as usize;
+        // ask for the inner children's groups before the recursion needs them
+        for c in group.clone() {
+            if self.masks[c] != 0 {
+                let fc = self.first_child[c] as usize;
+                prefetch(self.masks, fc);
+                prefetch(self.first_child, fc);
+                prefetch(self.values, fc);
+                prefetch(self.extras, fc);
+            }
         }
+        for c in group {
+            if self.masks[c] == 0 {
+                self.out.extend_from_slice(&(self.payload)(c));
+                self.out.push(0);
+            } else {
+                self.node(c)?;
+            }
+        }
+        if self.out.len() >= FLUSH_AT {
+            self.w.write_all(&self.out)?;
+            self.out.clear();
+        }
+        Ok(())
     }
-    w.write_all(&out)
 }

@@ -937,6 +937,11 @@ pub struct NodeRef<'a> {
 }
 
 impl<'a> NodeRef<'a> {
+    /// The arena and id of this node, for whole-tree passes.
+    pub(crate) fn arena_id(&self) -> (&'a NodeArena, NodeId) {
+        (self.arena, self.id)
+    }
+
     /// The log-odds value.
     #[inline]
     pub fn value(&self) -> f32 {
