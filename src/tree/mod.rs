@@ -621,7 +621,8 @@ impl OccupancyTree {
     /// occupancy, which OctoMap cannot do): values and structure are kept,
     /// colours or stamps dropped, new extras start at the kind's default.
     pub fn converted(&self, kind: NodeKind) -> OccupancyTree {
-        let mut b = PreorderBuilder::with_kind(kind);
+        let mut b = PreorderBuilder::with_hint(kind, self.size);
+        b.reserve(self.size);
         let keep = kind == self.kind;
         if let Some(root) = self.root() {
             let mut stack = vec![root];
