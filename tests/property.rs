@@ -305,8 +305,17 @@ proptest! {
         kind in 0u8..3,
         start in 8u8..15,
         threshold in prop_oneof![Just(0.0f32), -2.5f32..4.0],
+        bounds in 0u8..5,
     ) {
-        let sensor = SensorModel { occupancy_threshold: threshold, ..SensorModel::default() };
+        // odd clamping bounds too: equal ones (every maximum-likelihood
+        // value the same), a NaN one (never equal to itself), swapped ones
+        let (clamping_min, clamping_max) = match bounds {
+            0 | 1 => (-2.0, 3.5),
+            2 => (0.85, 0.85),
+            3 => (-2.0, f32::NAN),
+            _ => (3.5, -2.0),
+        };
+        let sensor = SensorModel { occupancy_threshold: threshold, clamping_min, clamping_max, ..SensorModel::default() };
         let tree = random_tree(seed, kind_of(kind), sensor, start);
         check_bt_write(&tree)?;
         let mut ml = tree.clone();

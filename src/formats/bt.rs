@@ -152,7 +152,7 @@ pub(crate) fn write_ml_data(tree: &OccupancyTree, out: &mut Vec<u8>) -> usize {
         return tree.size();
     };
     let (values, masks, first_child, extras) = arena.parts();
-    let ml = MlView { values, masks, first_child, extras, sensor: *tree.sensor() };
+    let ml = MlView::new(values, masks, first_child, extras, tree.sensor());
     let stamped = tree.kind() == NodeKind::Stamped;
     let emit = |lowest: usize, out: &mut Vec<u8>, counts: &mut [usize; 16]| {
         if stamped {
@@ -177,36 +177,39 @@ pub(crate) fn write_ml_data(tree: &OccupancyTree, out: &mut Vec<u8>) -> usize {
 }
 
 /// The tree as `toMaxLikelihood()` would leave it, read in place.
+///
+/// Maximum likelihood leaves a node one of two values: the upper clamping
+/// bound when it is occupied (class 1), else the lower (class 0). What
+/// `prune` and `writeBinaryConst` then compare and test depends on the
+/// class alone, so they are precomputed per class: the `.bt` label, and
+/// whether the values of two classes compare equal (they may not, even
+/// within a class, when a bound is NaN; they do across classes when the
+/// bounds are equal).
 struct MlView<'a> {
     values: &'a [f32],
     masks: &'a [u8],
     first_child: &'a [u32],
     extras: &'a [u32],
-    sensor: SensorModel,
+    threshold: f32,
+    /// The label of a leaf of each class: 2 when its value is occupied, else 1.
+    label: [u16; 2],
+    /// `equal[a][b]`: whether values of classes `a` and `b` compare equal.
+    equal: [[bool; 2]; 2],
 }
 
-impl MlView<'_> {
-    /// The maximum-likelihood value of node `n`.
-    #[inline(always)]
-    fn value(&self, n: usize) -> f32 {
-        self.sensor.max_likelihood(self.values[n])
-    }
-
-    /// Stamps are compared when pruning stamped trees only.
-    #[inline(always)]
-    fn extra<const STAMPED: bool>(&self, n: usize) -> u32 {
-        if STAMPED {
-            self.extras[n]
-        } else {
-            0
-        }
+impl<'a> MlView<'a> {
+    fn new(values: &'a [f32], masks: &'a [u8], first_child: &'a [u32], extras: &'a [u32], s: &SensorModel) -> Self {
+        let value = [s.clamping_min, s.clamping_max];
+        let label = value.map(|v| if s.is_occupied(v) { 2 } else { 1 });
+        let equal = [0, 1].map(|a| [0, 1].map(|b| value[a] == value[b]));
+        MlView { values, masks, first_child, extras, threshold: s.occupancy_threshold, label, equal }
     }
 
     /// Appends the record of inner node `n` at `depth` and those of its
     /// subtree, merging the nodes at depth `lowest` or deeper that merge
     /// once every level below them is pruned, and counts those per depth.
-    /// Returns `Some((value, stamp))` when `n` itself merges: the caller
-    /// then drops what was appended and labels `n` a leaf of that value.
+    /// Returns `Some((class, stamp))` when `n` itself merges: the caller
+    /// then drops what was appended and labels `n` a leaf of that class.
     fn emit<const STAMPED: bool>(
         &self,
         n: usize,
@@ -214,14 +217,15 @@ impl MlView<'_> {
         lowest: usize,
         out: &mut Vec<u8>,
         counts: &mut [usize; 16],
-    ) -> Option<(f32, u32)> {
+    ) -> Option<(u8, u32)> {
         let at = out.len();
         out.extend_from_slice(&[0, 0]);
         let mask = self.masks[n];
-        let mut c = self.first_child[n] as usize;
+        let first = self.first_child[n] as usize;
+        let group = first..first + mask.count_ones() as usize;
         // ask for the child groups of the inner children now, all at once,
         // rather than one after the other as the recursion reaches them
-        for g in c..c + mask.count_ones() as usize {
+        for g in group.clone() {
             if self.masks[g] != 0 {
                 let fc = self.first_child[g] as usize;
                 prefetch(self.masks, fc);
@@ -232,47 +236,55 @@ impl MlView<'_> {
                 }
             }
         }
-        let mut all = mask == 0xff;
-        let mut first_leaf = None;
         let mut labels = 0u16;
+        // classes by child position; children that stay inner
+        let mut occupied = 0u8;
+        let mut inner = 0u8;
+        let mut stamps_equal = true;
+        let mut stamp0 = 0;
         let mut rest = mask;
-        while rest != 0 {
+        for c in group {
             let pos = rest.trailing_zeros();
             rest &= rest - 1;
-            let leaf = if self.masks[c] == 0 {
-                Some((self.value(c), self.extra::<STAMPED>(c)))
+            let (class, stamp) = if self.masks[c] == 0 {
+                (u8::from(self.values[c] >= self.threshold), if STAMPED { self.extras[c] } else { 0 })
             } else {
                 let before = out.len();
-                let merged = self.emit::<STAMPED>(c, depth + 1, lowest, out, counts);
-                if merged.is_some() {
-                    out.truncate(before);
-                }
-                merged
-            };
-            let label = match leaf {
-                None => 3,
-                Some((v, _)) if self.sensor.is_occupied(v) => 2,
-                Some(_) => 1,
-            };
-            labels |= label << (2 * pos);
-            match (leaf, first_leaf) {
-                (None, _) => all = false,
-                (Some(l), None) => first_leaf = Some(l),
-                (Some((v, e)), Some((v0, e0))) => {
-                    if v != v0 || e != e0 {
-                        all = false
+                match self.emit::<STAMPED>(c, depth + 1, lowest, out, counts) {
+                    Some(leaf) => {
+                        out.truncate(before);
+                        leaf
+                    }
+                    None => {
+                        inner |= 1 << pos;
+                        labels |= 3 << (2 * pos);
+                        continue;
                     }
                 }
+            };
+            occupied |= class << pos;
+            labels |= self.label[usize::from(class)] << (2 * pos);
+            if STAMPED {
+                if pos == 0 {
+                    stamp0 = stamp;
+                } else if stamp != stamp0 {
+                    stamps_equal = false;
+                }
             }
-            c += 1;
         }
         out[at..at + 2].copy_from_slice(&labels.to_le_bytes());
-        if all && depth >= lowest {
-            counts[depth] += 1;
-            first_leaf
-        } else {
-            None
+        // `pruneNode`: eight leaves whose values (and stamps) all equal
+        // child 0's
+        if mask != 0xff || inner != 0 || depth < lowest || !stamps_equal {
+            return None;
         }
+        let class0 = usize::from(occupied & 1);
+        let others = occupied >> 1;
+        if (others != 0 && !self.equal[1][class0]) || (others != 0x7f && !self.equal[0][class0]) {
+            return None;
+        }
+        counts[depth] += 1;
+        Some((class0 as u8, stamp0))
     }
 }
 
