@@ -105,6 +105,19 @@ fn secs(d: Duration) -> f64 {
     d.as_secs_f64()
 }
 
+/// Lets the allocator finish, outside the timed regions, the work the last
+/// frees left pending. OctoMap frees a tree as hundreds of thousands of
+/// small chunks; glibc parks them in its fast bins, merges them at the next
+/// large allocation (`malloc_consolidate`) and sorts the merged chunks into
+/// its bins during the large allocations after that, at most 10,000 per
+/// allocation. That work would otherwise be charged to whichever job
+/// allocates next, usually octolinear's, whose arenas are a few large
+/// allocations. Large allocations here do it and nothing else.
+fn settle_heap() {
+    let blocks: Vec<Vec<u8>> = (0..32).map(|_| black_box(Vec::with_capacity(1 << 16))).collect();
+    drop(black_box(blocks));
+}
+
 /// Times `f` once.
 fn time<T>(f: impl FnOnce() -> T) -> (Duration, T) {
     let t = Instant::now();
@@ -254,6 +267,7 @@ fn run_case(args: &Args, kind: SceneKind, res: f64, scans: &[Scan]) {
         let (d, v) = time(|| om.write_ot().expect("write"));
         a.push(d);
         drop(v);
+        settle_heap();
         let (d, v) = time(|| {
             let mut v = Vec::with_capacity(ol_ot.len());
             ot::write(&ol, &mut v).expect("write");
@@ -261,6 +275,7 @@ fn run_case(args: &Args, kind: SceneKind, res: f64, scans: &[Scan]) {
         });
         b.push(d);
         drop(v);
+        settle_heap();
     }
     Row { job: format!(".ot write ({:.1} MB)", mb), octomap: median(a), octolinear: median(b), work: mb, unit: "MB" }
         .print();
@@ -269,9 +284,11 @@ fn run_case(args: &Args, kind: SceneKind, res: f64, scans: &[Scan]) {
         let (d, t) = time(|| OracleTree::read_ot(&om_ot).expect("read"));
         a.push(d);
         drop(t);
+        settle_heap();
         let (d, t) = time(|| ot::read(&ol_ot[..]).expect("read"));
         b.push(d);
         drop(t);
+        settle_heap();
     }
     Row { job: ".ot read".into(), octomap: median(a), octolinear: median(b), work: mb, unit: "MB" }.print();
 
@@ -284,6 +301,7 @@ fn run_case(args: &Args, kind: SceneKind, res: f64, scans: &[Scan]) {
         let (d, v) = time(|| copy.write_bt().expect("write"));
         a.push(d);
         drop(copy);
+        settle_heap();
         let (d, w) = time(|| {
             let mut w = Vec::with_capacity(v.len());
             bt::write(&ol, &mut w).expect("write");
@@ -301,9 +319,11 @@ fn run_case(args: &Args, kind: SceneKind, res: f64, scans: &[Scan]) {
         let (d, t) = time(|| OracleTree::read_bt(&bt_bytes).expect("read"));
         a.push(d);
         drop(t);
+        settle_heap();
         let (d, t) = time(|| bt::read(&bt_bytes[..]).expect("read"));
         b.push(d);
         drop(t);
+        settle_heap();
     }
     Row { job: ".bt read".into(), octomap: median(a), octolinear: median(b), work: mb, unit: "MB" }.print();
 

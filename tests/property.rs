@@ -3,10 +3,12 @@
 //! gives the same tree as key-by-key updates.
 
 use hashbrown::HashMap;
-use octolinear::formats::ot;
+use octolinear::formats::{bt, ot, ros};
 use octolinear::morton::MortonCode;
-use octolinear::{InnerNodes, Key, OccupancyTree, SensorModel};
+use octolinear::tree::NodeKind;
+use octolinear::{Clock, InnerNodes, Key, OccupancyTree, SensorModel};
 use proptest::prelude::*;
+use std::io::BufReader;
 
 /// Keys in a small cube so that pruning and expansion happen often.
 const BASE: u16 = 32764;
@@ -197,9 +199,187 @@ proptest! {
     }
 }
 
+/// A tree of `kind` after `ops`; stamped trees see a clock that moves, so
+/// that stamps differ between siblings.
+fn tree_of(kind: NodeKind, sensor: SensorModel, ops: &[Op]) -> OccupancyTree {
+    let mut tree = OccupancyTree::with_kind(0.1, sensor, kind).unwrap();
+    for (i, op) in ops.iter().enumerate() {
+        tree.set_clock(Clock::Fixed(i as u32 / 16));
+        match *op {
+            Op::Hit(k) => {
+                tree.update_occupancy(k, true, InnerNodes::Update);
+                if kind == NodeKind::Color && i % 3 == 0 {
+                    tree.set_color(k, [i as u8, 7, 9]);
+                }
+            }
+            Op::Miss(k) => {
+                tree.update_occupancy(k, false, InnerNodes::Update);
+            }
+            Op::Delta(k, d) => {
+                tree.update(k, d, if i % 2 == 0 { InnerNodes::Update } else { InnerNodes::Defer });
+            }
+            Op::Set(k, v) => {
+                tree.set_value(k, v, InnerNodes::Update);
+            }
+            Op::Delete(k, depth) => {
+                tree.delete(k, depth);
+            }
+            Op::Prune => tree.prune(),
+            Op::Compact => tree.compact(),
+            // only small expansions (a shallow leaf expands to 8^(16 - depth) nodes)
+            Op::Expand if tree.root().is_some_and(|r| r.has_children()) && tree.leaves(0).all(|l| l.depth >= 13) => {
+                tree.expand()
+            }
+            Op::Expand => {}
+            Op::MaxLikelihood => tree.to_max_likelihood(),
+        }
+    }
+    tree
+}
+
+/// A random tree from `seed`, built node by node: a chain from the root
+/// down to depth `start`, then random masks (often full) and values from a
+/// small set so that equal siblings, and thus merges at various depths,
+/// are common; stamps and colours from small sets too.
+fn random_tree(seed: u64, kind: NodeKind, sensor: SensorModel, start: u8) -> OccupancyTree {
+    use octolinear::tree::PreorderBuilder;
+    let mut state = seed | 1;
+    let mut next = move |n: u64| {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state % n
+    };
+    let mut b = PreorderBuilder::with_kind(kind);
+    let mut index = 0;
+    while let Some(depth) = b.next_depth() {
+        let value = [-2.0, -0.7, 0.4, 0.85, 3.5][next(5) as usize];
+        let mask = if depth < start {
+            1 << next(8)
+        } else if depth == 16 || next(16) < u64::from(depth - start) * 3 {
+            0
+        } else if next(3) > 0 {
+            0xff
+        } else {
+            next(256) as u8
+        };
+        let extra = match kind {
+            NodeKind::Plain => None,
+            _ => Some(next(2) as u32),
+        };
+        b.push_with_extra(value, extra, mask, index).unwrap();
+        index += 1;
+    }
+    b.finish(0.1, sensor).unwrap().unwrap()
+}
+
+fn kind_of(i: u8) -> NodeKind {
+    [NodeKind::Plain, NodeKind::Color, NodeKind::Stamped][usize::from(i % 3)]
+}
+
+fn check_bt_write(tree: &OccupancyTree) -> Result<(), TestCaseError> {
+    let mut reference = tree.clone();
+    reference.to_max_likelihood();
+    reference.prune();
+    let (mut want, mut got) = (Vec::new(), Vec::new());
+    bt::write_const(&reference, &mut want).unwrap();
+    bt::write(tree, &mut got).unwrap();
+    prop_assert!(want == got, "bt::write differs from to_max_likelihood + prune + write_const");
+    let msg = ros::binary_map_to_msg_compact(tree);
+    prop_assert!(got.ends_with(&msg.data), "compact message differs from the .bt node stream");
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 512, ..ProptestConfig::default() })]
+
+    /// `bt::write` works on the tree in place; it must give the bytes of a
+    /// copy converted to maximum likelihood, pruned (with OctoMap's
+    /// level-by-level early stop) and written as it is.
+    #[test]
+    fn bt_write_equals_max_likelihood_prune_write_const(
+        ops in prop::collection::vec(op(), 1..250),
+        kind in 0u8..3,
+        threshold in prop_oneof![Just(0.0f32), -2.5f32..2.5],
+    ) {
+        let sensor = SensorModel { occupancy_threshold: threshold, ..SensorModel::default() };
+        let tree = tree_of(kind_of(kind), sensor, &ops);
+        check_bt_write(&tree)?;
+    }
+
+    /// The same on random trees whose merges happen at various depths, so
+    /// that `prune`'s early stop matters.
+    #[test]
+    fn bt_write_equals_max_likelihood_prune_write_const_deep(
+        seed in any::<u64>(),
+        kind in 0u8..3,
+        start in 8u8..15,
+        threshold in prop_oneof![Just(0.0f32), -2.5f32..4.0],
+        bounds in 0u8..5,
+    ) {
+        // odd clamping bounds too: equal ones (every maximum-likelihood
+        // value the same), a NaN one (never equal to itself), swapped ones
+        let (clamping_min, clamping_max) = match bounds {
+            0 | 1 => (-2.0, 3.5),
+            2 => (0.85, 0.85),
+            3 => (-2.0, f32::NAN),
+            _ => (3.5, -2.0),
+        };
+        let sensor = SensorModel { occupancy_threshold: threshold, clamping_min, clamping_max, ..SensorModel::default() };
+        let tree = random_tree(seed, kind_of(kind), sensor, start);
+        check_bt_write(&tree)?;
+        let mut ml = tree.clone();
+        ml.to_max_likelihood();
+        check_bt_write(&ml)?;
+    }
+
+    /// Reading through a small buffer, where records straddle refills,
+    /// gives what reading from memory gives: the same tree, or the same
+    /// error at the same offset.
+    #[test]
+    fn chunked_reads_equal_reads_from_memory(
+        ops in prop::collection::vec(op(), 1..150),
+        seed in prop::option::of(any::<u64>()),
+        kind in 0u8..3,
+        cap in 1usize..12,
+        flips in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 0..3),
+        cut in any::<prop::sample::Index>(),
+        do_cut in any::<bool>(),
+    ) {
+        let tree = match seed {
+            Some(seed) => random_tree(seed, kind_of(kind), SensorModel::default(), 10),
+            None => tree_of(kind_of(kind), SensorModel::default(), &ops),
+        };
+        let (mut ot_bytes, mut bt_bytes) = (Vec::new(), Vec::new());
+        ot::write(&tree, &mut ot_bytes).unwrap();
+        bt::write(&tree, &mut bt_bytes).unwrap();
+        for bytes in [&mut ot_bytes, &mut bt_bytes] {
+            for (at, b) in &flips {
+                let i = at.index(bytes.len());
+                bytes[i] ^= b;
+            }
+            if do_cut {
+                bytes.truncate(cut.index(bytes.len() + 1));
+            }
+        }
+        let written = |t: &OccupancyTree| {
+            let mut v = Vec::new();
+            ot::write(t, &mut v).unwrap();
+            v
+        };
+        let ot_mem = ot::read(&ot_bytes[..]).map(|t| t.occupancy().map(written)).map_err(|e| e.to_string());
+        let ot_chunked = ot::read(BufReader::with_capacity(cap, &ot_bytes[..]))
+            .map(|t| t.occupancy().map(written))
+            .map_err(|e| e.to_string());
+        prop_assert_eq!(ot_mem, ot_chunked);
+        let bt_mem = bt::read(&bt_bytes[..]).map(|t| written(&t)).map_err(|e| e.to_string());
+        let bt_chunked = bt::read(BufReader::with_capacity(cap, &bt_bytes[..])).map(|t| written(&t)).map_err(|e| e.to_string());
+        prop_assert_eq!(bt_mem, bt_chunked);
+    }
+}
+
 #[test]
 fn kinds_convert_without_touching_values_or_structure() {
-    use octolinear::tree::NodeKind;
     let mut color = OccupancyTree::with_kind(0.1, SensorModel::default(), NodeKind::Color).unwrap();
     for i in 0..50u16 {
         let k = Key::new(BASE + i % 4, BASE + (i / 4) % 4, BASE + i / 16);

@@ -8,9 +8,9 @@
 //! not stored: readers restore the clamping bounds. See `formats/bt.md`.
 
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, BT_FIRST_LINE};
-use super::TreeFileError;
+use super::{prefetch, TreeFileError};
 use crate::sensor::SensorModel;
-use crate::tree::{NodeArena, NodeKind, OccupancyTree};
+use crate::tree::{default_extra, LabelFill, NodeKind, OccupancyTree};
 use std::io::{self, BufRead, Write};
 
 /// Reads a `.bt` file into a tree with the default sensor model.
@@ -40,7 +40,7 @@ pub fn read_with_sensor(r: impl BufRead, sensor: SensorModel) -> Result<Occupanc
         false => read_legacy_header(&mut r)?,
     };
     let tree = if size > 0 {
-        read_data(&mut r, resolution, sensor, NodeKind::Plain)?
+        read_data(&mut r, resolution, sensor, NodeKind::Plain, size)?
     } else {
         OccupancyTree::with_sensor(resolution, sensor)
             .map_err(|_| TreeFileError::BadResolution { value: resolution, offset: None })?
@@ -53,18 +53,50 @@ pub fn read_with_sensor(r: impl BufRead, sensor: SensorModel) -> Result<Occupanc
 
 /// Reads one tree's binary node stream, root first
 /// (`OccupancyOcTreeBase::readBinaryData`), into a tree of `kind` whose
-/// nodes keep that kind's default colour or stamp.
+/// nodes keep that kind's default colour or stamp. `size_hint` (the
+/// header's unchecked `size`) only sizes the arena.
 pub(crate) fn read_data<R: BufRead>(
     r: &mut CountingReader<R>,
     resolution: f64,
     sensor: SensorModel,
     kind: NodeKind,
+    size_hint: u64,
 ) -> Result<OccupancyTree, TreeFileError> {
     let mut tree = OccupancyTree::with_kind(resolution, sensor, kind)
         .map_err(|_| TreeFileError::BadResolution { value: resolution, offset: None })?;
-    let mut arena = OccupancyTree::new_arena(kind, sensor.clamping_max);
-    read_node(r, &mut arena, 0, 0, &sensor)?;
-    tree.set_arena(Some(arena));
+    let hint = usize::try_from(size_hint).unwrap_or(usize::MAX);
+    let mut fill =
+        LabelFill::new(default_extra(kind), hint, sensor.clamping_max, sensor.clamping_min, sensor.clamping_max);
+    // each record announces at most 8 nodes: reserve what the header says,
+    // as far as the bytes at hand can hold it
+    let at_hand = r.chunk()?.len() / 2;
+    fill.reserve(hint.min(at_hand.saturating_mul(8)));
+    let too_deep = |offset: u64| TreeFileError::TooDeep { offset };
+    loop {
+        let base = r.offset;
+        let buf = r.chunk()?;
+        let mut used = 0;
+        for rec in buf.chunks_exact(2) {
+            fill.push(u16::from_le_bytes([rec[0], rec[1]])).map_err(|_| too_deep(base + used as u64))?;
+            used += 2;
+            if fill.is_complete() {
+                break;
+            }
+        }
+        r.advance(used);
+        if fill.is_complete() {
+            break;
+        }
+        // a record split between two fills of the buffer (or the end)
+        let mut rec = [0u8; 2];
+        let offset = r.offset;
+        r.read_exact(&mut rec, "a node's child labels")?;
+        fill.push(u16::from_le_bytes(rec)).map_err(|_| too_deep(offset))?;
+        if fill.is_complete() {
+            break;
+        }
+    }
+    tree.set_arena_with_size(fill.finish().expect("complete"));
     Ok(tree)
 }
 
@@ -95,65 +127,165 @@ fn read_legacy_header<R: BufRead>(r: &mut CountingReader<R>) -> Result<(u64, f64
     Ok((u64::from(u32::from_le_bytes(b4)), res))
 }
 
-fn read_node<R: BufRead>(
-    r: &mut CountingReader<R>,
-    arena: &mut NodeArena,
-    id: u32,
-    depth: u8,
-    sensor: &SensorModel,
-) -> Result<(), TreeFileError> {
-    let offset = r.offset;
-    let mut b = [0u8; 2];
-    r.read_exact(&mut b, "a node's child labels")?;
-    let labels = u16::from_le_bytes(b);
-    let mut mask = 0u8;
-    for i in 0..8 {
-        if (labels >> (2 * i)) & 3 != 0 {
-            mask |= 1 << i;
-        }
-    }
-    if mask == 0 {
-        return Ok(());
-    }
-    if depth >= 16 {
-        return Err(TreeFileError::TooDeep { offset });
-    }
-    let first = arena.add_children(id, mask, 0.0);
-    let mut child = first;
-    for i in 0..8 {
-        match (labels >> (2 * i)) & 3 {
-            0 => continue,
-            1 => arena.set_value(child, sensor.clamping_min),
-            2 => arena.set_value(child, sensor.clamping_max),
-            _ => {}
-        }
-        child += 1;
-    }
-    let mut child = first;
-    for i in 0..8 {
-        match (labels >> (2 * i)) & 3 {
-            0 => continue,
-            3 => {
-                read_node(r, arena, child, depth + 1, sensor)?;
-                let max = (0..arena.mask(child).count_ones())
-                    .map(|j| arena.value(arena.first_child(child) + j))
-                    .fold(-f32::MAX, |m, v| if v > m { v } else { m });
-                arena.set_value(child, max);
-            }
-            _ => {}
-        }
-        child += 1;
-    }
-    Ok(())
-}
-
 /// Writes what OctoMap's `writeBinary` writes: the tree converted to
 /// maximum likelihood and pruned. The caller's tree is left unchanged.
-pub fn write(tree: &OccupancyTree, w: impl Write) -> io::Result<()> {
-    let mut ml = tree.clone();
-    ml.to_max_likelihood();
-    ml.prune();
-    write_const(&ml, w)
+pub fn write(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
+    let id = super::ot::TreeKind::of(tree.kind()).id();
+    let mut out = Vec::new();
+    let size = write_ml_data(tree, &mut out);
+    write_header(&mut w, BT_FIRST_LINE, id, size, tree.resolution())?;
+    w.write_all(&out)
+}
+
+/// Appends to `out` the node stream `toMaxLikelihood()` then `prune()`
+/// would leave, without copying or changing the tree; returns the node
+/// count (`size()`) that tree would have.
+///
+/// `prune` merges level by level from depth 15 up and stops after the
+/// first level that merged nothing. One read-only pass writes the records
+/// as if pruning went all the way up, dropping the subtrees that merge, and
+/// counts the merges per depth. That is the answer unless a level above
+/// the one where `prune` stops would merge something; then a second pass
+/// writes the records with merges below that level only.
+pub(crate) fn write_ml_data(tree: &OccupancyTree, out: &mut Vec<u8>) -> usize {
+    let Some(arena) = tree.arena() else {
+        return tree.size();
+    };
+    let (values, masks, first_child, extras) = arena.parts();
+    let ml = MlView::new(values, masks, first_child, extras, tree.sensor());
+    let stamped = tree.kind() == NodeKind::Stamped;
+    let emit = |lowest: usize, out: &mut Vec<u8>, counts: &mut [usize; 16]| {
+        if stamped {
+            ml.emit::<true>(0, 0, lowest, out, counts);
+        } else {
+            ml.emit::<false>(0, 0, lowest, out, counts);
+        }
+    };
+    out.reserve(2 * (masks.len() / 8 + 1));
+    let start = out.len();
+    let mut counts = [0usize; 16];
+    emit(1, out, &mut counts);
+    // as `OccupancyTree::prune`: the deepest level that merges nothing
+    // stops it; only the levels below that one merge
+    let stop = (1..16).rev().find(|&d| counts[d] == 0).unwrap_or(0);
+    let lowest = stop.max(1);
+    if counts[1..lowest].iter().any(|&c| c > 0) {
+        out.truncate(start);
+        emit(lowest, out, &mut [0; 16]);
+    }
+    tree.size() - 8 * counts[lowest..].iter().sum::<usize>()
+}
+
+/// The tree as `toMaxLikelihood()` would leave it, read in place.
+///
+/// Maximum likelihood leaves a node one of two values: the upper clamping
+/// bound when it is occupied (class 1), else the lower (class 0). What
+/// `prune` and `writeBinaryConst` then compare and test depends on the
+/// class alone, so they are precomputed per class: the `.bt` label, and
+/// whether the values of two classes compare equal (they may not, even
+/// within a class, when a bound is NaN; they do across classes when the
+/// bounds are equal).
+struct MlView<'a> {
+    values: &'a [f32],
+    masks: &'a [u8],
+    first_child: &'a [u32],
+    extras: &'a [u32],
+    threshold: f32,
+    /// The label of a leaf of each class: 2 when its value is occupied, else 1.
+    label: [u16; 2],
+    /// `equal[a][b]`: whether values of classes `a` and `b` compare equal.
+    equal: [[bool; 2]; 2],
+}
+
+impl<'a> MlView<'a> {
+    fn new(values: &'a [f32], masks: &'a [u8], first_child: &'a [u32], extras: &'a [u32], s: &SensorModel) -> Self {
+        let value = [s.clamping_min, s.clamping_max];
+        let label = value.map(|v| if s.is_occupied(v) { 2 } else { 1 });
+        let equal = [0, 1].map(|a| [0, 1].map(|b| value[a] == value[b]));
+        MlView { values, masks, first_child, extras, threshold: s.occupancy_threshold, label, equal }
+    }
+
+    /// Appends the record of inner node `n` at `depth` and those of its
+    /// subtree, merging the nodes at depth `lowest` or deeper that merge
+    /// once every level below them is pruned, and counts those per depth.
+    /// Returns `Some((class, stamp))` when `n` itself merges: the caller
+    /// then drops what was appended and labels `n` a leaf of that class.
+    fn emit<const STAMPED: bool>(
+        &self,
+        n: usize,
+        depth: usize,
+        lowest: usize,
+        out: &mut Vec<u8>,
+        counts: &mut [usize; 16],
+    ) -> Option<(u8, u32)> {
+        let at = out.len();
+        out.extend_from_slice(&[0, 0]);
+        let mask = self.masks[n];
+        let first = self.first_child[n] as usize;
+        let group = first..first + mask.count_ones() as usize;
+        // ask for the child groups of the inner children now, all at once,
+        // rather than one after the other as the recursion reaches them
+        for g in group.clone() {
+            if self.masks[g] != 0 {
+                let fc = self.first_child[g] as usize;
+                prefetch(self.masks, fc);
+                prefetch(self.values, fc);
+                prefetch(self.first_child, fc);
+                if STAMPED {
+                    prefetch(self.extras, fc);
+                }
+            }
+        }
+        let mut labels = 0u16;
+        // classes by child position; children that stay inner
+        let mut occupied = 0u8;
+        let mut inner = 0u8;
+        let mut stamps_equal = true;
+        let mut stamp0 = 0;
+        let mut rest = mask;
+        for c in group {
+            let pos = rest.trailing_zeros();
+            rest &= rest - 1;
+            let (class, stamp) = if self.masks[c] == 0 {
+                (u8::from(self.values[c] >= self.threshold), if STAMPED { self.extras[c] } else { 0 })
+            } else {
+                let before = out.len();
+                match self.emit::<STAMPED>(c, depth + 1, lowest, out, counts) {
+                    Some(leaf) => {
+                        out.truncate(before);
+                        leaf
+                    }
+                    None => {
+                        inner |= 1 << pos;
+                        labels |= 3 << (2 * pos);
+                        continue;
+                    }
+                }
+            };
+            occupied |= class << pos;
+            labels |= self.label[usize::from(class)] << (2 * pos);
+            if STAMPED {
+                if pos == 0 {
+                    stamp0 = stamp;
+                } else if stamp != stamp0 {
+                    stamps_equal = false;
+                }
+            }
+        }
+        out[at..at + 2].copy_from_slice(&labels.to_le_bytes());
+        // `pruneNode`: eight leaves whose values (and stamps) all equal
+        // child 0's
+        if mask != 0xff || inner != 0 || depth < lowest || !stamps_equal {
+            return None;
+        }
+        let class0 = usize::from(occupied & 1);
+        let others = occupied >> 1;
+        if (others != 0 && !self.equal[1][class0]) || (others != 0x7f && !self.equal[0][class0]) {
+            return None;
+        }
+        counts[depth] += 1;
+        Some((class0 as u8, stamp0))
+    }
 }
 
 /// Writes the tree as it is (`writeBinaryConst`): leaves are labelled
@@ -170,38 +302,53 @@ pub(crate) fn write_data(tree: &OccupancyTree, mut w: impl Write) -> io::Result<
     let Some(arena) = tree.arena() else {
         return Ok(());
     };
-    let sensor = tree.sensor();
-    let mut out = Vec::with_capacity(1 << 16);
-    let mut stack = vec![0u32];
-    while let Some(n) = stack.pop() {
-        let mut labels = 0u16;
-        let mask = arena.mask(n);
-        let first = arena.first_child(n);
-        let mut child = first;
-        for i in 0..8 {
-            if mask & (1 << i) == 0 {
-                continue;
-            }
-            let label = if arena.has_children(child) {
-                3
-            } else if sensor.is_occupied(arena.value(child)) {
-                2
-            } else {
-                1
-            };
-            labels |= label << (2 * i);
-            child += 1;
-        }
-        out.extend_from_slice(&labels.to_le_bytes());
-        for i in (0..mask.count_ones()).rev() {
-            if arena.has_children(first + i) {
-                stack.push(first + i);
-            }
-        }
-        if out.len() >= (1 << 16) - 4 {
-            w.write_all(&out)?;
-            out.clear();
+    let (values, masks, first_child, _) = arena.parts();
+    let mut out = Vec::with_capacity(2 * (masks.len() / 8 + 1));
+    write_const_node(masks, first_child, values, tree.sensor(), 0, &mut out);
+    w.write_all(&out)
+}
+
+/// Appends the record of node `n` (which has children) and those of its
+/// subtree: children with children are labelled 3, leaves 2 when occupied,
+/// else 1.
+fn write_const_node(
+    masks: &[u8],
+    first_child: &[u32],
+    values: &[f32],
+    sensor: &SensorModel,
+    n: usize,
+    out: &mut Vec<u8>,
+) {
+    let mask = masks[n];
+    let first = first_child[n] as usize;
+    let group = first..first + mask.count_ones() as usize;
+    // ask for the inner children's groups before the recursion needs them
+    for c in group.clone() {
+        if masks[c] != 0 {
+            let fc = first_child[c] as usize;
+            prefetch(masks, fc);
+            prefetch(values, fc);
+            prefetch(first_child, fc);
         }
     }
-    w.write_all(&out)
+    let mut labels = 0u16;
+    let mut rest = mask;
+    for c in group.clone() {
+        let pos = rest.trailing_zeros();
+        rest &= rest - 1;
+        let label = if masks[c] != 0 {
+            3
+        } else if sensor.is_occupied(values[c]) {
+            2
+        } else {
+            1
+        };
+        labels |= label << (2 * pos);
+    }
+    out.extend_from_slice(&labels.to_le_bytes());
+    for c in group {
+        if masks[c] != 0 {
+            write_const_node(masks, first_child, values, sensor, c, out);
+        }
+    }
 }

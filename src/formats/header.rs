@@ -39,6 +39,19 @@ impl<R: BufRead> CountingReader<R> {
         Ok(self.inner.fill_buf()?.first().copied())
     }
 
+    /// The bytes buffered next (empty at the end), without consuming them.
+    #[inline]
+    pub fn chunk(&mut self) -> Result<&[u8], TreeFileError> {
+        Ok(self.inner.fill_buf()?)
+    }
+
+    /// Consumes `n` bytes of [`Self::chunk`].
+    #[inline]
+    pub fn advance(&mut self, n: usize) {
+        self.inner.consume(n);
+        self.offset += n as u64;
+    }
+
     fn consume(&mut self) {
         self.inner.consume(1);
         self.offset += 1;

@@ -9,7 +9,7 @@
 //! whose id is `OcTreeBase`, a little-endian `u32` count. See `formats/ot.md`.
 
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, OT_FIRST_LINE};
-use super::TreeFileError;
+use super::{prefetch, TreeFileError};
 use crate::sensor::SensorModel;
 use crate::tree::{CountingTree, NodeKind, NodeRef, OccupancyTree, PreorderBuilder};
 use std::io::{self, BufRead, Write};
@@ -114,7 +114,7 @@ pub fn read(r: impl BufRead) -> Result<AnyTree, TreeFileError> {
         // OctoMap reads no data then, whatever follows
         return empty(kind, header.resolution);
     }
-    read_data(&mut r, kind, header.resolution)
+    read_data(&mut r, kind, header.resolution, header.size)
 }
 
 /// An empty tree of `kind`.
@@ -139,28 +139,28 @@ fn node_kind(kind: TreeKind) -> NodeKind {
 
 /// Reads one tree's node stream, root first (`OcTreeBaseImpl::readData`):
 /// exactly the nodes the child masks announce, nothing after them.
+/// `size_hint` (the header's unchecked `size`) only sizes the arena.
 pub(crate) fn read_data<R: BufRead>(
     r: &mut CountingReader<R>,
     kind: TreeKind,
     resolution: f64,
+    size_hint: u64,
 ) -> Result<AnyTree, TreeFileError> {
-    let mut b = PreorderBuilder::with_kind(node_kind(kind));
-    let mut buf = [0u8; 8];
-    let len = kind.payload_len() + 1;
-    let mut index = 0;
-    while !b.is_complete() {
-        let offset = r.offset;
-        r.read_exact(&mut buf[..len], "a node")?;
-        let word = [buf[0], buf[1], buf[2], buf[3]];
-        let (value, extra) = match kind {
-            TreeKind::OcTree => (f32::from_le_bytes(word), None),
-            TreeKind::OcTreeStamped => (f32::from_le_bytes(word), Some(0)),
-            TreeKind::ColorOcTree => (f32::from_le_bytes(word), Some(u32::from_le_bytes([buf[4], buf[5], buf[6], 0]))),
-            TreeKind::CountingOcTree => (0.0, Some(u32::from_le_bytes(word))),
-        };
-        b.push_with_extra(value, extra, buf[len - 1], index).map_err(|_| TreeFileError::TooDeep { offset })?;
-        index += 1;
-    }
+    let b = match kind {
+        TreeKind::OcTree => {
+            read_nodes::<R, 5>(r, kind, size_hint, |n| (f32::from_le_bytes([n[0], n[1], n[2], n[3]]), None))?
+        }
+        TreeKind::OcTreeStamped => {
+            read_nodes::<R, 5>(r, kind, size_hint, |n| (f32::from_le_bytes([n[0], n[1], n[2], n[3]]), Some(0)))?
+        }
+        TreeKind::ColorOcTree => read_nodes::<R, 8>(r, kind, size_hint, |n| {
+            (f32::from_le_bytes([n[0], n[1], n[2], n[3]]), Some(u32::from_le_bytes([n[4], n[5], n[6], 0])))
+        })?,
+        TreeKind::CountingOcTree => {
+            read_nodes::<R, 5>(r, kind, size_hint, |n| (0.0, Some(u32::from_le_bytes([n[0], n[1], n[2], n[3]]))))?
+        }
+    };
+    debug_assert!(b.is_complete());
     let bad_res = |_| TreeFileError::BadResolution { value: resolution, offset: None };
     if kind == TreeKind::CountingOcTree {
         let arena = b.finish_arena().expect("complete");
@@ -168,6 +168,55 @@ pub(crate) fn read_data<R: BufRead>(
     }
     let tree = b.finish(resolution, SensorModel::default()).map_err(bad_res)?.expect("complete");
     Ok(AnyTree::Occupancy(tree))
+}
+
+/// The node records (`N` bytes each: payload, then the child mask) until
+/// the tree is complete, decoded by `decode`. Records are taken straight
+/// from the reader's buffer; only one that straddles two buffer fills is
+/// copied.
+fn read_nodes<R: BufRead, const N: usize>(
+    r: &mut CountingReader<R>,
+    kind: TreeKind,
+    size_hint: u64,
+    decode: impl Fn(&[u8; N]) -> (f32, Option<u32>),
+) -> Result<PreorderBuilder, TreeFileError> {
+    debug_assert_eq!(N, kind.payload_len() + 1);
+    let mut b = PreorderBuilder::with_hint(node_kind(kind), usize::try_from(size_hint).unwrap_or(usize::MAX));
+    // reserve at once what the header announces, as far as the bytes at
+    // hand can hold it (the whole rest when reading from memory)
+    let at_hand = r.chunk()?.len() / N;
+    b.reserve(usize::try_from(size_hint).unwrap_or(usize::MAX).min(at_hand));
+    let mut index = 0u64;
+    let too_deep = |offset: u64| TreeFileError::TooDeep { offset };
+    loop {
+        let base = r.offset;
+        let buf = r.chunk()?;
+        let mut used = 0;
+        for rec in buf.chunks_exact(N) {
+            let rec: &[u8; N] = rec.try_into().expect("chunks_exact");
+            let (value, extra) = decode(rec);
+            b.push_with_extra(value, extra, rec[N - 1], index).map_err(|_| too_deep(base + used as u64))?;
+            used += N;
+            index += 1;
+            if b.is_complete() {
+                break;
+            }
+        }
+        r.advance(used);
+        if b.is_complete() {
+            return Ok(b);
+        }
+        // a record split between two fills of the buffer (or the end)
+        let mut rec = [0u8; N];
+        let offset = r.offset;
+        r.read_exact(&mut rec, "a node")?;
+        let (value, extra) = decode(&rec);
+        b.push_with_extra(value, extra, rec[N - 1], index).map_err(|_| too_deep(offset))?;
+        index += 1;
+        if b.is_complete() {
+            return Ok(b);
+        }
+    }
 }
 
 /// Writes `tree` as OctoMap's `write` does, under its type's id.
@@ -179,13 +228,18 @@ pub fn write(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
 
 /// Writes the node stream alone, without header (`writeData`).
 pub(crate) fn write_data(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
-    let kind = TreeKind::of(tree.kind());
-    write_nodes(tree.root(), &mut w, |n, out| {
-        out.extend_from_slice(&n.value().to_le_bytes());
-        if kind == TreeKind::ColorOcTree {
-            out.extend_from_slice(&n.extra().to_le_bytes()[..3]);
-        }
-    })
+    let Some(root) = tree.root() else { return Ok(()) };
+    let (arena, _) = root.arena_id();
+    let (values, _, _, extras) = arena.parts();
+    if TreeKind::of(tree.kind()) == TreeKind::ColorOcTree {
+        write_nodes(root, &mut w, |n| {
+            let [v0, v1, v2, v3] = values[n].to_le_bytes();
+            let [r, g, b, _] = extras[n].to_le_bytes();
+            [v0, v1, v2, v3, r, g, b]
+        })
+    } else {
+        write_nodes(root, &mut w, |n| values[n].to_le_bytes())
+    }
 }
 
 /// Writes a counting tree (`id OcTreeBase`, `u32` counts).
@@ -196,28 +250,73 @@ pub fn write_counting(tree: &CountingTree, mut w: impl Write) -> io::Result<()> 
 
 /// A counting tree's node stream alone, without header.
 pub(crate) fn write_counting_data(tree: &CountingTree, mut w: impl Write) -> io::Result<()> {
-    write_nodes(tree.root(), &mut w, |n, out| out.extend_from_slice(&n.extra().to_le_bytes()))
+    let Some(root) = tree.root() else { return Ok(()) };
+    let (arena, _) = root.arena_id();
+    let (_, _, _, extras) = arena.parts();
+    write_nodes(root, &mut w, |n| extras[n].to_le_bytes())
 }
 
-/// The pre-order node stream: payload, then the child-existence byte.
-fn write_nodes(
-    root: Option<NodeRef<'_>>,
+/// The pre-order node stream below `root`: each node's payload, then its
+/// child-existence byte.
+fn write_nodes<const P: usize>(
+    root: NodeRef<'_>,
     w: &mut impl Write,
-    payload: impl Fn(&NodeRef<'_>, &mut Vec<u8>),
+    payload: impl Fn(usize) -> [u8; P],
 ) -> io::Result<()> {
-    let Some(root) = root else { return Ok(()) };
-    let mut out = Vec::with_capacity(1 << 16);
-    let mut stack = vec![root];
-    while let Some(n) = stack.pop() {
-        payload(&n, &mut out);
-        out.push(n.child_mask());
-        for rank in (0..n.child_count()).rev() {
-            stack.extend(n.nth_child(rank));
+    let (arena, id) = root.arena_id();
+    let (values, masks, first_child, extras) = arena.parts();
+    let mut out = NodeStream { masks, first_child, values, extras, payload, out: Vec::with_capacity(FLUSH_AT + 64), w };
+    out.node(id as usize)?;
+    out.w.write_all(&out.out)
+}
+
+/// Bytes gathered before they go to the writer.
+const FLUSH_AT: usize = 1 << 16;
+
+struct NodeStream<'a, F, W> {
+    masks: &'a [u8],
+    first_child: &'a [u32],
+    /// What payloads are made of (only prefetched here).
+    values: &'a [f32],
+    extras: &'a [u32],
+    payload: F,
+    out: Vec<u8>,
+    w: W,
+}
+
+impl<const P: usize, F: Fn(usize) -> [u8; P], W: Write> NodeStream<'_, F, W> {
+    /// Node `n` and its subtree.
+    fn node(&mut self, n: usize) -> io::Result<()> {
+        let mask = self.masks[n];
+        self.out.extend_from_slice(&(self.payload)(n));
+        self.out.push(mask);
+        if mask == 0 {
+            return Ok(());
         }
-        if out.len() >= (1 << 16) - 16 {
-            w.write_all(&out)?;
-            out.clear();
+        let first = self.first_child[n] as usize;
+        let group = first..first + mask.count_ones() as usize;
+        // ask for the inner children's groups before the recursion needs them
+        for c in group.clone() {
+            if self.masks[c] != 0 {
+                let fc = self.first_child[c] as usize;
+                prefetch(self.masks, fc);
+                prefetch(self.first_child, fc);
+                prefetch(self.values, fc);
+                prefetch(self.extras, fc);
+            }
         }
+        for c in group {
+            if self.masks[c] == 0 {
+                self.out.extend_from_slice(&(self.payload)(c));
+                self.out.push(0);
+            } else {
+                self.node(c)?;
+            }
+        }
+        if self.out.len() >= FLUSH_AT {
+            self.w.write_all(&self.out)?;
+            self.out.clear();
+        }
+        Ok(())
     }
-    w.write_all(&out)
 }

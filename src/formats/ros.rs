@@ -36,10 +36,9 @@ pub fn binary_map_to_msg(tree: &OccupancyTree) -> OctomapMsg {
 /// smaller message octomap_msgs recommends, whose `data` is what follows
 /// the header of the `.bt` file [`bt::write`] writes. `tree` is unchanged.
 pub fn binary_map_to_msg_compact(tree: &OccupancyTree) -> OctomapMsg {
-    let mut ml = tree.clone();
-    ml.to_max_likelihood();
-    ml.prune();
-    binary_map_to_msg(&ml)
+    let mut data = Vec::new();
+    bt::write_ml_data(tree, &mut data);
+    OctomapMsg { binary: true, id: TreeKind::of(tree.kind()).id().to_string(), resolution: tree.resolution(), data }
 }
 
 /// `fullMapToMsg`: every node with its log-odds (and colour), the node
@@ -75,14 +74,14 @@ pub fn msg_to_map(msg: &OctomapMsg) -> Result<AnyTree, TreeFileError> {
         if msg.data.is_empty() {
             return ot::empty(TreeKind::of(kind), resolution);
         }
-        AnyTree::Occupancy(bt::read_data(&mut r, resolution, SensorModel::default(), kind)?)
+        AnyTree::Occupancy(bt::read_data(&mut r, resolution, SensorModel::default(), kind, u64::MAX)?)
     } else {
         let kind = TreeKind::from_id(&msg.id)
             .ok_or_else(|| TreeFileError::UnknownTreeType { id: msg.id.clone(), offset: None })?;
         if msg.data.is_empty() {
             return ot::empty(kind, resolution);
         }
-        ot::read_data(&mut r, kind, resolution)?
+        ot::read_data(&mut r, kind, resolution, u64::MAX)?
     };
     let rest = msg.data.len() as u64 - r.offset;
     if rest > 0 {

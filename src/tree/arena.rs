@@ -459,10 +459,363 @@ impl NodeArena {
         }
     }
 
+    /// The slot arrays, for read-only passes over the whole tree: values,
+    /// child masks, first children and extras (empty when extras are off).
+    #[inline]
+    pub(crate) fn parts(&self) -> (&[f32], &[u8], &[NodeId], &[u32]) {
+        (&self.values, &self.masks, &self.first_child, &self.extras)
+    }
+
     /// Mutable access to every slot's value (free slots included).
     pub fn values_mut(&mut self) -> &mut [f32] {
         &mut self.values
     }
+}
+
+/// Why [`PreorderFill::push`] refused a node.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum FillError {
+    /// The node has children but lies at depth 16.
+    TooDeep,
+    /// Every announced node has been given already.
+    Complete,
+}
+
+/// The arrays of an arena being filled in pre-order: zero-initialised
+/// (extras: the default) up to their length, which is the capacity in
+/// slots; the first `len` slots are in use.
+struct Slots {
+    values: Vec<f32>,
+    masks: Vec<u8>,
+    first_child: Vec<NodeId>,
+    extras: Vec<u32>,
+    default_extra: Option<u32>,
+    len: usize,
+    /// Expected node count; capacity grows toward it, never past what the
+    /// nodes given so far justify (see [`Self::grow`]).
+    hint: usize,
+}
+
+impl Slots {
+    fn new(default_extra: Option<u32>, hint: usize) -> Self {
+        Slots {
+            values: Vec::new(),
+            masks: Vec::new(),
+            first_child: Vec::new(),
+            extras: Vec::new(),
+            default_extra,
+            len: 0,
+            hint,
+        }
+    }
+
+    /// Makes room for `n` more slots at once. Fresh zeroed memory comes
+    /// from the allocator already zeroed, so large reservations cost no
+    /// writes up front.
+    fn reserve(&mut self, n: usize) {
+        let cap = self.len + n.min(u32::MAX as usize - 2 - self.len);
+        if cap <= self.values.len() {
+            return;
+        }
+        if self.values.is_empty() {
+            self.values = vec![0.0; cap];
+            self.masks = vec![0; cap];
+            self.first_child = vec![NO_CHILD; cap];
+            if let Some(e) = self.default_extra {
+                self.extras = vec![e; cap];
+            }
+        } else {
+            self.values.resize(cap, 0.0);
+            self.masks.resize(cap, 0);
+            self.first_child.resize(cap, NO_CHILD);
+            if let Some(e) = self.default_extra {
+                self.extras.resize(cap, e);
+            }
+        }
+    }
+
+    /// Makes room for `k` more slots: doubles the capacity, capped at the
+    /// hint while the hint is still ahead, so memory stays within twice
+    /// what the input has really announced.
+    #[cold]
+    #[inline(never)]
+    fn grow(&mut self, k: usize) {
+        let len = self.len;
+        assert!(len + k <= u32::MAX as usize - 2, "node arena exceeds 2^32 slots");
+        let mut want = (2 * len).max(1024);
+        if self.hint >= len + k {
+            want = want.min(self.hint);
+        }
+        self.reserve(want.max(len + k) - len);
+    }
+
+    /// Takes `k` more slots; returns the first.
+    #[inline(always)]
+    fn take(&mut self, k: usize) -> NodeId {
+        let first = self.len;
+        if first + k > self.values.len() {
+            self.grow(k);
+        }
+        self.len = first + k;
+        first as NodeId
+    }
+
+    /// The arena of the slots in use.
+    fn into_arena(self) -> NodeArena {
+        let len = self.len;
+        let mut a = NodeArena {
+            values: self.values,
+            masks: self.masks,
+            first_child: self.first_child,
+            extras: self.extras,
+            default_extra: self.default_extra,
+            free: Default::default(),
+            free_slots: 0,
+        };
+        if a.values.len() > len || a.values.capacity() > len {
+            a.values.truncate(len);
+            a.masks.truncate(len);
+            a.first_child.truncate(len);
+            a.extras.truncate(if a.default_extra.is_some() { len } else { 0 });
+            a.shrink_to_fit();
+        }
+        a
+    }
+}
+
+/// Fills an arena from nodes given in depth-first pre-order (children
+/// 0..7): each node's child group is allocated when the node is given, so
+/// the result has the layout of [`NodeArena::compacted`] and no free slots.
+///
+/// Open child groups are kept on a fixed stack, one per depth: the group
+/// at index `d` holds the nodes of depth `d + 1`; groups whose nodes have
+/// all been given are closed after each leaf, so the depth of the next node
+/// is the number of open groups.
+pub(crate) struct PreorderFill {
+    slots: Slots,
+    /// Per open group: its next slot and its end.
+    open: [(NodeId, NodeId); 16],
+    depth: usize,
+}
+
+impl PreorderFill {
+    /// An empty fill; `hint` (unchecked, e.g. a header's size field) is the
+    /// node count to grow toward.
+    pub(crate) fn new(default_extra: Option<u32>, hint: usize) -> Self {
+        PreorderFill { slots: Slots::new(default_extra, hint), open: [(0, 0); 16], depth: 0 }
+    }
+
+    /// Makes room for `n` more nodes at once (callers cap `n` by what their
+    /// input can still hold).
+    pub(crate) fn reserve(&mut self, n: usize) {
+        self.slots.reserve(n);
+    }
+
+    /// True once the root and every announced node have been given.
+    #[inline(always)]
+    pub(crate) fn is_complete(&self) -> bool {
+        self.slots.len != 0 && self.depth == 0
+    }
+
+    /// Depth of the next node (0 for the root); `None` when complete.
+    pub(crate) fn next_depth(&self) -> Option<u8> {
+        if self.is_complete() {
+            None
+        } else {
+            Some(self.depth as u8)
+        }
+    }
+
+    /// Nodes given or announced so far.
+    pub(crate) fn len(&self) -> usize {
+        self.slots.len
+    }
+
+    /// Gives the next node: its value, its extra (`None` keeps the
+    /// default) and its child mask.
+    #[inline(always)]
+    pub(crate) fn push(&mut self, value: f32, extra: Option<u32>, mask: u8) -> Result<(), FillError> {
+        let depth = self.depth;
+        let id = if depth > 0 {
+            let g = &mut self.open[depth - 1];
+            let id = g.0;
+            g.0 += 1;
+            id
+        } else if self.slots.len == 0 {
+            self.slots.take(1)
+        } else {
+            return Err(FillError::Complete);
+        };
+        let s = &mut self.slots;
+        let i = id as usize;
+        s.values[i] = value;
+        if let (Some(e), Some(slot)) = (extra, s.extras.get_mut(i)) {
+            *slot = e;
+        }
+        if mask != 0 {
+            if depth >= 16 {
+                return Err(FillError::TooDeep);
+            }
+            let k = mask.count_ones();
+            let first = s.take(k as usize);
+            s.masks[i] = mask;
+            s.first_child[i] = first;
+            self.open[depth] = (first, first + k);
+            self.depth = depth + 1;
+        } else {
+            // close the groups this leaf completed
+            while self.depth > 0 && self.open[self.depth - 1].0 == self.open[self.depth - 1].1 {
+                self.depth -= 1;
+            }
+        }
+        Ok(())
+    }
+
+    /// The arena (root at 0) once complete, `None` before the root or while
+    /// nodes are missing.
+    pub(crate) fn finish(self) -> Option<NodeArena> {
+        self.is_complete().then(|| self.slots.into_arena())
+    }
+}
+
+/// Fills an arena from a `.bt` node stream: one record per node with
+/// children, in depth-first pre-order, giving a 2-bit label per child
+/// (`0` absent, `1` free leaf, `2` occupied leaf, `3` inner node whose
+/// record comes later). Leaves get the free or occupied value, inner nodes
+/// the maximum of their children once those are known, nodes announced as
+/// inner but given no children `-f32::MAX` (OctoMap's `getMaxChildLogOdds`
+/// of no children); the root keeps its initial value. The layout is that
+/// of [`PreorderFill`].
+pub(crate) struct LabelFill {
+    slots: Slots,
+    /// Value per label: unused, free, occupied, inner placeholder.
+    label_values: [f32; 4],
+    /// Per depth `d`, the child group of the node at depth `d` whose
+    /// subtree is being read.
+    open: [OpenGroup; 16],
+    depth: usize,
+    started: bool,
+}
+
+#[derive(Clone, Copy, Default)]
+struct OpenGroup {
+    parent: NodeId,
+    first: NodeId,
+    mask: u8,
+    /// Children labelled inner whose record has not come yet.
+    due: u8,
+}
+
+/// Bits `0, 2, 4, .., 14` of `x` as one byte.
+#[inline(always)]
+fn even_bits(x: u16) -> u8 {
+    let x = x & 0x5555;
+    let x = (x | (x >> 1)) & 0x3333;
+    let x = (x | (x >> 2)) & 0x0f0f;
+    ((x | (x >> 4)) & 0x00ff) as u8
+}
+
+impl LabelFill {
+    /// A fill whose root holds `root_value`; leaves get `free` or
+    /// `occupied`. `hint` as for [`PreorderFill::new`].
+    pub(crate) fn new(default_extra: Option<u32>, hint: usize, root_value: f32, free: f32, occupied: f32) -> Self {
+        let mut slots = Slots::new(default_extra, hint);
+        let root = slots.take(1);
+        slots.values[root as usize] = root_value;
+        LabelFill {
+            slots,
+            label_values: [0.0, free, occupied, -f32::MAX],
+            open: [OpenGroup::default(); 16],
+            depth: 0,
+            started: false,
+        }
+    }
+
+    /// Makes room for `n` more nodes at once.
+    pub(crate) fn reserve(&mut self, n: usize) {
+        self.slots.reserve(n);
+    }
+
+    /// True once the root and every announced inner node have their record.
+    #[inline(always)]
+    pub(crate) fn is_complete(&self) -> bool {
+        self.started && self.depth == 0
+    }
+
+    /// Gives the next record: child `i`'s label in bits `2i, 2i + 1`.
+    #[inline(always)]
+    pub(crate) fn push(&mut self, labels: u16) -> Result<(), FillError> {
+        let depth = self.depth;
+        let id = if depth > 0 {
+            let g = &mut self.open[depth - 1];
+            let pos = g.due.trailing_zeros();
+            g.due &= g.due - 1;
+            g.first + (u32::from(g.mask) & ((1u32 << pos) - 1)).count_ones()
+        } else if !self.started {
+            self.started = true;
+            0
+        } else {
+            return Err(FillError::Complete);
+        };
+        let mask = even_bits(labels | (labels >> 1));
+        if mask == 0 {
+            self.close_groups();
+            return Ok(());
+        }
+        if depth >= 16 {
+            return Err(FillError::TooDeep);
+        }
+        let due = even_bits(labels & (labels >> 1));
+        let k = mask.count_ones();
+        let s = &mut self.slots;
+        let first = s.take(k as usize);
+        let mut rest = mask;
+        for v in &mut s.values[first as usize..(first + k) as usize] {
+            let pos = rest.trailing_zeros();
+            rest &= rest - 1;
+            *v = self.label_values[usize::from((labels >> (2 * pos)) as u8 & 3)];
+        }
+        s.masks[id as usize] = mask;
+        s.first_child[id as usize] = first;
+        if due != 0 {
+            self.open[depth] = OpenGroup { parent: id, first, mask, due };
+            self.depth = depth + 1;
+        } else {
+            if id != 0 {
+                s.values[id as usize] = max_of(&s.values[first as usize..(first + k) as usize]);
+            }
+            self.close_groups();
+        }
+        Ok(())
+    }
+
+    /// Closes the groups whose subtrees are now complete, giving each
+    /// parent (but the root) the maximum of its children.
+    #[inline(always)]
+    fn close_groups(&mut self) {
+        while self.depth > 0 {
+            let g = self.open[self.depth - 1];
+            if g.due != 0 {
+                break;
+            }
+            if g.parent != 0 {
+                let (a, b) = (g.first as usize, (g.first + g.mask.count_ones()) as usize);
+                self.slots.values[g.parent as usize] = max_of(&self.slots.values[a..b]);
+            }
+            self.depth -= 1;
+        }
+    }
+
+    /// The arena once complete.
+    pub(crate) fn finish(self) -> Option<NodeArena> {
+        self.is_complete().then(|| self.slots.into_arena())
+    }
+}
+
+/// `getMaxChildLogOdds` over a child group.
+#[inline(always)]
+fn max_of(values: &[f32]) -> f32 {
+    values.iter().fold(-f32::MAX, |m, &v| if v > m { v } else { m })
 }
 
 #[cfg(test)]

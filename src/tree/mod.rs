@@ -5,6 +5,8 @@ mod counting;
 mod cursor;
 mod iter;
 
+pub(crate) use arena::LabelFill;
+use arena::PreorderFill;
 pub use arena::{ArenaUsage, NodeArena, NodeId};
 pub use counting::CountingTree;
 pub(crate) use cursor::PathSearch;
@@ -186,12 +188,7 @@ impl OccupancyTree {
 
     /// A new arena with a root of `value`, carrying this kind's extras.
     pub(crate) fn new_arena(kind: NodeKind, value: f32) -> NodeArena {
-        let extra = match kind {
-            NodeKind::Plain => None,
-            NodeKind::Color => Some(WHITE),
-            NodeKind::Stamped => Some(0),
-        };
-        NodeArena::with_root_and_extras(value, extra)
+        NodeArena::with_root_and_extras(value, default_extra(kind))
     }
 
     pub fn resolution(&self) -> f64 {
@@ -228,11 +225,14 @@ impl OccupancyTree {
         self.arena.as_ref()
     }
 
-    /// Replaces the content with `arena` (root at id 0) and recounts the
-    /// nodes, as OctoMap's readers do.
-    pub(crate) fn set_arena(&mut self, arena: Option<NodeArena>) {
-        self.arena = arena;
-        self.size = self.calc_num_nodes();
+    /// Replaces the content with `arena`, which has no free slots (as
+    /// built by [`PreorderBuilder`]): its slot count is the node count.
+    pub(crate) fn set_arena_with_size(&mut self, arena: NodeArena) {
+        let usage = arena.usage();
+        debug_assert_eq!(usage.free_slots, 0);
+        self.size = usage.live_slots;
+        self.arena = Some(arena);
+        debug_assert_eq!(self.size, self.calc_num_nodes());
     }
 
     /// Removes every node.
@@ -680,7 +680,8 @@ impl OccupancyTree {
     /// occupancy, which OctoMap cannot do): values and structure are kept,
     /// colours or stamps dropped, new extras start at the kind's default.
     pub fn converted(&self, kind: NodeKind) -> OccupancyTree {
-        let mut b = PreorderBuilder::with_kind(kind);
+        let mut b = PreorderBuilder::with_hint(kind, self.size);
+        b.reserve(self.size);
         let keep = kind == self.kind;
         if let Some(root) = self.root() {
             let mut stack = vec![root];
@@ -996,6 +997,11 @@ pub struct NodeRef<'a> {
 }
 
 impl<'a> NodeRef<'a> {
+    /// The arena and id of this node, for whole-tree passes.
+    pub(crate) fn arena_id(&self) -> (&'a NodeArena, NodeId) {
+        (self.arena, self.id)
+    }
+
     /// The log-odds value.
     #[inline]
     pub fn value(&self) -> f32 {
@@ -1049,9 +1055,7 @@ impl<'a> NodeRef<'a> {
 /// depth-first order with no free slots.
 pub struct PreorderBuilder {
     kind: NodeKind,
-    arena: Option<NodeArena>,
-    /// Nodes announced by a parent's mask and not given yet, next on top.
-    pending: Vec<(NodeId, u8)>,
+    fill: PreorderFill,
 }
 
 /// A node below depth 16 was announced.
@@ -1068,20 +1072,29 @@ impl PreorderBuilder {
 
     /// A builder for a tree of `kind`; give extras with [`Self::push_with_extra`].
     pub fn with_kind(kind: NodeKind) -> Self {
-        PreorderBuilder { kind, arena: None, pending: Vec::with_capacity(128) }
+        PreorderBuilder { kind, fill: PreorderFill::new(default_extra(kind), 0) }
+    }
+
+    /// A builder that expects about `nodes` nodes. The hint need not be
+    /// right nor trusted: memory grows toward it only as nodes arrive.
+    pub(crate) fn with_hint(kind: NodeKind, nodes: usize) -> Self {
+        PreorderBuilder { kind, fill: PreorderFill::new(default_extra(kind), nodes) }
+    }
+
+    /// Reserves room for `n` more nodes at once.
+    pub(crate) fn reserve(&mut self, n: usize) {
+        self.fill.reserve(n);
     }
 
     /// True once the root and every announced node have been given.
+    #[inline(always)]
     pub fn is_complete(&self) -> bool {
-        self.arena.is_some() && self.pending.is_empty()
+        self.fill.is_complete()
     }
 
     /// Depth of the next node to give (0 for the root); `None` when complete.
     pub fn next_depth(&self) -> Option<u8> {
-        match &self.arena {
-            None => Some(0),
-            Some(_) => self.pending.last().map(|&(_, d)| d),
-        }
+        self.fill.next_depth()
     }
 
     /// Gives the next node. `index` only labels errors.
@@ -1091,56 +1104,27 @@ impl PreorderBuilder {
 
     /// Gives the next node with its colour or stamp (`None` keeps the
     /// kind's default).
+    #[inline(always)]
     pub fn push_with_extra(&mut self, value: f32, extra: Option<u32>, mask: u8, index: u64) -> Result<(), TooDeep> {
-        let (id, depth) = match self.arena.as_mut() {
-            None => {
-                self.arena = Some(OccupancyTree::new_arena(self.kind, value));
-                (ROOT, 0)
-            }
-            Some(a) => {
-                let Some((id, depth)) = self.pending.pop() else {
-                    return Err(TooDeep { index });
-                };
-                a.set_value(id, value);
-                (id, depth)
-            }
-        };
-        if let Some(e) = extra {
-            self.arena.as_mut().expect("root exists").set_extra(id, e);
-        }
-        if mask != 0 {
-            if depth >= TREE_DEPTH {
-                return Err(TooDeep { index });
-            }
-            let a = self.arena.as_mut().expect("root exists");
-            let first = a.add_children(id, mask, 0.0);
-            for i in (0..mask.count_ones()).rev() {
-                self.pending.push((first + i, depth + 1));
-            }
-        }
-        Ok(())
+        self.fill.push(value, extra, mask).map_err(|_| TooDeep { index })
     }
 
     /// The finished arena (root at 0); `None` when nodes are still missing.
     pub(crate) fn finish_arena(self) -> Option<Option<NodeArena>> {
-        if !self.pending.is_empty() {
-            return None;
+        if self.fill.len() == 0 {
+            return Some(None);
         }
-        Some(self.arena.map(|mut a| {
-            a.shrink_to_fit();
-            a
-        }))
+        self.fill.finish().map(Some)
     }
 
     /// The finished tree; `None` when nodes are still missing.
     pub fn finish(self, resolution: f64, sensor: SensorModel) -> Result<Option<OccupancyTree>, TreeError> {
         let mut tree = OccupancyTree::with_kind(resolution, sensor, self.kind)?;
-        if !self.pending.is_empty() {
+        let Some(arena) = self.finish_arena() else {
             return Ok(None);
-        }
-        if let Some(mut a) = self.arena {
-            a.shrink_to_fit();
-            tree.set_arena(Some(a));
+        };
+        if let Some(a) = arena {
+            tree.set_arena_with_size(a);
         }
         Ok(Some(tree))
     }
@@ -1149,6 +1133,15 @@ impl PreorderBuilder {
 impl Default for PreorderBuilder {
     fn default() -> Self {
         Self::new()
+    }
+}
+
+/// The extra a new node of `kind` starts with; `None` for plain trees.
+pub(crate) fn default_extra(kind: NodeKind) -> Option<u32> {
+    match kind {
+        NodeKind::Plain => None,
+        NodeKind::Color => Some(WHITE),
+        NodeKind::Stamped => Some(0),
     }
 }
 
