@@ -8,8 +8,9 @@
 //! not stored: readers restore the clamping bounds. See `formats/bt.md`.
 
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, BT_FIRST_LINE};
-use super::{prefetch, TreeFileError};
+use super::TreeFileError;
 use crate::sensor::SensorModel;
+use crate::tree::prefetch;
 use crate::tree::{default_extra, LabelFill, NodeKind, OccupancyTree};
 use std::io::{self, BufRead, Write};
 

@@ -43,21 +43,6 @@ pub enum TreeFileError {
     WrongFormat { offset: u64, expected: &'static str, reason: String },
 }
 
-/// Asks for the cache line holding `s[i]` (nothing when `i` is out of
-/// range): tree walks over an arena whose groups lie scattered after many
-/// updates ask for the groups they will visit next all at once.
-#[inline(always)]
-pub(crate) fn prefetch<T>(s: &[T], i: usize) {
-    #[cfg(target_arch = "x86_64")]
-    if let Some(x) = s.get(i) {
-        // SAFETY: a prefetch is a hint that never faults nor changes memory;
-        // SSE is part of the x86_64 baseline
-        unsafe { std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>((x as *const T).cast()) }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = (s, i);
-}
-
 fn at_byte(offset: &Option<u64>) -> String {
     offset.map(|o| format!(" at byte {o}")).unwrap_or_default()
 }

@@ -9,8 +9,9 @@
 //! whose id is `OcTreeBase`, a little-endian `u32` count. See `formats/ot.md`.
 
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, OT_FIRST_LINE};
-use super::{prefetch, TreeFileError};
+use super::TreeFileError;
 use crate::sensor::SensorModel;
+use crate::tree::prefetch;
 use crate::tree::{CountingTree, NodeKind, NodeRef, OccupancyTree, PreorderBuilder};
 use std::io::{self, BufRead, Write};
 

@@ -147,6 +147,7 @@ impl<'a> Iterator for NodeIter<'a> {
             let mask = a.mask(id);
             let is_leaf = mask == 0 || depth >= self.max_depth;
             if !is_leaf {
+                a.prefetch_grandchildren(id);
                 self.frames[self.len] = Frame { key, next: a.first_child(id), remaining: mask };
                 self.len += 1;
                 if self.leaves_only {

@@ -5,6 +5,7 @@ mod counting;
 mod cursor;
 mod iter;
 
+pub(crate) use arena::prefetch;
 pub(crate) use arena::LabelFill;
 use arena::PreorderFill;
 pub use arena::{ArenaUsage, NodeArena, NodeId};
