@@ -120,44 +120,148 @@ impl RayKeys {
 
 impl RayKeys {
     /// Calls `f` with the Morton code of every key the iterator would yield,
-    /// in a tight loop that steps the interleaved code directly (adding one
-    /// to a dilated coordinate carries through the other axes' bits when
-    /// those are set to one).
+    /// in a tight loop that steps the interleaved code directly (see
+    /// [`walk_codes`]).
     #[inline]
     pub fn for_each_code(self, mut f: impl FnMut(u64)) {
-        let Some(mut dda) = self.dda else { return };
-        const MX: u64 = 0x2492_4924_9249;
-        let masks = [MX, MX << 1, MX << 2];
+        let Some(dda) = self.dda else { return };
         let start = MortonCode::encode(dda.key).0;
-        let mut dil = [start & masks[0], start & masks[1], start & masks[2]];
+        if !self.pending_origin {
+            // the origin was already yielded and steps may have been taken:
+            // finish with the iterator's own stepping
+            let mut rest = RayKeys { dda: Some(dda), ..self };
+            rest.by_ref().for_each(|k| f(MortonCode::encode(k).0));
+            return;
+        }
+        f(start);
         let end_code = MortonCode::encode(self.end).0;
-        if self.pending_origin {
-            f(start);
+        walk_codes(start, dda.step, dda.t_max, dda.t_delta, end_code, f64::from(self.length), f);
+    }
+}
+
+/// The stepping loop of `computeRayKeys` on Morton codes: from the voxel
+/// `start` (not reported), step the axis of the smallest `t_max` and report
+/// each voxel until the end voxel or a `t_max` beyond `length`.
+///
+/// Stepping one axis changes only that axis's interleaved bits: with the
+/// other axes' bits set to one, adding one carries straight through them
+/// (and subtracting borrows through the zeros), so
+/// `dil' = ((dil | fill) + add) & mask` with no branch on the direction.
+/// The distance check uses the minimum `t_max` the next step's axis choice
+/// computes anyway (the same value as OctoMap's `min(min(..), ..)`, as no
+/// `t_max` is NaN).
+#[inline(always)]
+fn walk_codes(
+    start: u64,
+    step: [i32; 3],
+    t_max: [f64; 3],
+    t_delta: [f64; 3],
+    end_code: u64,
+    length: f64,
+    mut f: impl FnMut(u64),
+) {
+    const MX: u64 = 0x2492_4924_9249;
+    let masks = [MX, MX << 1, MX << 2];
+    let mut fill = [0u64; 3];
+    let mut add = [0u64; 3];
+    for i in 0..3 {
+        (fill[i], add[i]) = match step[i] {
+            1 => (!masks[i], 1 << i),
+            -1 => (0, (1u64 << i).wrapping_neg()),
+            _ => (0, 0),
+        };
+    }
+    // everything in registers, each step computed for all three axes and
+    // selected by masks: no data-dependent branch or memory access on the
+    // loop-carried path
+    let (mut d0, mut d1, mut d2) = (start & masks[0], start & masks[1], start & masks[2]);
+    let [mut t0, mut t1, mut t2] = t_max;
+    let bits = |t: f64, m: u64| f64::from_bits(t.to_bits() & m);
+    loop {
+        // `min_axis` as masks: ties go to the higher axis
+        let lt01 = t0 < t1;
+        let s0 = lt01 & (t0 < t2);
+        let s1 = !lt01 & (t1 < t2);
+        let s2 = !(s0 | s1);
+        let (m0, m1, m2) = (u64::from(s0).wrapping_neg(), u64::from(s1).wrapping_neg(), u64::from(s2).wrapping_neg());
+        // adding +0.0 leaves the other axes' t_max unchanged (none is NaN;
+        // a -0.0 would become +0.0, which compares the same)
+        t0 += bits(t_delta[0], m0);
+        t1 += bits(t_delta[1], m1);
+        t2 += bits(t_delta[2], m2);
+        d0 ^= (((d0 | fill[0]).wrapping_add(add[0]) & masks[0]) ^ d0) & m0;
+        d1 ^= (((d1 | fill[1]).wrapping_add(add[1]) & masks[1]) ^ d1) & m1;
+        d2 ^= (((d2 | fill[2]).wrapping_add(add[2]) & masks[2]) ^ d2) & m2;
+        let code = d0 | d1 | d2;
+        if code == end_code || min(min(t0, t1), t2) > length {
+            return;
         }
-        let length = f64::from(self.length);
-        // per axis: dil' = ((dil | fill) + add) & mask, branch-free
-        let mut fill = [0u64; 3];
-        let mut add = [0u64; 3];
+        f(code);
+    }
+}
+
+/// Rays from one origin: what [`RayKeys::new`] derives from the origin
+/// alone (its key, its distances to the voxel borders) computed once, so
+/// that each ray of a scan only pays for its own direction.
+#[derive(Clone, Debug)]
+pub struct RayFan {
+    origin: Point3,
+    origin_key: Key,
+    origin_code: u64,
+    /// Per axis, `border - origin` for a negative (0) and a positive (1) step.
+    to_border: [[f64; 2]; 3],
+    resolution: f64,
+}
+
+impl RayFan {
+    /// Fails like [`RayKeys::new`] when the origin lies outside the map.
+    pub fn new(keys: &KeySpace, origin: Point3) -> Result<Self, KeyError> {
+        let origin_key = keys.key(origin)?;
+        let o = [origin.x, origin.y, origin.z];
+        let mut to_border = [[0.0; 2]; 3];
         for i in 0..3 {
-            (fill[i], add[i]) = match dda.step[i] {
-                1 => (!masks[i], 1 << i),
-                -1 => (0, (1u64 << i).wrapping_neg()),
-                _ => (0, 0),
+            for (s, step) in [(0, -1.0), (1, 1.0)] {
+                // as `Dda::new` with the border offset rounded to float
+                let offset = f64::from((step * keys.resolution() * 0.5) as f32);
+                to_border[i][s] = keys.key_to_coord(origin_key.0[i]) + offset - f64::from(o[i]);
+            }
+        }
+        let origin_code = MortonCode::encode(origin_key).0;
+        Ok(RayFan { origin, origin_key, origin_code, to_border, resolution: keys.resolution() })
+    }
+
+    pub fn origin_key(&self) -> Key {
+        self.origin_key
+    }
+
+    /// Calls `f` with the Morton code of every key `RayKeys::new(keys,
+    /// origin, end)` yields, given `end_key`, the key of `end`.
+    #[inline]
+    pub fn for_each_code(&self, end: Point3, end_key: Key, mut f: impl FnMut(u64)) {
+        if end_key == self.origin_key {
+            return;
+        }
+        let d = end - self.origin;
+        let length = d.norm() as f32;
+        let dir = [d.x / length, d.y / length, d.z / length];
+        let mut step = [0i32; 3];
+        let mut t_max = [f64::MAX; 3];
+        let mut t_delta = [f64::MAX; 3];
+        for i in 0..3 {
+            let s = if dir[i] > 0.0 {
+                1
+            } else if dir[i] < 0.0 {
+                0
+            } else {
+                continue;
             };
+            step[i] = 2 * s as i32 - 1;
+            t_max[i] = self.to_border[i][s] / f64::from(dir[i]);
+            t_delta[i] = self.resolution / f64::from(dir[i].abs());
         }
-        loop {
-            let dim = min_axis(&dda.t_max);
-            dil[dim] = (dil[dim] | fill[dim]).wrapping_add(add[dim]) & masks[dim];
-            dda.t_max[dim] += dda.t_delta[dim];
-            let code = dil[0] | dil[1] | dil[2];
-            if code == end_code {
-                return;
-            }
-            if min(min(dda.t_max[0], dda.t_max[1]), dda.t_max[2]) > length {
-                return;
-            }
-            f(code);
-        }
+        f(self.origin_code);
+        let end_code = MortonCode::encode(end_key).0;
+        walk_codes(self.origin_code, step, t_max, t_delta, end_code, f64::from(length), f);
     }
 }
 

@@ -12,7 +12,7 @@
 use crate::geometry::Point3;
 use crate::key::{Key, KeyError, KeySpace};
 use crate::morton::MortonCode;
-use crate::ray::{point_along, RayKeys};
+use crate::ray::{point_along, RayFan, RayKeys};
 use crate::tree::{InnerNodes, OccupancyTree};
 use hashbrown::HashSet;
 use rayon::prelude::*;
@@ -46,69 +46,126 @@ impl Hasher for KeyHasher {
 /// [`KeyHasher`].
 pub type KeySet = HashSet<MortonCode, BuildHasherDefault<KeyHasher>>;
 
-/// Size of the direct-mapped filter of recently inserted ray keys; rays of
-/// one scan share most voxels near the sensor.
+/// Size of the direct-mapped filter of recently emitted ray keys; rays of
+/// one scan share most voxels near the sensor, and the filter drops all but
+/// a few per cent of the repeats before they reach the key lists.
 const RECENT_SLOTS: usize = 1 << RECENT_BITS;
-const RECENT_BITS: u32 = 14;
+const RECENT_BITS: u32 = 13;
 
 #[inline(always)]
 fn recent_slot(code: u64) -> usize {
     ((code ^ (code >> 21)).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> (64 - RECENT_BITS)) as usize
 }
 
-/// The key sets one worker collects, with its filter of recent keys.
+/// The key lists one worker collects (Morton codes, unsorted, repeats
+/// allowed), with its filter of recent keys.
 struct Casting {
-    free: KeySet,
-    occupied: KeySet,
+    free: Vec<u64>,
+    occupied: Vec<u64>,
     recent: Vec<u64>,
 }
 
 impl Casting {
     fn new() -> Self {
-        Casting { free: KeySet::default(), occupied: KeySet::default(), recent: vec![u64::MAX; RECENT_SLOTS] }
+        Casting { free: Vec::new(), occupied: Vec::new(), recent: vec![u64::MAX; RECENT_SLOTS] }
     }
 
-    /// `computeUpdate`'s work for one end point.
+    /// `computeUpdate`'s work for one end point. `fan` holds the rays'
+    /// common origin; `None` when it lies outside the map (no rays then).
     #[inline]
-    fn cast(&mut self, keys: &KeySpace, p: Point3, origin: Point3, opts: &ScanOptions) {
+    fn cast(&mut self, keys: &KeySpace, fan: Option<&RayFan>, p: Point3, origin: Point3, opts: &ScanOptions) {
         let max_range = opts.max_range.unwrap_or(-1.0);
         let within = max_range < 0.0 || (p - origin).norm() <= max_range;
         let end = if within { p } else { point_along(origin, (p - origin).normalized(), max_range) };
         let Some(bbx) = opts.bbx else {
-            if let Ok(ray) = RayKeys::new(keys, origin, end) {
+            let Ok(end_key) = keys.key(end) else { return };
+            if within {
+                self.occupied.push(MortonCode::encode(end_key).0);
+            }
+            if let Some(fan) = fan {
                 let (free, recent) = (&mut self.free, &mut self.recent);
-                ray.for_each_code(|c| {
-                    // skip the set for keys a recent ray already gave
+                fan.for_each_code(end, end_key, |c| {
+                    // skip keys a recent ray already gave
                     let slot = &mut recent[recent_slot(c)];
                     if *slot != c {
                         *slot = c;
-                        free.insert(MortonCode(c));
+                        free.push(c);
                     }
                 });
-            }
-            if within {
-                if let Ok(k) = keys.key(p) {
-                    self.occupied.insert(MortonCode::encode(k));
-                }
             }
             return;
         };
         if within && bbx.contains_point(p) {
             if let Ok(k) = keys.key(p) {
-                self.occupied.insert(MortonCode::encode(k));
+                self.occupied.push(MortonCode::encode(k).0);
             }
         }
         if let Ok(ray) = RayKeys::new(keys, origin, end) {
-            self.free.extend(ray.take_while(|&k| bbx.contains_key(k)).map(MortonCode::encode));
+            self.free.extend(ray.take_while(|&k| bbx.contains_key(k)).map(|k| MortonCode::encode(k).0));
         }
+    }
+
+    /// Sorts both lists and drops repeats.
+    fn finish(&mut self) {
+        sort_dedup(&mut self.free);
+        sort_dedup(&mut self.occupied);
     }
 }
 
-/// Merges two sets, inserting the smaller into the larger.
-fn union(a: KeySet, b: KeySet) -> KeySet {
-    let (mut big, small) = if a.len() >= b.len() { (a, b) } else { (b, a) };
-    big.extend(small);
-    big
+fn sort_dedup(codes: &mut Vec<u64>) {
+    crate::morton::sort_codes(codes);
+    codes.dedup();
+}
+
+/// The union of sorted, repeat-free lists, sorted and repeat-free.
+fn merge_sorted(mut lists: Vec<Vec<u64>>) -> Vec<u64> {
+    lists.retain(|l| !l.is_empty());
+    while lists.len() > 1 {
+        // merge pairwise, shortest lists first
+        lists.sort_unstable_by_key(|l| std::cmp::Reverse(l.len()));
+        let (a, b) = (lists.pop().expect("two lists"), lists.pop().expect("two lists"));
+        let mut out = Vec::with_capacity(a.len() + b.len());
+        let (mut i, mut j) = (0, 0);
+        while i < a.len() && j < b.len() {
+            let (x, y) = (a[i], b[j]);
+            out.push(x.min(y));
+            i += usize::from(x <= y);
+            j += usize::from(y <= x);
+        }
+        out.extend_from_slice(&a[i..]);
+        out.extend_from_slice(&b[j..]);
+        lists.push(out);
+    }
+    lists.pop().unwrap_or_default()
+}
+
+/// Removes from `free` (sorted) every code of `occupied` (sorted).
+fn remove_sorted(free: &mut Vec<u64>, occupied: &[u64]) {
+    let mut j = 0;
+    free.retain(|&c| {
+        while j < occupied.len() && occupied[j] < c {
+            j += 1;
+        }
+        j == occupied.len() || occupied[j] != c
+    });
+}
+
+/// Thread pools by size, built once: a pool per scan would cost more than
+/// casting a small scan's rays.
+fn thread_pool(threads: usize) -> Result<std::sync::Arc<rayon::ThreadPool>, ScanError> {
+    use std::sync::{Arc, Mutex};
+    static POOLS: Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>> = Mutex::new(Vec::new());
+    let mut pools = POOLS.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, p)) = pools.iter().find(|(n, _)| *n == threads) {
+        return Ok(p.clone());
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|_| ScanError::ThreadPool("could not start ray-casting threads"))?;
+    let pool = Arc::new(pool);
+    pools.push((threads, pool.clone()));
+    Ok(pool)
 }
 
 /// What to do with end points outside the addressable map.
@@ -196,44 +253,44 @@ pub enum ScanError {
     ThreadPool(&'static str),
 }
 
-/// The free and occupied voxels of one scan, disjoint.
-#[derive(Default)]
+/// The free and occupied voxels of one scan as Morton codes, each list
+/// sorted and free of repeats, the two disjoint.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct ScanUpdate {
-    pub free: KeySet,
-    pub occupied: KeySet,
+    pub free: Vec<u64>,
+    pub occupied: Vec<u64>,
 }
 
 impl ScanUpdate {
-    /// The sets as key lists sorted in Morton order.
+    /// The update from casting output (Morton codes in any order, repeats
+    /// allowed): both lists sorted and freed of repeats, then the occupied
+    /// codes removed from the free ones, by merging.
+    pub fn from_codes(mut free: Vec<u64>, mut occupied: Vec<u64>) -> Self {
+        sort_dedup(&mut free);
+        sort_dedup(&mut occupied);
+        remove_sorted(&mut free, &occupied);
+        ScanUpdate { free, occupied }
+    }
+
+    /// The lists as keys, in Morton order.
     pub fn sorted(&self) -> (Vec<Key>, Vec<Key>) {
-        let keys = |codes: Vec<u64>| codes.into_iter().map(|c| MortonCode(c).decode()).collect();
-        let (free, occupied) = self.sorted_codes();
-        (keys(free), keys(occupied))
+        let keys = |codes: &[u64]| codes.iter().map(|&c| MortonCode(c).decode()).collect();
+        (keys(&self.free), keys(&self.occupied))
     }
 
-    /// The sets as sorted Morton codes, each set freed before its codes
-    /// are sorted (lower peak memory than [`Self::sorted_codes`]).
-    pub fn into_sorted_codes(self) -> (Vec<u64>, Vec<u64>) {
-        let drain = |set: KeySet| {
-            let mut codes: Vec<u64> = set.into_iter().map(|c| c.0).collect();
-            crate::morton::sort_codes(&mut codes);
-            codes
-        };
-        let ScanUpdate { free, occupied } = self;
-        let free = drain(free);
-        (free, drain(occupied))
+    /// The lists as OctoMap's hash-based key sets.
+    pub fn key_sets(&self) -> (KeySet, KeySet) {
+        let set = |codes: &[u64]| codes.iter().map(|&c| MortonCode(c)).collect();
+        (set(&self.free), set(&self.occupied))
     }
 
-    /// The sets as sorted Morton codes.
-    pub fn sorted_codes(&self) -> (Vec<u64>, Vec<u64>) {
-        (sorted_codes(&self.free), sorted_codes(&self.occupied))
+    pub fn len(&self) -> usize {
+        self.free.len() + self.occupied.len()
     }
-}
 
-fn sorted_codes(set: &KeySet) -> Vec<u64> {
-    let mut codes: Vec<u64> = set.iter().map(|c| c.0).collect();
-    crate::morton::sort_codes(&mut codes);
-    codes
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
 }
 
 impl OccupancyTree {
@@ -245,8 +302,7 @@ impl OccupancyTree {
         origin: Point3,
         opts: &ScanOptions,
     ) -> Result<ScanReport, ScanError> {
-        let (update, report) = self.compute_update(points, origin, opts)?;
-        let (free, occupied) = update.into_sorted_codes();
+        let (ScanUpdate { free, occupied }, report) = self.compute_update(points, origin, opts)?;
         let sensor = *self.sensor();
         self.update_batch(&free, sensor.miss, opts.inner);
         self.update_batch(&occupied, sensor.hit, opts.inner);
@@ -303,55 +359,92 @@ impl OccupancyTree {
                 return Err(ScanError::Origin { x: origin.x, y: origin.y, z: origin.z, source });
             }
         }
-        let mut cleaned: Vec<Point3> = Vec::with_capacity(points.len());
-        for (index, &p) in points.iter().enumerate() {
-            if !p.is_finite() {
-                report.non_finite += 1;
-                continue;
-            }
-            match (opts.out_of_map, keys.key(p)) {
-                (OutOfMap::Skip, Err(_)) => report.out_of_map += 1,
-                (OutOfMap::Error, Err(source)) => {
-                    return Err(ScanError::PointOutOfMap { index, x: p.x, y: p.y, z: p.z, source })
+        // only OctoMap's policy lets points without a key through to the
+        // casting (which skips them); the input is used as it is when
+        // nothing is to be dropped or changed
+        let clean = opts.out_of_map == OutOfMap::OctoMap && !opts.discretize && points.iter().all(|p| p.is_finite());
+        let mut cleaned: Vec<Point3> = Vec::new();
+        if !clean {
+            cleaned.reserve(points.len());
+            for (index, &p) in points.iter().enumerate() {
+                if !p.is_finite() {
+                    report.non_finite += 1;
+                    continue;
                 }
-                _ => cleaned.push(p),
+                if opts.out_of_map != OutOfMap::OctoMap {
+                    if let Err(source) = keys.key(p) {
+                        if opts.out_of_map == OutOfMap::Error {
+                            return Err(ScanError::PointOutOfMap { index, x: p.x, y: p.y, z: p.z, source });
+                        }
+                        report.out_of_map += 1;
+                        continue;
+                    }
+                }
+                cleaned.push(p);
             }
         }
-        let points = if opts.discretize {
+        if opts.discretize {
             let mut seen = KeySet::default();
             cleaned.retain(|&p| seen.insert(MortonCode::encode(keys.key_unchecked(p))));
             cleaned.iter_mut().for_each(|p| *p = keys.key_to_point(keys.key_unchecked(*p)));
-            cleaned
-        } else {
-            cleaned
-        };
+        }
+        let points = if clean { points } else { &cleaned[..] };
 
-        let run = || self.cast_scan(&points, origin, opts);
+        let fan = RayFan::new(keys, origin).ok();
+        let run = || self.cast_scan(points, fan.as_ref(), origin, opts);
         let update = match opts.threads {
+            Some(1) => self.cast_serial(points, fan.as_ref(), origin, opts),
             None => run(),
-            Some(n) => rayon::ThreadPoolBuilder::new()
-                .num_threads(n.max(1))
-                .build()
-                .map_err(|_| ScanError::ThreadPool("could not start ray-casting threads"))?
-                .install(run),
+            Some(n) => thread_pool(n)?.install(run),
         };
         Ok((update, report))
     }
 
-    fn cast_scan(&self, points: &[Point3], origin: Point3, opts: &ScanOptions) -> ScanUpdate {
+    fn cast_serial(&self, points: &[Point3], fan: Option<&RayFan>, origin: Point3, opts: &ScanOptions) -> ScanUpdate {
+        let mut c = Casting::new();
+        for &p in points {
+            c.cast(self.key_space(), fan, p, origin, opts);
+        }
+        ScanUpdate::from_codes(c.free, c.occupied)
+    }
+
+    /// The raw output of one thread's ray casting for a scan of finite
+    /// points with default options: the free codes, with the few repeats
+    /// the recent-key filter lets through, and the occupied codes, with all
+    /// their repeats, both unsorted. [`ScanUpdate::from_codes`] turns them
+    /// into [`Self::compute_update`]'s result; benchmarks use them to
+    /// compare ways of removing the repeats.
+    pub fn cast_codes(&self, points: &[Point3], origin: Point3) -> (Vec<u64>, Vec<u64>) {
+        let fan = RayFan::new(self.key_space(), origin).ok();
+        let mut c = Casting::new();
+        for &p in points {
+            c.cast(self.key_space(), fan.as_ref(), p, origin, &ScanOptions::default());
+        }
+        (c.free, c.occupied)
+    }
+
+    fn cast_scan(&self, points: &[Point3], fan: Option<&RayFan>, origin: Point3, opts: &ScanOptions) -> ScanUpdate {
         let threads = rayon::current_num_threads();
+        if threads == 1 {
+            return self.cast_serial(points, fan, origin, opts);
+        }
         let chunk = points.len().div_ceil(2 * threads).max(512);
-        let (mut free, occupied) = points
+        let parts: Vec<Casting> = points
             .par_chunks(chunk)
             .fold(Casting::new, |mut acc, chunk| {
                 for &p in chunk {
-                    acc.cast(self.key_space(), p, origin, opts);
+                    acc.cast(self.key_space(), fan, p, origin, opts);
                 }
                 acc
             })
-            .map(|c| (c.free, c.occupied))
-            .reduce(|| (KeySet::default(), KeySet::default()), |(f1, o1), (f2, o2)| (union(f1, f2), union(o1, o2)));
-        free.retain(|k| !occupied.contains(k));
+            .map(|mut c| {
+                c.finish();
+                c
+            })
+            .collect();
+        let (free, occupied): (Vec<_>, Vec<_>) = parts.into_iter().map(|c| (c.free, c.occupied)).unzip();
+        let (mut free, occupied) = rayon::join(|| merge_sorted(free), || merge_sorted(occupied));
+        remove_sorted(&mut free, &occupied);
         ScanUpdate { free, occupied }
     }
 
