@@ -175,28 +175,111 @@ fn walk_codes(
     // selected by masks: no data-dependent branch or memory access on the
     // loop-carried path
     let (mut d0, mut d1, mut d2) = (start & masks[0], start & masks[1], start & masks[2]);
-    let [mut t0, mut t1, mut t2] = t_max;
-    let bits = |t: f64, m: u64| f64::from_bits(t.to_bits() & m);
+    let mut clock = StepClock::new(t_max, t_delta);
     loop {
-        // `min_axis` as masks: ties go to the higher axis
-        let lt01 = t0 < t1;
-        let s0 = lt01 & (t0 < t2);
-        let s1 = !lt01 & (t1 < t2);
-        let s2 = !(s0 | s1);
-        let (m0, m1, m2) = (u64::from(s0).wrapping_neg(), u64::from(s1).wrapping_neg(), u64::from(s2).wrapping_neg());
-        // adding +0.0 leaves the other axes' t_max unchanged (none is NaN;
-        // a -0.0 would become +0.0, which compares the same)
-        t0 += bits(t_delta[0], m0);
-        t1 += bits(t_delta[1], m1);
-        t2 += bits(t_delta[2], m2);
+        let [m0, m1, m2] = clock.step();
         d0 ^= (((d0 | fill[0]).wrapping_add(add[0]) & masks[0]) ^ d0) & m0;
         d1 ^= (((d1 | fill[1]).wrapping_add(add[1]) & masks[1]) ^ d1) & m1;
         d2 ^= (((d2 | fill[2]).wrapping_add(add[2]) & masks[2]) ^ d2) & m2;
         let code = d0 | d1 | d2;
-        if code == end_code || min(min(t0, t1), t2) > length {
+        if code == end_code || clock.min() > length {
             return;
         }
         f(code);
+    }
+}
+
+/// The DDA's three `t_max` and their increments. [`Self::step`] advances
+/// the smallest (`min_axis`: ties go to the higher axis) and returns one
+/// mask per axis, all ones for the axis stepped. The choice is made with
+/// compare masks, not branches: the axis changes irregularly along a ray,
+/// and a mispredicted branch would cost more than the whole step.
+/// Adding a masked-out increment adds +0.0, which leaves a `t_max`
+/// unchanged (none is NaN; a -0.0 would become +0.0, which compares the
+/// same).
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+struct StepClock {
+    t: [std::arch::x86_64::__m128d; 3],
+    dt: [std::arch::x86_64::__m128d; 3],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl StepClock {
+    #[inline(always)]
+    fn new(t: [f64; 3], dt: [f64; 3]) -> Self {
+        use std::arch::x86_64::_mm_set_sd;
+        // SAFETY: SSE2 is part of the x86-64 baseline (these intrinsics
+        // are only `unsafe` for their `target_feature` attribute), and no
+        // memory is accessed.
+        unsafe {
+            StepClock {
+                t: [_mm_set_sd(t[0]), _mm_set_sd(t[1]), _mm_set_sd(t[2])],
+                dt: [_mm_set_sd(dt[0]), _mm_set_sd(dt[1]), _mm_set_sd(dt[2])],
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn step(&mut self) -> [u64; 3] {
+        use std::arch::x86_64::*;
+        // SAFETY: as in `new`: baseline SSE2, registers only.
+        unsafe {
+            let [t0, t1, t2] = self.t;
+            let lt01 = _mm_cmplt_sd(t0, t1);
+            let s0 = _mm_and_pd(lt01, _mm_cmplt_sd(t0, t2));
+            let s1 = _mm_andnot_pd(lt01, _mm_cmplt_sd(t1, t2));
+            let s2 = _mm_andnot_pd(_mm_or_pd(s0, s1), _mm_castsi128_pd(_mm_set1_epi32(-1)));
+            self.t = [
+                _mm_add_sd(t0, _mm_and_pd(s0, self.dt[0])),
+                _mm_add_sd(t1, _mm_and_pd(s1, self.dt[1])),
+                _mm_add_sd(t2, _mm_and_pd(s2, self.dt[2])),
+            ];
+            let mask = |s: __m128d| _mm_cvtsi128_si64(_mm_castpd_si128(s)) as u64;
+            [mask(s0), mask(s1), mask(s2)]
+        }
+    }
+
+    /// `min(min(t_max[0], t_max[1]), t_max[2])`.
+    #[inline(always)]
+    fn min(&self) -> f64 {
+        use std::arch::x86_64::*;
+        // SAFETY: as in `new`: baseline SSE2, registers only.
+        unsafe { _mm_cvtsd_f64(_mm_min_sd(_mm_min_sd(self.t[0], self.t[1]), self.t[2])) }
+    }
+}
+
+/// Portable [`StepClock`]: the same choice on booleans.
+#[cfg(not(target_arch = "x86_64"))]
+#[derive(Clone, Copy)]
+struct StepClock {
+    t: [f64; 3],
+    dt: [f64; 3],
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+impl StepClock {
+    #[inline(always)]
+    fn new(t: [f64; 3], dt: [f64; 3]) -> Self {
+        StepClock { t, dt }
+    }
+
+    #[inline(always)]
+    fn step(&mut self) -> [u64; 3] {
+        let [t0, t1, t2] = self.t;
+        let lt01 = t0 < t1;
+        let s0 = lt01 & (t0 < t2);
+        let s1 = !lt01 & (t1 < t2);
+        let s = [s0, s1, !(s0 | s1)];
+        for i in 0..3 {
+            self.t[i] += std::hint::select_unpredictable(s[i], self.dt[i], 0.0);
+        }
+        s.map(|b| u64::from(b).wrapping_neg())
+    }
+
+    #[inline(always)]
+    fn min(&self) -> f64 {
+        min(min(self.t[0], self.t[1]), self.t[2])
     }
 }
 
