@@ -114,7 +114,27 @@ impl Casting {
 
 fn sort_dedup(codes: &mut Vec<u64>) {
     crate::morton::sort_codes(codes);
-    codes.dedup();
+    dedup_except(codes, &[]);
+}
+
+/// Drops repeats from the sorted `codes`, and every code of the sorted
+/// `except`, in one pass: each code is written, and the end of the kept
+/// part only moves past it when it is kept, so repeats, which come at
+/// random, cost no mispredicted branch.
+fn dedup_except(codes: &mut Vec<u64>, except: &[u64]) {
+    let (mut kept, mut j) = (0, 0);
+    let mut prev = u64::MAX; // no code: codes have 48 bits
+    for i in 0..codes.len() {
+        let c = codes[i];
+        while j < except.len() && except[j] < c {
+            j += 1;
+        }
+        let drop = (c == prev) | (j < except.len() && except[j] == c);
+        codes[kept] = c;
+        kept += usize::from(!drop);
+        prev = c;
+    }
+    codes.truncate(kept);
 }
 
 /// The union of sorted, repeat-free lists, sorted and repeat-free.
@@ -137,17 +157,6 @@ fn merge_sorted(mut lists: Vec<Vec<u64>>) -> Vec<u64> {
         lists.push(out);
     }
     lists.pop().unwrap_or_default()
-}
-
-/// Removes from `free` (sorted) every code of `occupied` (sorted).
-fn remove_sorted(free: &mut Vec<u64>, occupied: &[u64]) {
-    let mut j = 0;
-    free.retain(|&c| {
-        while j < occupied.len() && occupied[j] < c {
-            j += 1;
-        }
-        j == occupied.len() || occupied[j] != c
-    });
 }
 
 /// Thread pools by size, built once: a pool per scan would cost more than
@@ -266,9 +275,9 @@ impl ScanUpdate {
     /// allowed): both lists sorted and freed of repeats, then the occupied
     /// codes removed from the free ones, by merging.
     pub fn from_codes(mut free: Vec<u64>, mut occupied: Vec<u64>) -> Self {
-        sort_dedup(&mut free);
         sort_dedup(&mut occupied);
-        remove_sorted(&mut free, &occupied);
+        crate::morton::sort_codes(&mut free);
+        dedup_except(&mut free, &occupied);
         ScanUpdate { free, occupied }
     }
 
@@ -444,7 +453,7 @@ impl OccupancyTree {
             .collect();
         let (free, occupied): (Vec<_>, Vec<_>) = parts.into_iter().map(|c| (c.free, c.occupied)).unzip();
         let (mut free, occupied) = rayon::join(|| merge_sorted(free), || merge_sorted(occupied));
-        remove_sorted(&mut free, &occupied);
+        dedup_except(&mut free, &occupied);
         ScanUpdate { free, occupied }
     }
 

@@ -850,7 +850,8 @@ impl Batch<'_> {
                 needed |= 1 << (c & 7);
             }
         } else {
-            if codes.len() <= 16 {
+            if codes.len() <= 64 {
+                // a linear pass: stores only, no mispredicted search branches
                 for (i, &c) in codes.iter().enumerate().rev() {
                     bounds[child_of(c)] = i;
                 }
@@ -915,6 +916,7 @@ impl Batch<'_> {
         changed
     }
 
+    #[inline]
     fn apply_leaf(&mut self, n: NodeId, code: u64, created: bool) -> bool {
         let before = self.arena.value(n);
         if !created && self.sensor.is_saturated(before, self.delta) {
@@ -1166,7 +1168,7 @@ fn prune_or_update_plain(a: &mut NodeArena, n: NodeId) -> bool {
         if v > max {
             max = v;
         }
-        same &= v == v0 && !a.has_children(c);
+        same &= (v == v0) & !a.has_children(c);
     }
     if same {
         a.remove_all_children(n);
