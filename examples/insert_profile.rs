@@ -33,10 +33,8 @@ fn main() {
         let c = cpu_time();
         tree = OccupancyTree::new(res).expect("resolution");
         updates = 0;
-        for (cloud, origin) in &scans {
-            let r = tree.insert_point_cloud(&cloud.points, *origin, &opts).expect("insert");
-            updates += r.free_updates + r.occupied_updates;
-        }
+        let clouds = scans.iter().map(|(cloud, origin)| (cloud.points.as_slice(), *origin));
+        tree.insert_point_clouds(clouds, &opts, |_, r| updates += r.free_updates + r.occupied_updates).expect("insert");
         secs = secs.min(t.elapsed().as_secs_f64());
         cpu = cpu.min(cpu_time() - c);
     }

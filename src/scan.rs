@@ -311,11 +311,71 @@ impl OccupancyTree {
         origin: Point3,
         opts: &ScanOptions,
     ) -> Result<ScanReport, ScanError> {
-        let (ScanUpdate { free, occupied }, report) = self.compute_update(points, origin, opts)?;
+        let (update, report) = self.compute_update(points, origin, opts)?;
+        Ok(self.apply_update(&update, report, opts.inner))
+    }
+
+    /// Applies a scan's update (from [`Self::compute_update`]): misses, then
+    /// hits, each list in one batched walk. Completes `report` with the
+    /// update counts.
+    pub fn apply_update(&mut self, update: &ScanUpdate, report: ScanReport, inner: InnerNodes) -> ScanReport {
         let sensor = *self.sensor();
-        self.update_batch(&free, sensor.miss, opts.inner);
-        self.update_batch(&occupied, sensor.hit, opts.inner);
-        Ok(ScanReport { free_updates: free.len(), occupied_updates: occupied.len(), ..report })
+        self.update_batch(&update.free, sensor.miss, inner);
+        self.update_batch(&update.occupied, sensor.hit, inner);
+        ScanReport { free_updates: update.free.len(), occupied_updates: update.occupied.len(), ..report }
+    }
+
+    /// Integrates scans in order, with the result of calling
+    /// [`Self::insert_point_cloud`] on each (`scans` gives each scan's
+    /// points and origin), calling `after_each` with the tree and the
+    /// scan's report once it is in. With more than one thread the work is
+    /// pipelined: while one scan's update is applied to the tree, the next
+    /// scan's rays are cast (a scan's update depends on the map's key space
+    /// only, never on its content), and the thread that applied joins the
+    /// casting when done. Stops at the first scan that is refused, with its
+    /// position in `scans`; the scans before it are in.
+    pub fn insert_point_clouds<I, P>(
+        &mut self,
+        scans: I,
+        opts: &ScanOptions,
+        mut after_each: impl FnMut(&mut Self, ScanReport) + Send,
+    ) -> Result<(), (usize, ScanError)>
+    where
+        I: IntoIterator<Item = (P, Point3)>,
+        I::IntoIter: Send,
+        P: AsRef<[Point3]> + Send,
+    {
+        let mut scans = scans.into_iter().enumerate();
+        if opts.threads == Some(1) {
+            for (i, (points, origin)) in scans {
+                let report = self.insert_point_cloud(points.as_ref(), origin, opts).map_err(|e| (i, e))?;
+                after_each(self, report);
+            }
+            return Ok(());
+        }
+        let keys = self.key_space().clone();
+        // cast on whatever pool runs the pipeline
+        let cast_opts = ScanOptions { threads: None, ..*opts };
+        let compute = |(i, (points, origin)): (usize, (P, Point3))| {
+            (i, compute_update(&keys, points.as_ref(), origin, &cast_opts))
+        };
+        let mut run = || {
+            let mut next = scans.next().map(compute);
+            while let Some((i, result)) = next.take() {
+                let (update, report) = result.map_err(|e| (i, e))?;
+                let following = scans.next();
+                let (report, computed) =
+                    rayon::join(|| self.apply_update(&update, report, opts.inner), || following.map(compute));
+                drop(update);
+                after_each(self, report);
+                next = computed;
+            }
+            Ok(())
+        };
+        match opts.threads {
+            None => run(),
+            Some(n) => thread_pool(n).map_err(|e| (0, e))?.install(run),
+        }
     }
 
     /// Integrates a coloured scan into a colour tree: the scan as
@@ -358,63 +418,7 @@ impl OccupancyTree {
         origin: Point3,
         opts: &ScanOptions,
     ) -> Result<(ScanUpdate, ScanReport), ScanError> {
-        let keys = self.key_space();
-        let mut report = ScanReport { points: points.len(), ..Default::default() };
-        let origin_key = keys.key(origin);
-        if let Err(source) = origin_key {
-            // OctoMap casts no ray then, but still marks in-map end points
-            // occupied; only a non-finite origin is refused outright.
-            if !origin.is_finite() {
-                return Err(ScanError::Origin { x: origin.x, y: origin.y, z: origin.z, source });
-            }
-        }
-        // only OctoMap's policy lets points without a key through to the
-        // casting (which skips them); the input is used as it is when
-        // nothing is to be dropped or changed
-        let clean = opts.out_of_map == OutOfMap::OctoMap && !opts.discretize && points.iter().all(|p| p.is_finite());
-        let mut cleaned: Vec<Point3> = Vec::new();
-        if !clean {
-            cleaned.reserve(points.len());
-            for (index, &p) in points.iter().enumerate() {
-                if !p.is_finite() {
-                    report.non_finite += 1;
-                    continue;
-                }
-                if opts.out_of_map != OutOfMap::OctoMap {
-                    if let Err(source) = keys.key(p) {
-                        if opts.out_of_map == OutOfMap::Error {
-                            return Err(ScanError::PointOutOfMap { index, x: p.x, y: p.y, z: p.z, source });
-                        }
-                        report.out_of_map += 1;
-                        continue;
-                    }
-                }
-                cleaned.push(p);
-            }
-        }
-        if opts.discretize {
-            let mut seen = KeySet::default();
-            cleaned.retain(|&p| seen.insert(MortonCode::encode(keys.key_unchecked(p))));
-            cleaned.iter_mut().for_each(|p| *p = keys.key_to_point(keys.key_unchecked(*p)));
-        }
-        let points = if clean { points } else { &cleaned[..] };
-
-        let fan = RayFan::new(keys, origin).ok();
-        let run = || self.cast_scan(points, fan.as_ref(), origin, opts);
-        let update = match opts.threads {
-            Some(1) => self.cast_serial(points, fan.as_ref(), origin, opts),
-            None => run(),
-            Some(n) => thread_pool(n)?.install(run),
-        };
-        Ok((update, report))
-    }
-
-    fn cast_serial(&self, points: &[Point3], fan: Option<&RayFan>, origin: Point3, opts: &ScanOptions) -> ScanUpdate {
-        let mut c = Casting::new();
-        for &p in points {
-            c.cast(self.key_space(), fan, p, origin, opts);
-        }
-        ScanUpdate::from_codes(c.free, c.occupied)
+        compute_update(self.key_space(), points, origin, opts)
     }
 
     /// The raw output of one thread's ray casting for a scan of finite
@@ -430,31 +434,6 @@ impl OccupancyTree {
             c.cast(self.key_space(), fan.as_ref(), p, origin, &ScanOptions::default());
         }
         (c.free, c.occupied)
-    }
-
-    fn cast_scan(&self, points: &[Point3], fan: Option<&RayFan>, origin: Point3, opts: &ScanOptions) -> ScanUpdate {
-        let threads = rayon::current_num_threads();
-        if threads == 1 {
-            return self.cast_serial(points, fan, origin, opts);
-        }
-        let chunk = points.len().div_ceil(2 * threads).max(512);
-        let parts: Vec<Casting> = points
-            .par_chunks(chunk)
-            .fold(Casting::new, |mut acc, chunk| {
-                for &p in chunk {
-                    acc.cast(self.key_space(), fan, p, origin, opts);
-                }
-                acc
-            })
-            .map(|mut c| {
-                c.finish();
-                c
-            })
-            .collect();
-        let (free, occupied): (Vec<_>, Vec<_>) = parts.into_iter().map(|c| (c.free, c.occupied)).unzip();
-        let (mut free, occupied) = rayon::join(|| merge_sorted(free), || merge_sorted(occupied));
-        dedup_except(&mut free, &occupied);
-        ScanUpdate { free, occupied }
     }
 
     /// OctoMap's `insertPointCloudRays` ("simple" mode): ray by ray, each
@@ -504,6 +483,109 @@ impl OccupancyTree {
         self.update_point(end, true, inner)?;
         Ok(())
     }
+}
+
+/// [`OccupancyTree::compute_update`] for a map with key space `keys`: the
+/// update depends on nothing else of the tree.
+pub fn compute_update(
+    keys: &KeySpace,
+    points: &[Point3],
+    origin: Point3,
+    opts: &ScanOptions,
+) -> Result<(ScanUpdate, ScanReport), ScanError> {
+    let mut report = ScanReport { points: points.len(), ..Default::default() };
+    let origin_key = keys.key(origin);
+    if let Err(source) = origin_key {
+        // OctoMap casts no ray then, but still marks in-map end points
+        // occupied; only a non-finite origin is refused outright.
+        if !origin.is_finite() {
+            return Err(ScanError::Origin { x: origin.x, y: origin.y, z: origin.z, source });
+        }
+    }
+    // only OctoMap's policy lets points without a key through to the
+    // casting (which skips them); the input is used as it is when
+    // nothing is to be dropped or changed
+    let clean = opts.out_of_map == OutOfMap::OctoMap && !opts.discretize && points.iter().all(|p| p.is_finite());
+    let mut cleaned: Vec<Point3> = Vec::new();
+    if !clean {
+        cleaned.reserve(points.len());
+        for (index, &p) in points.iter().enumerate() {
+            if !p.is_finite() {
+                report.non_finite += 1;
+                continue;
+            }
+            if opts.out_of_map != OutOfMap::OctoMap {
+                if let Err(source) = keys.key(p) {
+                    if opts.out_of_map == OutOfMap::Error {
+                        return Err(ScanError::PointOutOfMap { index, x: p.x, y: p.y, z: p.z, source });
+                    }
+                    report.out_of_map += 1;
+                    continue;
+                }
+            }
+            cleaned.push(p);
+        }
+    }
+    if opts.discretize {
+        let mut seen = KeySet::default();
+        cleaned.retain(|&p| seen.insert(MortonCode::encode(keys.key_unchecked(p))));
+        cleaned.iter_mut().for_each(|p| *p = keys.key_to_point(keys.key_unchecked(*p)));
+    }
+    let points = if clean { points } else { &cleaned[..] };
+
+    let fan = RayFan::new(keys, origin).ok();
+    let run = || cast_scan(keys, points, fan.as_ref(), origin, opts);
+    let update = match opts.threads {
+        Some(1) => cast_serial(keys, points, fan.as_ref(), origin, opts),
+        None => run(),
+        Some(n) => thread_pool(n)?.install(run),
+    };
+    Ok((update, report))
+}
+
+fn cast_serial(
+    keys: &KeySpace,
+    points: &[Point3],
+    fan: Option<&RayFan>,
+    origin: Point3,
+    opts: &ScanOptions,
+) -> ScanUpdate {
+    let mut c = Casting::new();
+    for &p in points {
+        c.cast(keys, fan, p, origin, opts);
+    }
+    ScanUpdate::from_codes(c.free, c.occupied)
+}
+
+fn cast_scan(
+    keys: &KeySpace,
+    points: &[Point3],
+    fan: Option<&RayFan>,
+    origin: Point3,
+    opts: &ScanOptions,
+) -> ScanUpdate {
+    let threads = rayon::current_num_threads();
+    if threads == 1 {
+        return cast_serial(keys, points, fan, origin, opts);
+    }
+    let chunk = points.len().div_ceil(2 * threads).max(512);
+    let parts: Vec<Casting> = points
+        .par_chunks(chunk)
+        .fold(Casting::new, |mut acc, chunk| {
+            for &p in chunk {
+                acc.cast(keys, fan, p, origin, opts);
+            }
+            acc
+        })
+        .map(|mut c| {
+            c.finish();
+            c
+        })
+        .collect();
+    let (free, occupied): (Vec<_>, Vec<_>) = parts.into_iter().map(|c| (c.free, c.occupied)).unzip();
+    let (mut free, occupied) = rayon::join(|| merge_sorted(free), || merge_sorted(occupied));
+    dedup_except(&mut free, &occupied);
+    ScanUpdate { free, occupied }
 }
 
 #[cfg(test)]
@@ -584,5 +666,50 @@ mod tests {
             bytes.push(out);
         }
         assert!(bytes[0] == bytes[1] && bytes[1] == bytes[2]);
+    }
+
+    #[test]
+    fn pipelined_insertion_matches_scan_by_scan() {
+        let g = crate::simulate::simulate(
+            crate::simulate::SceneKind::Indoor,
+            4,
+            9,
+            &crate::simulate::LidarConfig::indoor(),
+        )
+        .unwrap();
+        let scans: Vec<_> = g.nodes.iter().map(|n| n.graph2tree()).map(|(c, o)| (c.points, o)).collect();
+        let ot = |t: &OccupancyTree| {
+            let mut out = Vec::new();
+            crate::formats::ot::write(t, &mut out).unwrap();
+            out
+        };
+        let mut expected = OccupancyTree::new(0.1).unwrap();
+        let mut reports = Vec::new();
+        for (points, origin) in &scans {
+            reports.push(expected.insert_point_cloud(points, *origin, &ScanOptions::default()).unwrap());
+        }
+        for threads in [Some(1), Some(2), Some(8), None] {
+            let mut t = OccupancyTree::new(0.1).unwrap();
+            let opts = ScanOptions { threads, ..Default::default() };
+            let mut got = Vec::new();
+            let input = scans.iter().map(|(p, o)| (p.as_slice(), *o));
+            t.insert_point_clouds(input, &opts, |_, r| got.push(r)).unwrap();
+            assert_eq!(got, reports, "{threads:?} threads");
+            assert!(ot(&t) == ot(&expected), "{threads:?} threads");
+        }
+
+        // a refused scan stops the sequence after the scans before it
+        let mut bad = scans.clone();
+        bad[2].0.push(Point3::new(1e9, 0.0, 0.0));
+        for threads in [Some(1), Some(2)] {
+            let opts = ScanOptions { threads, out_of_map: OutOfMap::Error, ..Default::default() };
+            let mut t = OccupancyTree::new(0.1).unwrap();
+            let mut n = 0;
+            let input = bad.iter().map(|(p, o)| (p.as_slice(), *o));
+            let err = t.insert_point_clouds(input, &opts, |_, _| n += 1).unwrap_err();
+            assert_eq!(err.0, 2);
+            assert!(matches!(err.1, ScanError::PointOutOfMap { .. }));
+            assert_eq!(n, 2);
+        }
     }
 }
