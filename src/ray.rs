@@ -143,13 +143,12 @@ impl RayKeys {
 /// `start` (not reported), step the axis of the smallest `t_max` and report
 /// each voxel until the end voxel or a `t_max` beyond `length`.
 ///
-/// Stepping one axis changes only that axis's interleaved bits: with the
-/// other axes' bits set to one, adding one carries straight through them
-/// (and subtracting borrows through the zeros), so
-/// `dil' = ((dil | fill) + add) & mask` with no branch on the direction.
-/// The distance check uses the minimum `t_max` the next step's axis choice
-/// computes anyway (the same value as OctoMap's `min(min(..), ..)`, as no
-/// `t_max` is NaN).
+/// Stepping one axis changes only that axis's interleaved bits (`mask`):
+/// with the other axes' bits set to one, adding one carries straight
+/// through them (and subtracting borrows through zeros), so the axis's bits
+/// become `((code & mask | fill) + add) & mask` with no branch on the
+/// direction. The distance check is OctoMap's `min(min(..), ..)` of the
+/// `t_max`.
 #[inline(always)]
 fn walk_codes(
     start: u64,
@@ -171,17 +170,14 @@ fn walk_codes(
             _ => (0, 0),
         };
     }
-    // everything in registers, each step computed for all three axes and
-    // selected by masks: no data-dependent branch or memory access on the
-    // loop-carried path
-    let (mut d0, mut d1, mut d2) = (start & masks[0], start & masks[1], start & masks[2]);
+    // the code in one register; the axis to step comes from compare masks
+    // (no branch on it), its three constants from small tables
+    let mut code = start;
     let mut clock = StepClock::new(t_max, t_delta);
     loop {
-        let [m0, m1, m2] = clock.step();
-        d0 ^= (((d0 | fill[0]).wrapping_add(add[0]) & masks[0]) ^ d0) & m0;
-        d1 ^= (((d1 | fill[1]).wrapping_add(add[1]) & masks[1]) ^ d1) & m1;
-        d2 ^= (((d2 | fill[2]).wrapping_add(add[2]) & masks[2]) ^ d2) & m2;
-        let code = d0 | d1 | d2;
+        let dim = clock.step();
+        let (m, fl, ad) = (masks[dim], fill[dim], add[dim]);
+        code = ((((code & m) | fl).wrapping_add(ad)) & m) | (code & !m);
         if code == end_code || clock.min() > length {
             return;
         }
@@ -190,8 +186,8 @@ fn walk_codes(
 }
 
 /// The DDA's three `t_max` and their increments. [`Self::step`] advances
-/// the smallest (`min_axis`: ties go to the higher axis) and returns one
-/// mask per axis, all ones for the axis stepped. The choice is made with
+/// the smallest (`min_axis`: ties go to the higher axis) and returns its
+/// axis. The choice is made with
 /// compare masks, not branches: the axis changes irregularly along a ray,
 /// and a mispredicted branch would cost more than the whole step.
 /// Adding a masked-out increment adds +0.0, which leaves a `t_max`
@@ -221,7 +217,7 @@ impl StepClock {
     }
 
     #[inline(always)]
-    fn step(&mut self) -> [u64; 3] {
+    fn step(&mut self) -> usize {
         use std::arch::x86_64::*;
         // SAFETY: as in `new`: baseline SSE2, registers only.
         unsafe {
@@ -235,8 +231,8 @@ impl StepClock {
                 _mm_add_sd(t1, _mm_and_pd(s1, self.dt[1])),
                 _mm_add_sd(t2, _mm_and_pd(s2, self.dt[2])),
             ];
-            let mask = |s: __m128d| _mm_cvtsi128_si64(_mm_castpd_si128(s)) as u64;
-            [mask(s0), mask(s1), mask(s2)]
+            // the sign bits of (s1, s2): 0, 1 or 2, the axis stepped
+            _mm_movemask_pd(_mm_unpacklo_pd(s1, s2)) as usize & 3
         }
     }
 
@@ -265,7 +261,7 @@ impl StepClock {
     }
 
     #[inline(always)]
-    fn step(&mut self) -> [u64; 3] {
+    fn step(&mut self) -> usize {
         let [t0, t1, t2] = self.t;
         let lt01 = t0 < t1;
         let s0 = lt01 & (t0 < t2);
@@ -274,7 +270,7 @@ impl StepClock {
         for i in 0..3 {
             self.t[i] += std::hint::select_unpredictable(s[i], self.dt[i], 0.0);
         }
-        s.map(|b| u64::from(b).wrapping_neg())
+        usize::from(s1) | (usize::from(s[2]) << 1)
     }
 
     #[inline(always)]
