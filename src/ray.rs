@@ -314,10 +314,11 @@ impl RayFan {
     }
 
     /// Calls `f` with the Morton code of every key `RayKeys::new(keys,
-    /// origin, end)` yields, given `end_key`, the key of `end`.
+    /// origin, end)` yields, given `end_code`, the Morton code of the key of
+    /// `end`.
     #[inline]
-    pub fn for_each_code(&self, end: Point3, end_key: Key, mut f: impl FnMut(u64)) {
-        if end_key == self.origin_key {
+    pub fn for_each_code(&self, end: Point3, end_code: u64, mut f: impl FnMut(u64)) {
+        if end_code == self.origin_code {
             return;
         }
         let d = end - self.origin;
@@ -339,7 +340,6 @@ impl RayFan {
             t_delta[i] = self.resolution / f64::from(dir[i].abs());
         }
         f(self.origin_code);
-        let end_code = MortonCode::encode(end_key).0;
         walk_codes(self.origin_code, step, t_max, t_delta, end_code, f64::from(length), f);
     }
 }

@@ -2,12 +2,27 @@
 //! parallel ray casting and updates applied in Morton order.
 //!
 //! Per scan, the free voxels of all rays and the occupied end-point voxels
-//! are collected into hash sets; a voxel that is an end point is never also
-//! freed; then each voxel is updated once, free voxels first. Because every
-//! voxel is touched once per scan, the result does not depend on the order
-//! of application, so we sort by Morton code (consecutive updates share
+//! are collected as sets; a voxel that is an end point is never also freed;
+//! then each voxel is updated once, free voxels first. Because every voxel
+//! is touched once per scan, the result does not depend on the order of
+//! application, so we apply in Morton order (consecutive updates share
 //! their path from the root) and parallelise the ray casting freely: the
 //! tree is bit-identical for any thread count.
+//!
+//! The sets are not hash sets, although OctoMap's are: rays walk Morton
+//! codes ([`RayFan`]), a small direct-mapped filter of recent codes drops
+//! all but a few per cent of the repeats (rays of one scan share the voxels
+//! near the sensor), and the raw lists are radix-sorted, which the Morton
+//! order application needs anyway, and freed of repeats and of the occupied
+//! codes in one merging pass. Measured with `cargo bench --bench insert --
+//! dedup` (indoor and outdoor scenes at 0.1 m), that takes 0.6x and 0.25x
+//! the time of inserting the same raw lists into hashbrown sets
+//! ([`KeySet`]), removing the occupied keys from the free set and sorting
+//! the sets for the batched walk. Hash sets remain where lists do not pay:
+//! merging end points for `discretize`.
+//!
+//! [`OccupancyTree::insert_point_clouds`] integrates a sequence of scans and,
+//! with several threads, casts the next scan while one is applied.
 
 use crate::geometry::Point3;
 use crate::key::{Key, KeyError, KeySpace};
@@ -79,12 +94,13 @@ impl Casting {
         let end = if within { p } else { point_along(origin, (p - origin).normalized(), max_range) };
         let Some(bbx) = opts.bbx else {
             let Ok(end_key) = keys.key(end) else { return };
+            let end_code = MortonCode::encode(end_key).0;
             if within {
-                self.occupied.push(MortonCode::encode(end_key).0);
+                self.occupied.push(end_code);
             }
             if let Some(fan) = fan {
                 let (free, recent) = (&mut self.free, &mut self.recent);
-                fan.for_each_code(end, end_key, |c| {
+                fan.for_each_code(end, end_code, |c| {
                     // skip keys a recent ray already gave
                     let slot = &mut recent[recent_slot(c)];
                     if *slot != c {
