@@ -159,29 +159,93 @@ fn walk_codes(
     length: f64,
     mut f: impl FnMut(u64),
 ) {
-    const MX: u64 = 0x2492_4924_9249;
-    let masks = [MX, MX << 1, MX << 2];
-    let mut fill = [0u64; 3];
-    let mut add = [0u64; 3];
-    for i in 0..3 {
-        (fill[i], add[i]) = match step[i] {
-            1 => (!masks[i], 1 << i),
-            -1 => (0, (1u64 << i).wrapping_neg()),
-            _ => (0, 0),
-        };
-    }
-    // the code in one register; the axis to step comes from compare masks
-    // (no branch on it), its three constants from small tables
-    let mut code = start;
-    let mut clock = StepClock::new(t_max, t_delta);
-    loop {
-        let dim = clock.step();
-        let (m, fl, ad) = (masks[dim], fill[dim], add[dim]);
-        code = ((((code & m) | fl).wrapping_add(ad)) & m) | (code & !m);
-        if code == end_code || clock.min() > length {
-            return;
-        }
+    let mut ray = FanRay::new(start, step, t_max, t_delta, end_code, length);
+    while let Some(code) = ray.next_code() {
         f(code);
+    }
+}
+
+/// The dilated bits of each axis in a Morton code.
+const AXIS_MASKS: [u64; 3] = [0x2492_4924_9249, 0x2492_4924_9249 << 1, 0x2492_4924_9249 << 2];
+
+/// One ray of `computeRayKeys` walked step by step on Morton codes (see
+/// [`walk_codes`]), from [`RayFan::ray`]: lets a caller interleave rays,
+/// whose steps, each a chain of dependent operations, then overlap in the
+/// processor. [`Self::split`] separates the state that changes at every
+/// step from the per-axis constants, so that two walks can stay in
+/// registers.
+#[derive(Clone, Copy)]
+pub struct FanRay {
+    state: WalkState,
+    steps: AxisSteps,
+}
+
+/// What changes along a [`FanRay`].
+#[derive(Clone, Copy)]
+pub struct WalkState {
+    code: u64,
+    end_code: u64,
+    length: f64,
+    clock: StepClock,
+}
+
+/// Per axis, what a step adds to a Morton code: `((code & mask | fill) +
+/// add) & mask` are the axis's new bits.
+#[derive(Clone, Copy)]
+pub struct AxisSteps {
+    fill: [u64; 3],
+    add: [u64; 3],
+}
+
+impl FanRay {
+    #[inline(always)]
+    fn new(start: u64, step: [i32; 3], t_max: [f64; 3], t_delta: [f64; 3], end_code: u64, length: f64) -> Self {
+        let mut fill = [0u64; 3];
+        let mut add = [0u64; 3];
+        for i in 0..3 {
+            (fill[i], add[i]) = match step[i] {
+                1 => (!AXIS_MASKS[i], 1 << i),
+                -1 => (0, (1u64 << i).wrapping_neg()),
+                _ => (0, 0),
+            };
+        }
+        FanRay {
+            state: WalkState { code: start, end_code, length, clock: StepClock::new(t_max, t_delta) },
+            steps: AxisSteps { fill, add },
+        }
+    }
+
+    /// A ray with no voxel left.
+    pub fn finished() -> Self {
+        FanRay::new(0, [0; 3], [0.0; 3], [1.0; 3], u64::MAX, f64::NEG_INFINITY)
+    }
+
+    /// The next voxel's Morton code, `None` once the ray is done (and from
+    /// then on).
+    #[inline(always)]
+    pub fn next_code(&mut self) -> Option<u64> {
+        self.state.next_code(&self.steps)
+    }
+
+    pub fn split(self) -> (WalkState, AxisSteps) {
+        (self.state, self.steps)
+    }
+}
+
+impl WalkState {
+    /// [`FanRay::next_code`], given the ray's [`AxisSteps`].
+    #[inline(always)]
+    pub fn next_code(&mut self, steps: &AxisSteps) -> Option<u64> {
+        // the code in one register; the axis to step comes from compare
+        // masks (no branch on it), its constants from small tables
+        let dim = self.clock.step().min(2);
+        let (m, fl, ad) = (AXIS_MASKS[dim], steps.fill[dim], steps.add[dim]);
+        self.code = ((((self.code & m) | fl).wrapping_add(ad)) & m) | (self.code & !m);
+        if self.code == self.end_code || self.clock.min() > self.length {
+            self.length = f64::NEG_INFINITY; // stays done
+            return None;
+        }
+        Some(self.code)
     }
 }
 
@@ -195,7 +259,7 @@ fn walk_codes(
 /// same).
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy)]
-struct StepClock {
+pub struct StepClock {
     t: [std::arch::x86_64::__m128d; 3],
     dt: [std::arch::x86_64::__m128d; 3],
 }
@@ -248,7 +312,7 @@ impl StepClock {
 /// Portable [`StepClock`]: the same choice on booleans.
 #[cfg(not(target_arch = "x86_64"))]
 #[derive(Clone, Copy)]
-struct StepClock {
+pub struct StepClock {
     t: [f64; 3],
     dt: [f64; 3],
 }
@@ -318,8 +382,27 @@ impl RayFan {
     /// `end`.
     #[inline]
     pub fn for_each_code(&self, end: Point3, end_code: u64, mut f: impl FnMut(u64)) {
+        if let Some(mut ray) = self.ray(end, end_code) {
+            f(self.origin_code);
+            while let Some(code) = ray.next_code() {
+                f(code);
+            }
+        }
+    }
+
+    /// The Morton code of the origin's voxel, the first of every ray that
+    /// is not empty.
+    pub fn origin_code(&self) -> u64 {
+        self.origin_code
+    }
+
+    /// The ray to `end` (`end_code` the Morton code of its key) past the
+    /// origin's voxel, which [`RayKeys`] yields first; `None` when the ray
+    /// is empty (`end` lies in the origin's voxel).
+    #[inline]
+    pub fn ray(&self, end: Point3, end_code: u64) -> Option<FanRay> {
         if end_code == self.origin_code {
-            return;
+            return None;
         }
         let d = end - self.origin;
         let length = d.norm() as f32;
@@ -339,8 +422,7 @@ impl RayFan {
             t_max[i] = self.to_border[i][s] / f64::from(dir[i]);
             t_delta[i] = self.resolution / f64::from(dir[i].abs());
         }
-        f(self.origin_code);
-        walk_codes(self.origin_code, step, t_max, t_delta, end_code, f64::from(length), f);
+        Some(FanRay::new(self.origin_code, step, t_max, t_delta, end_code, f64::from(length)))
     }
 }
 

@@ -27,7 +27,7 @@
 use crate::geometry::Point3;
 use crate::key::{Key, KeyError, KeySpace};
 use crate::morton::MortonCode;
-use crate::ray::{point_along, RayFan, RayKeys};
+use crate::ray::{point_along, FanRay, RayFan, RayKeys};
 use crate::tree::{InnerNodes, OccupancyTree};
 use hashbrown::HashSet;
 use rayon::prelude::*;
@@ -118,6 +118,92 @@ impl Casting {
         }
         if let Ok(ray) = RayKeys::new(keys, origin, end) {
             self.free.extend(ray.take_while(|&k| bbx.contains_key(k)).map(|k| MortonCode::encode(k).0));
+        }
+    }
+
+    /// [`Self::cast`] for every point, rays walked two at a time: the
+    /// steps of one ray form a chain of dependent operations, and
+    /// interleaving two chains lets the processor overlap them.
+    fn cast_all(
+        &mut self,
+        keys: &KeySpace,
+        fan: Option<&RayFan>,
+        points: &[Point3],
+        origin: Point3,
+        opts: &ScanOptions,
+    ) {
+        let Some(fan) = fan.filter(|_| opts.bbx.is_none()) else {
+            for &p in points {
+                self.cast(keys, fan, p, origin, opts);
+            }
+            return;
+        };
+        let mut points = points.iter();
+        // the two walks' changing state apart from their constants, so that
+        // it stays in registers
+        let (mut a, mut a_steps) = self.next_ray(keys, fan, &mut points, origin, opts).split();
+        let (mut b, mut b_steps) = self.next_ray(keys, fan, &mut points, origin, opts).split();
+        loop {
+            let (ca, cb) = (a.next_code(&a_steps), b.next_code(&b_steps));
+            match ca {
+                Some(c) => self.push_free(c),
+                None => (a, a_steps) = self.next_ray(keys, fan, &mut points, origin, opts).split(),
+            }
+            match cb {
+                Some(c) => self.push_free(c),
+                None => {
+                    (b, b_steps) = self.next_ray(keys, fan, &mut points, origin, opts).split();
+                    if ca.is_none() && points.len() == 0 {
+                        break;
+                    }
+                }
+            }
+        }
+        // the last rays
+        while let Some(c) = a.next_code(&a_steps) {
+            self.push_free(c);
+        }
+        while let Some(c) = b.next_code(&b_steps) {
+            self.push_free(c);
+        }
+    }
+
+    /// Takes points until one has a ray that is not empty, doing
+    /// [`Self::cast`]'s work for each except the walk (its end point, the
+    /// origin voxel); that ray, or a finished one when the points run out.
+    #[inline(never)]
+    fn next_ray(
+        &mut self,
+        keys: &KeySpace,
+        fan: &RayFan,
+        points: &mut std::slice::Iter<Point3>,
+        origin: Point3,
+        opts: &ScanOptions,
+    ) -> FanRay {
+        let max_range = opts.max_range.unwrap_or(-1.0);
+        for &p in points {
+            let within = max_range < 0.0 || (p - origin).norm() <= max_range;
+            let end = if within { p } else { point_along(origin, (p - origin).normalized(), max_range) };
+            let Ok(end_key) = keys.key(end) else { continue };
+            let end_code = MortonCode::encode(end_key).0;
+            if within {
+                self.occupied.push(end_code);
+            }
+            if let Some(ray) = fan.ray(end, end_code) {
+                self.push_free(fan.origin_code());
+                return ray;
+            }
+        }
+        FanRay::finished()
+    }
+
+    /// Adds a free code unless the filter of recent keys has it.
+    #[inline(always)]
+    fn push_free(&mut self, c: u64) {
+        let slot = &mut self.recent[recent_slot(c)];
+        if *slot != c {
+            *slot = c;
+            self.free.push(c);
         }
     }
 
@@ -446,9 +532,7 @@ impl OccupancyTree {
     pub fn cast_codes(&self, points: &[Point3], origin: Point3) -> (Vec<u64>, Vec<u64>) {
         let fan = RayFan::new(self.key_space(), origin).ok();
         let mut c = Casting::new();
-        for &p in points {
-            c.cast(self.key_space(), fan.as_ref(), p, origin, &ScanOptions::default());
-        }
+        c.cast_all(self.key_space(), fan.as_ref(), points, origin, &ScanOptions::default());
         (c.free, c.occupied)
     }
 
@@ -567,9 +651,7 @@ fn cast_serial(
     opts: &ScanOptions,
 ) -> ScanUpdate {
     let mut c = Casting::new();
-    for &p in points {
-        c.cast(keys, fan, p, origin, opts);
-    }
+    c.cast_all(keys, fan, points, origin, opts);
     ScanUpdate::from_codes(c.free, c.occupied)
 }
 
@@ -588,9 +670,7 @@ fn cast_scan(
     let parts: Vec<Casting> = points
         .par_chunks(chunk)
         .fold(Casting::new, |mut acc, chunk| {
-            for &p in chunk {
-                acc.cast(keys, fan, p, origin, opts);
-            }
+            acc.cast_all(keys, fan, chunk, origin, opts);
             acc
         })
         .map(|mut c| {
