@@ -859,8 +859,23 @@ impl Batch<'_> {
                     bounds[pos] = bounds[pos].min(bounds[pos + 1]);
                 }
             } else {
+                // each child's range ends where the next begins: gallop
+                // forwards from its start (the memory just read) instead of
+                // binary searches over the whole list
+                let n = codes.len();
+                let mut start = 0;
                 for (pos, b) in bounds.iter_mut().enumerate().take(8) {
-                    *b = codes.partition_point(|&c| child_of(c) < pos);
+                    *b = start;
+                    if start == n || child_of(codes[start]) != pos {
+                        continue;
+                    }
+                    let (mut last, mut step) = (start, 1);
+                    while last + step < n && child_of(codes[last + step]) == pos {
+                        last += step;
+                        step *= 2;
+                    }
+                    let limit = (last + step).min(n);
+                    start = last + 1 + codes[last + 1..limit].partition_point(|&c| child_of(c) == pos);
                 }
             }
             for pos in 0..8 {
