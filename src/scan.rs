@@ -138,6 +138,8 @@ impl Casting {
             }
             return;
         };
+        // a few voxels per point pass the filter (many more on long rays)
+        self.free.reserve(4 * points.len());
         let mut points = points.iter();
         // the two walks' changing state apart from their constants, so that
         // it stays in registers
