@@ -15,10 +15,10 @@
 //! near the sensor), and the raw lists are radix-sorted, which the Morton
 //! order application needs anyway, and freed of repeats and of the occupied
 //! codes in one merging pass. Measured with `cargo bench --bench insert --
-//! dedup` (indoor and outdoor scenes at 0.1 m), that takes 0.6x and 0.25x
-//! the time of inserting the same raw lists into hashbrown sets
-//! ([`KeySet`]), removing the occupied keys from the free set and sorting
-//! the sets for the batched walk. Hash sets remain where lists do not pay:
+//! dedup`, that takes 0.45-0.53x (indoor scenes, 0.05-0.2 m) and
+//! 0.28-0.41x (outdoor) the time of inserting the same raw lists into
+//! hashbrown sets ([`KeySet`]), removing the occupied keys from the free set
+//! and sorting the sets for the batched walk. Hash sets remain where lists do not pay:
 //! merging end points for `discretize`.
 //!
 //! [`OccupancyTree::insert_point_clouds`] integrates a sequence of scans and,
