@@ -478,7 +478,17 @@ impl OccupancyTree {
         };
         match opts.threads {
             None => run(),
-            Some(n) => thread_pool(n).map_err(|e| (0, e))?.install(run),
+            // a pool of its own per call rather than the cached one: workers
+            // that slept long (between calls) were seen to be woken onto
+            // the CPU of the thread waking them and to share it for a whole
+            // scan sequence (2 threads slower than 1 in `side_by_side`),
+            // while new threads start spread; starting them costs far less
+            // than a sequence of scans
+            Some(n) => rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .map_err(|_| (0, ScanError::ThreadPool("could not start ray-casting threads")))?
+                .install(run),
         }
     }
 
