@@ -1,26 +1,31 @@
 //! Scan insertion: whole scan sets into a fresh tree at 0.05, 0.1 and 0.2 m
-//! with 1 and 2 ray-casting threads, and the parts of an insertion timed
-//! apart: ray casting (`compute_update`), sorting the key sets by Morton
-//! code, and applying them: in one batched walk (`update_batch`, what
-//! `insert_point_cloud` does), or key by key (`apply_sorted`) in Morton
-//! order and in the hash sets' own iteration order. Before timing, the
-//! three applications are checked to give the same `.ot` bytes.
+//! with 1 and 2 threads, and the parts of an insertion timed apart: ray
+//! casting with the key lists made repeat-free and sorted
+//! (`compute_update`); that deduplication alone, as done (sort the raw
+//! codes, drop repeats, remove the occupied codes from the free ones by
+//! merging) and with hashbrown key sets as OctoMap does with its
+//! `KeySet`s (then sorted for the batched walk); and applying the lists:
+//! in one batched walk (`update_batch`, what `insert_point_cloud` does),
+//! or key by key (`apply_sorted`) in Morton order and in the hash sets'
+//! own iteration order. Before timing, the three applications are checked
+//! to give the same `.ot` bytes.
 //!
 //! `cargo bench --bench insert` (filter e.g. `-- insert/indoor`).
-//! Throughputs: `insert` and `compute_update` in points, `apply` in voxel
-//! updates, `sort` in keys; the setup lines on stderr give both counts so
-//! either rate can be derived.
+//! Throughputs: `insert` and `compute_update` in points, `dedup` in raw
+//! codes, `apply` in voxel updates. Each scene and resolution also prints
+//! (stderr) its counts and the rates of a plain timing: points and voxel
+//! updates per second and nanoseconds per ray-key step.
 
 mod common;
 
 use common::*;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use octolinear::formats::ot;
-use octolinear::scan::ScanUpdate;
+use octolinear::scan::{KeySet, ScanUpdate};
 use octolinear::simulate::SceneKind;
 use octolinear::{InnerNodes, Key, OccupancyTree};
 use std::cell::OnceCell;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 const RESOLUTIONS: [f64; 3] = [0.05, 0.1, 0.2];
 
@@ -40,13 +45,41 @@ struct KeyLists {
 }
 
 fn key_lists(updates: &[ScanUpdate]) -> KeyLists {
-    let codes = updates.iter().map(ScanUpdate::sorted_codes).collect();
+    let codes = updates.iter().map(|u| (u.free.clone(), u.occupied.clone())).collect();
     let sorted = updates.iter().map(ScanUpdate::sorted).collect();
     let hashed = updates
         .iter()
-        .map(|u| (u.free.iter().map(|h| h.decode()).collect(), u.occupied.iter().map(|h| h.decode()).collect()))
+        .map(|u| {
+            let (free, occupied) = u.key_sets();
+            (free.iter().map(|h| h.decode()).collect(), occupied.iter().map(|h| h.decode()).collect())
+        })
         .collect();
     KeyLists { codes, sorted, hashed }
+}
+
+/// The deduplication OctoMap's way: hash sets, the occupied keys removed
+/// from the free set, then (for the batched walk) sorted.
+fn dedup_hash(free: &[u64], occupied: &[u64]) -> ScanUpdate {
+    let mut f: KeySet = free.iter().map(|&c| octolinear::MortonCode(c)).collect();
+    let o: KeySet = occupied.iter().map(|&c| octolinear::MortonCode(c)).collect();
+    f.retain(|k| !o.contains(k));
+    let sorted = |set: KeySet| {
+        let mut v: Vec<u64> = set.into_iter().map(|c| c.0).collect();
+        octolinear::morton::sort_codes(&mut v);
+        v
+    };
+    ScanUpdate { free: sorted(f), occupied: sorted(o) }
+}
+
+/// Fastest of `reps` runs of `f`, in seconds.
+fn best_of(reps: usize, mut f: impl FnMut()) -> f64 {
+    (0..reps)
+        .map(|_| {
+            let t = Instant::now();
+            f();
+            t.elapsed().as_secs_f64()
+        })
+        .fold(f64::MAX, f64::min)
 }
 
 fn ot_bytes(tree: &OccupancyTree) -> Vec<u8> {
@@ -117,12 +150,51 @@ fn split(c: &mut Criterion) {
             let opts = scan_options(Some(1));
             let updates: Vec<ScanUpdate> =
                 scans.iter().map(|(p, o)| empty.compute_update(p, *o, &opts).unwrap().0).collect();
-            let n_updates: usize = updates.iter().map(|u| u.free.len() + u.occupied.len()).sum();
+            let n_updates: usize = updates.iter().map(ScanUpdate::len).sum();
+            let raw: Vec<(Vec<u64>, Vec<u64>)> = scans.iter().map(|(p, o)| empty.cast_codes(p, *o)).collect();
+            let n_raw: usize = raw.iter().map(|(f, o)| f.len() + o.len()).sum();
+            // every voxel step of every ray, the origin voxel included
+            let steps: usize = scans
+                .iter()
+                .flat_map(|(p, o)| p.iter().map(move |q| (q, o)))
+                .map(|(q, o)| empty.ray_keys(*o, *q).map_or(0, |r| r.count()))
+                .sum();
+            let t_cast = best_of(3, || {
+                for (p, o) in &scans {
+                    std::hint::black_box(empty.compute_update(p, *o, &opts).unwrap());
+                }
+            });
+            let t_insert = best_of(3, || {
+                std::hint::black_box(build(&scans, res, Some(1)));
+            });
             eprintln!(
-                "insert: {name} {res} m: {} scans, {points} points, {n_updates} voxel updates ({:.1} per point)",
+                "insert: {name} {res} m: {} scans, {points} points, {steps} ray-key steps ({:.1} per point), \
+                 {n_raw} raw codes after the recent-key filter, {n_updates} voxel updates ({:.2} per point)",
                 scans.len(),
+                steps as f64 / points as f64,
                 n_updates as f64 / points as f64
             );
+            eprintln!(
+                "insert: {name} {res} m, 1 thread: insert {:.1} ms = {:.2} M points/s, {:.2} M voxel updates/s, \
+                 {:.2} ns per ray-key step; compute_update {:.1} ms = {:.2} ns per ray-key step",
+                t_insert * 1e3,
+                points as f64 / t_insert / 1e6,
+                n_updates as f64 / t_insert / 1e6,
+                t_insert * 1e9 / steps as f64,
+                t_cast * 1e3,
+                t_cast * 1e9 / steps as f64
+            );
+            for (i, (f, o)) in raw.iter().enumerate() {
+                let u = ScanUpdate::from_codes(f.clone(), o.clone());
+                assert!(u == updates[i] && dedup_hash(f, o) == u, "deduplications differ");
+            }
+            g.throughput(Throughput::Elements(n_raw as u64));
+            g.bench_function("dedup_sort", |b| {
+                b.iter(|| raw.iter().map(|(f, o)| ScanUpdate::from_codes(f.clone(), o.clone())).collect::<Vec<_>>())
+            });
+            g.bench_function("dedup_hash", |b| {
+                b.iter(|| raw.iter().map(|(f, o)| dedup_hash(f, o)).collect::<Vec<_>>())
+            });
             // built on first use, so that benchmarks filtered out cost nothing
             let lists = OnceCell::new();
             let lists = || {
@@ -137,9 +209,6 @@ fn split(c: &mut Criterion) {
                 })
             };
             g.throughput(Throughput::Elements(n_updates as u64));
-            g.bench_function("sort_morton", |b| {
-                b.iter(|| updates.iter().map(ScanUpdate::sorted_codes).collect::<Vec<_>>())
-            });
             g.bench_function("apply_batch_morton", |b| {
                 let l = lists();
                 b.iter(|| apply_batches(res, &l.codes))

@@ -37,7 +37,7 @@ pub use geometry::{Point3, PointCloud, Pose6D, Quaternion};
 pub use key::{Key, KeyError, KeySpace};
 pub use mapped::{MapView, MappedMap, OlmError};
 pub use morton::MortonCode;
-pub use ray::{CastOptions, CastOutcome, RayKeys};
+pub use ray::{CastOptions, CastOutcome, FanRay, RayFan, RayKeys};
 pub use scan::{OutOfMap, ScanOptions, ScanReport, UpdateBox};
 pub use sensor::{SensorModel, SensorProbabilities};
 pub use tree::{

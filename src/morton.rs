@@ -198,6 +198,37 @@ mod tests {
     }
 
     #[test]
+    fn radix_sort_sorts_scenes_around_the_centre() {
+        // keys around the map centre (every bit differs across it), in a
+        // few extents, plus lists of one repeated code and of two values
+        let mut s = 99u64;
+        let mut rand = move || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            s >> 33
+        };
+        for (extent, n) in [(40u64, 300), (200, 5000), (3000, 100_000), (30, 70_000), (1 << 15, 20_000)] {
+            let mut v: Vec<u64> = (0..n)
+                .map(|_| {
+                    let k = |r: u64| (0x8000 - extent + r % (2 * extent)) as u16;
+                    MortonCode::encode(Key::new(k(rand()), k(rand()), k(rand()))).0
+                })
+                .collect();
+            let mut expected = v.clone();
+            expected.sort_unstable();
+            sort_codes(&mut v);
+            assert_eq!(v, expected, "extent {extent}, {n} codes");
+        }
+        let mut same = vec![12345u64; 1000];
+        sort_codes(&mut same);
+        assert!(same.iter().all(|&c| c == 12345));
+        let mut two: Vec<u64> = (0..1000).map(|i| if i % 3 == 0 { 1 << 47 } else { 5 }).collect();
+        let mut expected = two.clone();
+        expected.sort_unstable();
+        sort_codes(&mut two);
+        assert_eq!(two, expected);
+    }
+
+    #[test]
     fn radix_sort_sorts() {
         let mut s = 7u64;
         let mut v: Vec<u64> = (0..5000)

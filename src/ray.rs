@@ -120,44 +120,309 @@ impl RayKeys {
 
 impl RayKeys {
     /// Calls `f` with the Morton code of every key the iterator would yield,
-    /// in a tight loop that steps the interleaved code directly (adding one
-    /// to a dilated coordinate carries through the other axes' bits when
-    /// those are set to one).
+    /// in a tight loop that steps the interleaved code directly (see
+    /// [`walk_codes`]).
     #[inline]
     pub fn for_each_code(self, mut f: impl FnMut(u64)) {
-        let Some(mut dda) = self.dda else { return };
-        const MX: u64 = 0x2492_4924_9249;
-        let masks = [MX, MX << 1, MX << 2];
+        let Some(dda) = self.dda else { return };
         let start = MortonCode::encode(dda.key).0;
-        let mut dil = [start & masks[0], start & masks[1], start & masks[2]];
-        let end_code = MortonCode::encode(self.end).0;
-        if self.pending_origin {
-            f(start);
+        if !self.pending_origin {
+            // the origin was already yielded and steps may have been taken:
+            // finish with the iterator's own stepping
+            let mut rest = RayKeys { dda: Some(dda), ..self };
+            rest.by_ref().for_each(|k| f(MortonCode::encode(k).0));
+            return;
         }
-        let length = f64::from(self.length);
-        // per axis: dil' = ((dil | fill) + add) & mask, branch-free
+        f(start);
+        let end_code = MortonCode::encode(self.end).0;
+        walk_codes(start, dda.step, dda.t_max, dda.t_delta, end_code, f64::from(self.length), f);
+    }
+}
+
+/// The stepping loop of `computeRayKeys` on Morton codes: from the voxel
+/// `start` (not reported), step the axis of the smallest `t_max` and report
+/// each voxel until the end voxel or a `t_max` beyond `length`.
+///
+/// Stepping one axis changes only that axis's interleaved bits (`mask`):
+/// with the other axes' bits set to one, adding one carries straight
+/// through them (and subtracting borrows through zeros), so the axis's bits
+/// become `((code & mask | fill) + add) & mask` with no branch on the
+/// direction. The distance check is OctoMap's `min(min(..), ..)` of the
+/// `t_max`.
+#[inline(always)]
+fn walk_codes(
+    start: u64,
+    step: [i32; 3],
+    t_max: [f64; 3],
+    t_delta: [f64; 3],
+    end_code: u64,
+    length: f64,
+    mut f: impl FnMut(u64),
+) {
+    let mut ray = FanRay::new(start, step, t_max, t_delta, end_code, length);
+    while let Some(code) = ray.next_code() {
+        f(code);
+    }
+}
+
+/// The dilated bits of each axis in a Morton code.
+const AXIS_MASKS: [u64; 3] = [0x2492_4924_9249, 0x2492_4924_9249 << 1, 0x2492_4924_9249 << 2];
+
+/// One ray of `computeRayKeys` walked step by step on Morton codes (see
+/// [`walk_codes`]), from [`RayFan::ray`]: lets a caller interleave rays,
+/// whose steps, each a chain of dependent operations, then overlap in the
+/// processor. [`Self::split`] separates the state that changes at every
+/// step from the per-axis constants, so that two walks can stay in
+/// registers.
+#[derive(Clone, Copy)]
+pub struct FanRay {
+    state: WalkState,
+    steps: AxisSteps,
+}
+
+/// What changes along a [`FanRay`].
+#[derive(Clone, Copy)]
+pub struct WalkState {
+    code: u64,
+    end_code: u64,
+    length: f64,
+    clock: StepClock,
+}
+
+/// Per axis, what a step adds to a Morton code: `((code & mask | fill) +
+/// add) & mask` are the axis's new bits.
+#[derive(Clone, Copy)]
+pub struct AxisSteps {
+    fill: [u64; 3],
+    add: [u64; 3],
+}
+
+impl FanRay {
+    #[inline(always)]
+    fn new(start: u64, step: [i32; 3], t_max: [f64; 3], t_delta: [f64; 3], end_code: u64, length: f64) -> Self {
         let mut fill = [0u64; 3];
         let mut add = [0u64; 3];
         for i in 0..3 {
-            (fill[i], add[i]) = match dda.step[i] {
-                1 => (!masks[i], 1 << i),
+            (fill[i], add[i]) = match step[i] {
+                1 => (!AXIS_MASKS[i], 1 << i),
                 -1 => (0, (1u64 << i).wrapping_neg()),
                 _ => (0, 0),
             };
         }
-        loop {
-            let dim = min_axis(&dda.t_max);
-            dil[dim] = (dil[dim] | fill[dim]).wrapping_add(add[dim]) & masks[dim];
-            dda.t_max[dim] += dda.t_delta[dim];
-            let code = dil[0] | dil[1] | dil[2];
-            if code == end_code {
-                return;
-            }
-            if min(min(dda.t_max[0], dda.t_max[1]), dda.t_max[2]) > length {
-                return;
-            }
-            f(code);
+        FanRay {
+            state: WalkState { code: start, end_code, length, clock: StepClock::new(t_max, t_delta) },
+            steps: AxisSteps { fill, add },
         }
+    }
+
+    /// A ray with no voxel left.
+    pub fn finished() -> Self {
+        FanRay::new(0, [0; 3], [0.0; 3], [1.0; 3], u64::MAX, f64::NEG_INFINITY)
+    }
+
+    /// The next voxel's Morton code, `None` once the ray is done (and from
+    /// then on).
+    #[inline(always)]
+    pub fn next_code(&mut self) -> Option<u64> {
+        self.state.next_code(&self.steps)
+    }
+
+    pub fn split(self) -> (WalkState, AxisSteps) {
+        (self.state, self.steps)
+    }
+}
+
+impl WalkState {
+    /// [`FanRay::next_code`], given the ray's [`AxisSteps`].
+    #[inline(always)]
+    pub fn next_code(&mut self, steps: &AxisSteps) -> Option<u64> {
+        // the code in one register; the axis to step comes from compare
+        // masks (no branch on it), its constants from small tables
+        let dim = self.clock.step().min(2);
+        let (m, fl, ad) = (AXIS_MASKS[dim], steps.fill[dim], steps.add[dim]);
+        self.code = ((((self.code & m) | fl).wrapping_add(ad)) & m) | (self.code & !m);
+        if self.code == self.end_code || self.clock.min() > self.length {
+            self.length = f64::NEG_INFINITY; // stays done
+            return None;
+        }
+        Some(self.code)
+    }
+}
+
+/// The DDA's three `t_max` and their increments. [`Self::step`] advances
+/// the smallest (`min_axis`: ties go to the higher axis) and returns its
+/// axis. The choice is made with
+/// compare masks, not branches: the axis changes irregularly along a ray,
+/// and a mispredicted branch would cost more than the whole step.
+/// Adding a masked-out increment adds +0.0, which leaves a `t_max`
+/// unchanged (none is NaN; a -0.0 would become +0.0, which compares the
+/// same).
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+pub struct StepClock {
+    t: [std::arch::x86_64::__m128d; 3],
+    dt: [std::arch::x86_64::__m128d; 3],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl StepClock {
+    #[inline(always)]
+    fn new(t: [f64; 3], dt: [f64; 3]) -> Self {
+        use std::arch::x86_64::_mm_set_sd;
+        // SAFETY: SSE2 is part of the x86-64 baseline (these intrinsics
+        // are only `unsafe` for their `target_feature` attribute), and no
+        // memory is accessed.
+        unsafe {
+            StepClock {
+                t: [_mm_set_sd(t[0]), _mm_set_sd(t[1]), _mm_set_sd(t[2])],
+                dt: [_mm_set_sd(dt[0]), _mm_set_sd(dt[1]), _mm_set_sd(dt[2])],
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn step(&mut self) -> usize {
+        use std::arch::x86_64::*;
+        // SAFETY: as in `new`: baseline SSE2, registers only.
+        unsafe {
+            let [t0, t1, t2] = self.t;
+            let lt01 = _mm_cmplt_sd(t0, t1);
+            let s0 = _mm_and_pd(lt01, _mm_cmplt_sd(t0, t2));
+            let s1 = _mm_andnot_pd(lt01, _mm_cmplt_sd(t1, t2));
+            let s2 = _mm_andnot_pd(_mm_or_pd(s0, s1), _mm_castsi128_pd(_mm_set1_epi32(-1)));
+            self.t = [
+                _mm_add_sd(t0, _mm_and_pd(s0, self.dt[0])),
+                _mm_add_sd(t1, _mm_and_pd(s1, self.dt[1])),
+                _mm_add_sd(t2, _mm_and_pd(s2, self.dt[2])),
+            ];
+            // the sign bits of (s1, s2): 0, 1 or 2, the axis stepped
+            _mm_movemask_pd(_mm_unpacklo_pd(s1, s2)) as usize & 3
+        }
+    }
+
+    /// `min(min(t_max[0], t_max[1]), t_max[2])`.
+    #[inline(always)]
+    fn min(&self) -> f64 {
+        use std::arch::x86_64::*;
+        // SAFETY: as in `new`: baseline SSE2, registers only.
+        unsafe { _mm_cvtsd_f64(_mm_min_sd(_mm_min_sd(self.t[0], self.t[1]), self.t[2])) }
+    }
+}
+
+/// Portable [`StepClock`]: the same choice on booleans.
+#[cfg(not(target_arch = "x86_64"))]
+#[derive(Clone, Copy)]
+pub struct StepClock {
+    t: [f64; 3],
+    dt: [f64; 3],
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+impl StepClock {
+    #[inline(always)]
+    fn new(t: [f64; 3], dt: [f64; 3]) -> Self {
+        StepClock { t, dt }
+    }
+
+    #[inline(always)]
+    fn step(&mut self) -> usize {
+        let [t0, t1, t2] = self.t;
+        let lt01 = t0 < t1;
+        let s0 = lt01 & (t0 < t2);
+        let s1 = !lt01 & (t1 < t2);
+        let s = [s0, s1, !(s0 | s1)];
+        for i in 0..3 {
+            self.t[i] += std::hint::select_unpredictable(s[i], self.dt[i], 0.0);
+        }
+        usize::from(s1) | (usize::from(s[2]) << 1)
+    }
+
+    #[inline(always)]
+    fn min(&self) -> f64 {
+        min(min(self.t[0], self.t[1]), self.t[2])
+    }
+}
+
+/// Rays from one origin: what [`RayKeys::new`] derives from the origin
+/// alone (its key, its distances to the voxel borders) computed once, so
+/// that each ray of a scan only pays for its own direction.
+#[derive(Clone, Debug)]
+pub struct RayFan {
+    origin: Point3,
+    origin_key: Key,
+    origin_code: u64,
+    /// Per axis, `border - origin` for a negative (0) and a positive (1) step.
+    to_border: [[f64; 2]; 3],
+    resolution: f64,
+}
+
+impl RayFan {
+    /// Fails like [`RayKeys::new`] when the origin lies outside the map.
+    pub fn new(keys: &KeySpace, origin: Point3) -> Result<Self, KeyError> {
+        let origin_key = keys.key(origin)?;
+        let o = [origin.x, origin.y, origin.z];
+        let mut to_border = [[0.0; 2]; 3];
+        for i in 0..3 {
+            for (s, step) in [(0, -1.0), (1, 1.0)] {
+                // as `Dda::new` with the border offset rounded to float
+                let offset = f64::from((step * keys.resolution() * 0.5) as f32);
+                to_border[i][s] = keys.key_to_coord(origin_key.0[i]) + offset - f64::from(o[i]);
+            }
+        }
+        let origin_code = MortonCode::encode(origin_key).0;
+        Ok(RayFan { origin, origin_key, origin_code, to_border, resolution: keys.resolution() })
+    }
+
+    pub fn origin_key(&self) -> Key {
+        self.origin_key
+    }
+
+    /// Calls `f` with the Morton code of every key `RayKeys::new(keys,
+    /// origin, end)` yields, given `end_code`, the Morton code of the key of
+    /// `end`.
+    #[inline]
+    pub fn for_each_code(&self, end: Point3, end_code: u64, mut f: impl FnMut(u64)) {
+        if let Some(mut ray) = self.ray(end, end_code) {
+            f(self.origin_code);
+            while let Some(code) = ray.next_code() {
+                f(code);
+            }
+        }
+    }
+
+    /// The Morton code of the origin's voxel, the first of every ray that
+    /// is not empty.
+    pub fn origin_code(&self) -> u64 {
+        self.origin_code
+    }
+
+    /// The ray to `end` (`end_code` the Morton code of its key) past the
+    /// origin's voxel, which [`RayKeys`] yields first; `None` when the ray
+    /// is empty (`end` lies in the origin's voxel).
+    #[inline]
+    pub fn ray(&self, end: Point3, end_code: u64) -> Option<FanRay> {
+        if end_code == self.origin_code {
+            return None;
+        }
+        let d = end - self.origin;
+        let length = d.norm() as f32;
+        let dir = [d.x / length, d.y / length, d.z / length];
+        let mut step = [0i32; 3];
+        let mut t_max = [f64::MAX; 3];
+        let mut t_delta = [f64::MAX; 3];
+        for i in 0..3 {
+            let s = if dir[i] > 0.0 {
+                1
+            } else if dir[i] < 0.0 {
+                0
+            } else {
+                continue;
+            };
+            step[i] = 2 * s as i32 - 1;
+            t_max[i] = self.to_border[i][s] / f64::from(dir[i]);
+            t_delta[i] = self.resolution / f64::from(dir[i].abs());
+        }
+        Some(FanRay::new(self.origin_code, step, t_max, t_delta, end_code, f64::from(length)))
     }
 }
 

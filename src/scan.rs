@@ -2,17 +2,32 @@
 //! parallel ray casting and updates applied in Morton order.
 //!
 //! Per scan, the free voxels of all rays and the occupied end-point voxels
-//! are collected into hash sets; a voxel that is an end point is never also
-//! freed; then each voxel is updated once, free voxels first. Because every
-//! voxel is touched once per scan, the result does not depend on the order
-//! of application, so we sort by Morton code (consecutive updates share
+//! are collected as sets; a voxel that is an end point is never also freed;
+//! then each voxel is updated once, free voxels first. Because every voxel
+//! is touched once per scan, the result does not depend on the order of
+//! application, so we apply in Morton order (consecutive updates share
 //! their path from the root) and parallelise the ray casting freely: the
 //! tree is bit-identical for any thread count.
+//!
+//! The sets are not hash sets, although OctoMap's are: rays walk Morton
+//! codes ([`RayFan`]), a small direct-mapped filter of recent codes drops
+//! all but a few per cent of the repeats (rays of one scan share the voxels
+//! near the sensor), and the raw lists are radix-sorted, which the Morton
+//! order application needs anyway, and freed of repeats and of the occupied
+//! codes in one merging pass. Measured with `cargo bench --bench insert --
+//! dedup`, that takes 0.45-0.53x (indoor scenes, 0.05-0.2 m) and
+//! 0.28-0.41x (outdoor) the time of inserting the same raw lists into
+//! hashbrown sets ([`KeySet`]), removing the occupied keys from the free set
+//! and sorting the sets for the batched walk. Hash sets remain where lists do not pay:
+//! merging end points for `discretize`.
+//!
+//! [`OccupancyTree::insert_point_clouds`] integrates a sequence of scans and,
+//! with several threads, casts the next scan while one is applied.
 
 use crate::geometry::Point3;
 use crate::key::{Key, KeyError, KeySpace};
 use crate::morton::MortonCode;
-use crate::ray::{point_along, RayKeys};
+use crate::ray::{point_along, FanRay, RayFan, RayKeys};
 use crate::tree::{InnerNodes, OccupancyTree};
 use hashbrown::HashSet;
 use rayon::prelude::*;
@@ -46,69 +61,224 @@ impl Hasher for KeyHasher {
 /// [`KeyHasher`].
 pub type KeySet = HashSet<MortonCode, BuildHasherDefault<KeyHasher>>;
 
-/// Size of the direct-mapped filter of recently inserted ray keys; rays of
-/// one scan share most voxels near the sensor.
+/// Size of the direct-mapped filter of recently emitted ray keys; rays of
+/// one scan share most voxels near the sensor, and the filter drops all but
+/// a few per cent of the repeats before they reach the key lists.
 const RECENT_SLOTS: usize = 1 << RECENT_BITS;
-const RECENT_BITS: u32 = 14;
+const RECENT_BITS: u32 = 13;
 
 #[inline(always)]
 fn recent_slot(code: u64) -> usize {
     ((code ^ (code >> 21)).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> (64 - RECENT_BITS)) as usize
 }
 
-/// The key sets one worker collects, with its filter of recent keys.
+/// The key lists one worker collects (Morton codes, unsorted, repeats
+/// allowed), with its filter of recent keys.
 struct Casting {
-    free: KeySet,
-    occupied: KeySet,
+    free: Vec<u64>,
+    occupied: Vec<u64>,
     recent: Vec<u64>,
 }
 
 impl Casting {
     fn new() -> Self {
-        Casting { free: KeySet::default(), occupied: KeySet::default(), recent: vec![u64::MAX; RECENT_SLOTS] }
+        Casting { free: Vec::new(), occupied: Vec::new(), recent: vec![u64::MAX; RECENT_SLOTS] }
     }
 
-    /// `computeUpdate`'s work for one end point.
+    /// `computeUpdate`'s work for one end point. `fan` holds the rays'
+    /// common origin; `None` when it lies outside the map (no rays then).
     #[inline]
-    fn cast(&mut self, keys: &KeySpace, p: Point3, origin: Point3, opts: &ScanOptions) {
+    fn cast(&mut self, keys: &KeySpace, fan: Option<&RayFan>, p: Point3, origin: Point3, opts: &ScanOptions) {
         let max_range = opts.max_range.unwrap_or(-1.0);
         let within = max_range < 0.0 || (p - origin).norm() <= max_range;
         let end = if within { p } else { point_along(origin, (p - origin).normalized(), max_range) };
         let Some(bbx) = opts.bbx else {
-            if let Ok(ray) = RayKeys::new(keys, origin, end) {
+            let Ok(end_key) = keys.key(end) else { return };
+            let end_code = MortonCode::encode(end_key).0;
+            if within {
+                self.occupied.push(end_code);
+            }
+            if let Some(fan) = fan {
                 let (free, recent) = (&mut self.free, &mut self.recent);
-                ray.for_each_code(|c| {
-                    // skip the set for keys a recent ray already gave
+                fan.for_each_code(end, end_code, |c| {
+                    // skip keys a recent ray already gave
                     let slot = &mut recent[recent_slot(c)];
                     if *slot != c {
                         *slot = c;
-                        free.insert(MortonCode(c));
+                        free.push(c);
                     }
                 });
-            }
-            if within {
-                if let Ok(k) = keys.key(p) {
-                    self.occupied.insert(MortonCode::encode(k));
-                }
             }
             return;
         };
         if within && bbx.contains_point(p) {
             if let Ok(k) = keys.key(p) {
-                self.occupied.insert(MortonCode::encode(k));
+                self.occupied.push(MortonCode::encode(k).0);
             }
         }
         if let Ok(ray) = RayKeys::new(keys, origin, end) {
-            self.free.extend(ray.take_while(|&k| bbx.contains_key(k)).map(MortonCode::encode));
+            self.free.extend(ray.take_while(|&k| bbx.contains_key(k)).map(|k| MortonCode::encode(k).0));
         }
+    }
+
+    /// [`Self::cast`] for every point, rays walked two at a time: the
+    /// steps of one ray form a chain of dependent operations, and
+    /// interleaving two chains lets the processor overlap them.
+    fn cast_all(
+        &mut self,
+        keys: &KeySpace,
+        fan: Option<&RayFan>,
+        points: &[Point3],
+        origin: Point3,
+        opts: &ScanOptions,
+    ) {
+        let Some(fan) = fan.filter(|_| opts.bbx.is_none()) else {
+            for &p in points {
+                self.cast(keys, fan, p, origin, opts);
+            }
+            return;
+        };
+        // a few voxels per point pass the filter (many more on long rays)
+        self.free.reserve(4 * points.len());
+        let mut points = points.iter();
+        // the two walks' changing state apart from their constants, so that
+        // it stays in registers
+        let (mut a, mut a_steps) = self.next_ray(keys, fan, &mut points, origin, opts).split();
+        let (mut b, mut b_steps) = self.next_ray(keys, fan, &mut points, origin, opts).split();
+        loop {
+            let (ca, cb) = (a.next_code(&a_steps), b.next_code(&b_steps));
+            match ca {
+                Some(c) => self.push_free(c),
+                None => (a, a_steps) = self.next_ray(keys, fan, &mut points, origin, opts).split(),
+            }
+            match cb {
+                Some(c) => self.push_free(c),
+                None => {
+                    (b, b_steps) = self.next_ray(keys, fan, &mut points, origin, opts).split();
+                    if ca.is_none() && points.len() == 0 {
+                        break;
+                    }
+                }
+            }
+        }
+        // the last rays
+        while let Some(c) = a.next_code(&a_steps) {
+            self.push_free(c);
+        }
+        while let Some(c) = b.next_code(&b_steps) {
+            self.push_free(c);
+        }
+    }
+
+    /// Takes points until one has a ray that is not empty, doing
+    /// [`Self::cast`]'s work for each except the walk (its end point, the
+    /// origin voxel); that ray, or a finished one when the points run out.
+    #[inline(never)]
+    fn next_ray(
+        &mut self,
+        keys: &KeySpace,
+        fan: &RayFan,
+        points: &mut std::slice::Iter<Point3>,
+        origin: Point3,
+        opts: &ScanOptions,
+    ) -> FanRay {
+        let max_range = opts.max_range.unwrap_or(-1.0);
+        for &p in points {
+            let within = max_range < 0.0 || (p - origin).norm() <= max_range;
+            let end = if within { p } else { point_along(origin, (p - origin).normalized(), max_range) };
+            let Ok(end_key) = keys.key(end) else { continue };
+            let end_code = MortonCode::encode(end_key).0;
+            if within {
+                self.occupied.push(end_code);
+            }
+            if let Some(ray) = fan.ray(end, end_code) {
+                self.push_free(fan.origin_code());
+                return ray;
+            }
+        }
+        FanRay::finished()
+    }
+
+    /// Adds a free code unless the filter of recent keys has it.
+    #[inline(always)]
+    fn push_free(&mut self, c: u64) {
+        let slot = &mut self.recent[recent_slot(c)];
+        if *slot != c {
+            *slot = c;
+            self.free.push(c);
+        }
+    }
+
+    /// Sorts both lists and drops repeats.
+    fn finish(&mut self) {
+        sort_dedup(&mut self.free);
+        sort_dedup(&mut self.occupied);
     }
 }
 
-/// Merges two sets, inserting the smaller into the larger.
-fn union(a: KeySet, b: KeySet) -> KeySet {
-    let (mut big, small) = if a.len() >= b.len() { (a, b) } else { (b, a) };
-    big.extend(small);
-    big
+fn sort_dedup(codes: &mut Vec<u64>) {
+    crate::morton::sort_codes(codes);
+    dedup_except(codes, &[]);
+}
+
+/// Drops repeats from the sorted `codes`, and every code of the sorted
+/// `except`, in one pass: each code is written, and the end of the kept
+/// part only moves past it when it is kept, so repeats, which come at
+/// random, cost no mispredicted branch.
+fn dedup_except(codes: &mut Vec<u64>, except: &[u64]) {
+    let (mut kept, mut j) = (0, 0);
+    let mut prev = u64::MAX; // no code: codes have 48 bits
+    for i in 0..codes.len() {
+        let c = codes[i];
+        while j < except.len() && except[j] < c {
+            j += 1;
+        }
+        let drop = (c == prev) | (j < except.len() && except[j] == c);
+        codes[kept] = c;
+        kept += usize::from(!drop);
+        prev = c;
+    }
+    codes.truncate(kept);
+}
+
+/// The union of sorted, repeat-free lists, sorted and repeat-free.
+fn merge_sorted(mut lists: Vec<Vec<u64>>) -> Vec<u64> {
+    lists.retain(|l| !l.is_empty());
+    while lists.len() > 1 {
+        // merge pairwise, shortest lists first
+        lists.sort_unstable_by_key(|l| std::cmp::Reverse(l.len()));
+        let (a, b) = (lists.pop().expect("two lists"), lists.pop().expect("two lists"));
+        let mut out = Vec::with_capacity(a.len() + b.len());
+        let (mut i, mut j) = (0, 0);
+        while i < a.len() && j < b.len() {
+            let (x, y) = (a[i], b[j]);
+            out.push(x.min(y));
+            i += usize::from(x <= y);
+            j += usize::from(y <= x);
+        }
+        out.extend_from_slice(&a[i..]);
+        out.extend_from_slice(&b[j..]);
+        lists.push(out);
+    }
+    lists.pop().unwrap_or_default()
+}
+
+/// Thread pools by size, built once: a pool per scan would cost more than
+/// casting a small scan's rays.
+fn thread_pool(threads: usize) -> Result<std::sync::Arc<rayon::ThreadPool>, ScanError> {
+    use std::sync::{Arc, Mutex};
+    static POOLS: Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>> = Mutex::new(Vec::new());
+    let mut pools = POOLS.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, p)) = pools.iter().find(|(n, _)| *n == threads) {
+        return Ok(p.clone());
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|_| ScanError::ThreadPool("could not start ray-casting threads"))?;
+    let pool = Arc::new(pool);
+    pools.push((threads, pool.clone()));
+    Ok(pool)
 }
 
 /// What to do with end points outside the addressable map.
@@ -196,44 +366,44 @@ pub enum ScanError {
     ThreadPool(&'static str),
 }
 
-/// The free and occupied voxels of one scan, disjoint.
-#[derive(Default)]
+/// The free and occupied voxels of one scan as Morton codes, each list
+/// sorted and free of repeats, the two disjoint.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct ScanUpdate {
-    pub free: KeySet,
-    pub occupied: KeySet,
+    pub free: Vec<u64>,
+    pub occupied: Vec<u64>,
 }
 
 impl ScanUpdate {
-    /// The sets as key lists sorted in Morton order.
+    /// The update from casting output (Morton codes in any order, repeats
+    /// allowed): both lists sorted and freed of repeats, then the occupied
+    /// codes removed from the free ones, by merging.
+    pub fn from_codes(mut free: Vec<u64>, mut occupied: Vec<u64>) -> Self {
+        sort_dedup(&mut occupied);
+        crate::morton::sort_codes(&mut free);
+        dedup_except(&mut free, &occupied);
+        ScanUpdate { free, occupied }
+    }
+
+    /// The lists as keys, in Morton order.
     pub fn sorted(&self) -> (Vec<Key>, Vec<Key>) {
-        let keys = |codes: Vec<u64>| codes.into_iter().map(|c| MortonCode(c).decode()).collect();
-        let (free, occupied) = self.sorted_codes();
-        (keys(free), keys(occupied))
+        let keys = |codes: &[u64]| codes.iter().map(|&c| MortonCode(c).decode()).collect();
+        (keys(&self.free), keys(&self.occupied))
     }
 
-    /// The sets as sorted Morton codes, each set freed before its codes
-    /// are sorted (lower peak memory than [`Self::sorted_codes`]).
-    pub fn into_sorted_codes(self) -> (Vec<u64>, Vec<u64>) {
-        let drain = |set: KeySet| {
-            let mut codes: Vec<u64> = set.into_iter().map(|c| c.0).collect();
-            crate::morton::sort_codes(&mut codes);
-            codes
-        };
-        let ScanUpdate { free, occupied } = self;
-        let free = drain(free);
-        (free, drain(occupied))
+    /// The lists as OctoMap's hash-based key sets.
+    pub fn key_sets(&self) -> (KeySet, KeySet) {
+        let set = |codes: &[u64]| codes.iter().map(|&c| MortonCode(c)).collect();
+        (set(&self.free), set(&self.occupied))
     }
 
-    /// The sets as sorted Morton codes.
-    pub fn sorted_codes(&self) -> (Vec<u64>, Vec<u64>) {
-        (sorted_codes(&self.free), sorted_codes(&self.occupied))
+    pub fn len(&self) -> usize {
+        self.free.len() + self.occupied.len()
     }
-}
 
-fn sorted_codes(set: &KeySet) -> Vec<u64> {
-    let mut codes: Vec<u64> = set.iter().map(|c| c.0).collect();
-    crate::morton::sort_codes(&mut codes);
-    codes
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
 }
 
 impl OccupancyTree {
@@ -250,11 +420,81 @@ impl OccupancyTree {
             return self.insert_point_cloud_in_octomap_order(points, origin, opts);
         }
         let (update, report) = self.compute_update(points, origin, opts)?;
-        let (free, occupied) = update.into_sorted_codes();
+        Ok(self.apply_update(&update, report, opts.inner))
+    }
+
+    /// Applies a scan's update (from [`Self::compute_update`]): misses, then
+    /// hits, each list in one batched walk. Completes `report` with the
+    /// update counts.
+    pub fn apply_update(&mut self, update: &ScanUpdate, report: ScanReport, inner: InnerNodes) -> ScanReport {
         let sensor = *self.sensor();
-        self.update_batch(&free, sensor.miss, opts.inner);
-        self.update_batch(&occupied, sensor.hit, opts.inner);
-        Ok(ScanReport { free_updates: free.len(), occupied_updates: occupied.len(), ..report })
+        self.update_batch(&update.free, sensor.miss, inner);
+        self.update_batch(&update.occupied, sensor.hit, inner);
+        ScanReport { free_updates: update.free.len(), occupied_updates: update.occupied.len(), ..report }
+    }
+
+    /// Integrates scans in order, with the result of calling
+    /// [`Self::insert_point_cloud`] on each (`scans` gives each scan's
+    /// points and origin), calling `after_each` with the tree and the
+    /// scan's report once it is in. With more than one thread the work is
+    /// pipelined: while one scan's update is applied to the tree, the next
+    /// scan's rays are cast (a scan's update depends on the map's key space
+    /// only, never on its content), and the thread that applied joins the
+    /// casting when done. Stops at the first scan that is refused, with its
+    /// position in `scans`; the scans before it are in.
+    pub fn insert_point_clouds<I, P>(
+        &mut self,
+        scans: I,
+        opts: &ScanOptions,
+        mut after_each: impl FnMut(&mut Self, ScanReport) + Send,
+    ) -> Result<(), (usize, ScanError)>
+    where
+        I: IntoIterator<Item = (P, Point3)>,
+        I::IntoIter: Send,
+        P: AsRef<[Point3]> + Send,
+    {
+        let mut scans = scans.into_iter().enumerate();
+        // colour trees apply key by key in OctoMap's order: no pipeline
+        if opts.threads == Some(1) || self.kind() == crate::tree::NodeKind::Color {
+            for (i, (points, origin)) in scans {
+                let report = self.insert_point_cloud(points.as_ref(), origin, opts).map_err(|e| (i, e))?;
+                after_each(self, report);
+            }
+            return Ok(());
+        }
+        let keys = self.key_space().clone();
+        // cast on whatever pool runs the pipeline
+        let cast_opts = ScanOptions { threads: None, ..*opts };
+        let compute = |(i, (points, origin)): (usize, (P, Point3))| {
+            (i, compute_update(&keys, points.as_ref(), origin, &cast_opts))
+        };
+        let mut run = || {
+            let mut next = scans.next().map(compute);
+            while let Some((i, result)) = next.take() {
+                let (update, report) = result.map_err(|e| (i, e))?;
+                let following = scans.next();
+                let (report, computed) =
+                    rayon::join(|| self.apply_update(&update, report, opts.inner), || following.map(compute));
+                drop(update);
+                after_each(self, report);
+                next = computed;
+            }
+            Ok(())
+        };
+        match opts.threads {
+            None => run(),
+            // a pool of its own per call rather than the cached one: workers
+            // that slept long (between calls) were seen to be woken onto
+            // the CPU of the thread waking them and to share it for a whole
+            // scan sequence (2 threads slower than 1 in `side_by_side`),
+            // while new threads start spread; starting them costs far less
+            // than a sequence of scans
+            Some(n) => rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .map_err(|_| (0, ScanError::ThreadPool("could not start ray-casting threads")))?
+                .install(run),
+        }
     }
 
     /// Integrates a coloured scan into a colour tree: the scan as
@@ -297,66 +537,20 @@ impl OccupancyTree {
         origin: Point3,
         opts: &ScanOptions,
     ) -> Result<(ScanUpdate, ScanReport), ScanError> {
-        let keys = self.key_space();
-        let mut report = ScanReport { points: points.len(), ..Default::default() };
-        let origin_key = keys.key(origin);
-        if let Err(source) = origin_key {
-            // OctoMap casts no ray then, but still marks in-map end points
-            // occupied; only a non-finite origin is refused outright.
-            if !origin.is_finite() {
-                return Err(ScanError::Origin { x: origin.x, y: origin.y, z: origin.z, source });
-            }
-        }
-        let mut cleaned: Vec<Point3> = Vec::with_capacity(points.len());
-        for (index, &p) in points.iter().enumerate() {
-            if !p.is_finite() {
-                report.non_finite += 1;
-                continue;
-            }
-            match (opts.out_of_map, keys.key(p)) {
-                (OutOfMap::Skip, Err(_)) => report.out_of_map += 1,
-                (OutOfMap::Error, Err(source)) => {
-                    return Err(ScanError::PointOutOfMap { index, x: p.x, y: p.y, z: p.z, source })
-                }
-                _ => cleaned.push(p),
-            }
-        }
-        let points = if opts.discretize {
-            let mut seen = KeySet::default();
-            cleaned.retain(|&p| seen.insert(MortonCode::encode(keys.key_unchecked(p))));
-            cleaned.iter_mut().for_each(|p| *p = keys.key_to_point(keys.key_unchecked(*p)));
-            cleaned
-        } else {
-            cleaned
-        };
-
-        let run = || self.cast_scan(&points, origin, opts);
-        let update = match opts.threads {
-            None => run(),
-            Some(n) => rayon::ThreadPoolBuilder::new()
-                .num_threads(n.max(1))
-                .build()
-                .map_err(|_| ScanError::ThreadPool("could not start ray-casting threads"))?
-                .install(run),
-        };
-        Ok((update, report))
+        compute_update(self.key_space(), points, origin, opts)
     }
 
-    fn cast_scan(&self, points: &[Point3], origin: Point3, opts: &ScanOptions) -> ScanUpdate {
-        let threads = rayon::current_num_threads();
-        let chunk = points.len().div_ceil(2 * threads).max(512);
-        let (mut free, occupied) = points
-            .par_chunks(chunk)
-            .fold(Casting::new, |mut acc, chunk| {
-                for &p in chunk {
-                    acc.cast(self.key_space(), p, origin, opts);
-                }
-                acc
-            })
-            .map(|c| (c.free, c.occupied))
-            .reduce(|| (KeySet::default(), KeySet::default()), |(f1, o1), (f2, o2)| (union(f1, f2), union(o1, o2)));
-        free.retain(|k| !occupied.contains(k));
-        ScanUpdate { free, occupied }
+    /// The raw output of one thread's ray casting for a scan of finite
+    /// points with default options: the free codes, with the few repeats
+    /// the recent-key filter lets through, and the occupied codes, with all
+    /// their repeats, both unsorted. [`ScanUpdate::from_codes`] turns them
+    /// into [`Self::compute_update`]'s result; benchmarks use them to
+    /// compare ways of removing the repeats.
+    pub fn cast_codes(&self, points: &[Point3], origin: Point3) -> (Vec<u64>, Vec<u64>) {
+        let fan = RayFan::new(self.key_space(), origin).ok();
+        let mut c = Casting::new();
+        c.cast_all(self.key_space(), fan.as_ref(), points, origin, &ScanOptions::default());
+        (c.free, c.occupied)
     }
 
     /// OctoMap's `insertPointCloudRays` ("simple" mode): ray by ray, each
@@ -406,6 +600,105 @@ impl OccupancyTree {
         self.update_point(end, true, inner)?;
         Ok(())
     }
+}
+
+/// [`OccupancyTree::compute_update`] for a map with key space `keys`: the
+/// update depends on nothing else of the tree.
+pub fn compute_update(
+    keys: &KeySpace,
+    points: &[Point3],
+    origin: Point3,
+    opts: &ScanOptions,
+) -> Result<(ScanUpdate, ScanReport), ScanError> {
+    let mut report = ScanReport { points: points.len(), ..Default::default() };
+    let origin_key = keys.key(origin);
+    if let Err(source) = origin_key {
+        // OctoMap casts no ray then, but still marks in-map end points
+        // occupied; only a non-finite origin is refused outright.
+        if !origin.is_finite() {
+            return Err(ScanError::Origin { x: origin.x, y: origin.y, z: origin.z, source });
+        }
+    }
+    // only OctoMap's policy lets points without a key through to the
+    // casting (which skips them); the input is used as it is when
+    // nothing is to be dropped or changed
+    let clean = opts.out_of_map == OutOfMap::OctoMap && !opts.discretize && points.iter().all(|p| p.is_finite());
+    let mut cleaned: Vec<Point3> = Vec::new();
+    if !clean {
+        cleaned.reserve(points.len());
+        for (index, &p) in points.iter().enumerate() {
+            if !p.is_finite() {
+                report.non_finite += 1;
+                continue;
+            }
+            if opts.out_of_map != OutOfMap::OctoMap {
+                if let Err(source) = keys.key(p) {
+                    if opts.out_of_map == OutOfMap::Error {
+                        return Err(ScanError::PointOutOfMap { index, x: p.x, y: p.y, z: p.z, source });
+                    }
+                    report.out_of_map += 1;
+                    continue;
+                }
+            }
+            cleaned.push(p);
+        }
+    }
+    if opts.discretize {
+        let mut seen = KeySet::default();
+        cleaned.retain(|&p| seen.insert(MortonCode::encode(keys.key_unchecked(p))));
+        cleaned.iter_mut().for_each(|p| *p = keys.key_to_point(keys.key_unchecked(*p)));
+    }
+    let points = if clean { points } else { &cleaned[..] };
+
+    let fan = RayFan::new(keys, origin).ok();
+    let run = || cast_scan(keys, points, fan.as_ref(), origin, opts);
+    let update = match opts.threads {
+        Some(1) => cast_serial(keys, points, fan.as_ref(), origin, opts),
+        None => run(),
+        Some(n) => thread_pool(n)?.install(run),
+    };
+    Ok((update, report))
+}
+
+fn cast_serial(
+    keys: &KeySpace,
+    points: &[Point3],
+    fan: Option<&RayFan>,
+    origin: Point3,
+    opts: &ScanOptions,
+) -> ScanUpdate {
+    let mut c = Casting::new();
+    c.cast_all(keys, fan, points, origin, opts);
+    ScanUpdate::from_codes(c.free, c.occupied)
+}
+
+fn cast_scan(
+    keys: &KeySpace,
+    points: &[Point3],
+    fan: Option<&RayFan>,
+    origin: Point3,
+    opts: &ScanOptions,
+) -> ScanUpdate {
+    let threads = rayon::current_num_threads();
+    if threads == 1 {
+        return cast_serial(keys, points, fan, origin, opts);
+    }
+    let chunk = points.len().div_ceil(2 * threads).max(512);
+    let parts: Vec<Casting> = points
+        .par_chunks(chunk)
+        .fold(Casting::new, |mut acc, chunk| {
+            acc.cast_all(keys, fan, chunk, origin, opts);
+            acc
+        })
+        .map(|mut c| {
+            c.finish();
+            c
+        })
+        .collect();
+    let (free, occupied): (Vec<_>, Vec<_>) = parts.into_iter().map(|c| (c.free, c.occupied)).unzip();
+    let (mut free, occupied) = rayon::join(|| merge_sorted(free), || merge_sorted(occupied));
+    dedup_except(&mut free, &occupied);
+    ScanUpdate { free, occupied }
 }
 
 #[cfg(test)]
@@ -486,5 +779,50 @@ mod tests {
             bytes.push(out);
         }
         assert!(bytes[0] == bytes[1] && bytes[1] == bytes[2]);
+    }
+
+    #[test]
+    fn pipelined_insertion_matches_scan_by_scan() {
+        let g = crate::simulate::simulate(
+            crate::simulate::SceneKind::Indoor,
+            4,
+            9,
+            &crate::simulate::LidarConfig::indoor(),
+        )
+        .unwrap();
+        let scans: Vec<_> = g.nodes.iter().map(|n| n.graph2tree()).map(|(c, o)| (c.points, o)).collect();
+        let ot = |t: &OccupancyTree| {
+            let mut out = Vec::new();
+            crate::formats::ot::write(t, &mut out).unwrap();
+            out
+        };
+        let mut expected = OccupancyTree::new(0.1).unwrap();
+        let mut reports = Vec::new();
+        for (points, origin) in &scans {
+            reports.push(expected.insert_point_cloud(points, *origin, &ScanOptions::default()).unwrap());
+        }
+        for threads in [Some(1), Some(2), Some(8), None] {
+            let mut t = OccupancyTree::new(0.1).unwrap();
+            let opts = ScanOptions { threads, ..Default::default() };
+            let mut got = Vec::new();
+            let input = scans.iter().map(|(p, o)| (p.as_slice(), *o));
+            t.insert_point_clouds(input, &opts, |_, r| got.push(r)).unwrap();
+            assert_eq!(got, reports, "{threads:?} threads");
+            assert!(ot(&t) == ot(&expected), "{threads:?} threads");
+        }
+
+        // a refused scan stops the sequence after the scans before it
+        let mut bad = scans.clone();
+        bad[2].0.push(Point3::new(1e9, 0.0, 0.0));
+        for threads in [Some(1), Some(2)] {
+            let opts = ScanOptions { threads, out_of_map: OutOfMap::Error, ..Default::default() };
+            let mut t = OccupancyTree::new(0.1).unwrap();
+            let mut n = 0;
+            let input = bad.iter().map(|(p, o)| (p.as_slice(), *o));
+            let err = t.insert_point_clouds(input, &opts, |_, _| n += 1).unwrap_err();
+            assert_eq!(err.0, 2);
+            assert!(matches!(err.1, ScanError::PointOutOfMap { .. }));
+            assert_eq!(n, 2);
+        }
     }
 }

@@ -44,13 +44,14 @@ pub fn scan_options(threads: Option<usize>) -> ScanOptions {
     ScanOptions { threads, ..ScanOptions::default() }
 }
 
-/// A tree built from `scans` at `res` with OctoMap's default parameters.
+/// A tree built from `scans` at `res` with OctoMap's default parameters,
+/// scan after scan (`insert_point_clouds`: with several threads, one scan
+/// is applied while the next is cast).
 pub fn build(scans: &[Scan], res: f64, threads: Option<usize>) -> OccupancyTree {
     let mut tree = OccupancyTree::new(res).expect("resolution");
     let opts = scan_options(threads);
-    for (points, origin) in scans {
-        tree.insert_point_cloud(points, *origin, &opts).expect("insert");
-    }
+    let scans = scans.iter().map(|(points, origin)| (points.as_slice(), *origin));
+    tree.insert_point_clouds(scans, &opts, |_, _| {}).expect("insert");
     tree
 }
 

@@ -8,7 +8,7 @@ use octolinear::formats::graph;
 use octolinear::formats::{bt, ot, write_atomically};
 use octolinear::scan::OutOfMap;
 use octolinear::sensor::{SensorModel, SensorProbabilities};
-use octolinear::{BoundsRule, InnerNodes, NodeKind, OccupancyTree, Point3, Pose6D, ScanGraph, ScanOptions};
+use octolinear::{BoundsRule, InnerNodes, NodeKind, OccupancyTree, Point3, Pose6D, ScanGraph, ScanOptions, ScanReport};
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -249,18 +249,7 @@ pub fn run(a: Args) -> Result<()> {
     let (mut non_finite, mut skipped_out_of_map, start) = (0, 0, Instant::now());
     g.nodes.truncate(n);
     colors.truncate(n);
-    let mut colors = colors.into_iter();
-    for mut node in std::mem::take(&mut g.nodes) {
-        let (cloud, origin) = node.graph2tree();
-        node.scan = Default::default(); // release each scan once transformed
-        let report = if a.simple {
-            tree.insert_point_cloud_rays(&cloud.points, origin, InnerNodes::Update)
-        } else {
-            tree.insert_point_cloud(&cloud.points, origin, &opts).with_context(|| format!("scan {}", node.id))?
-        };
-        if let Some(c) = colors.next() {
-            integrate_colors(&mut tree, &cloud.points, &c);
-        }
+    let mut after_each = |tree: &mut OccupancyTree, report: ScanReport| {
         non_finite += report.non_finite;
         skipped_out_of_map += report.out_of_map;
         if a.compress_ml {
@@ -268,6 +257,33 @@ pub fn run(a: Args) -> Result<()> {
             tree.prune();
         }
         bar.inc(1);
+    };
+    if a.simple || a.color {
+        // scan by scan: colours are blended in after each scan's occupancy
+        let mut colors = colors.into_iter();
+        for mut node in std::mem::take(&mut g.nodes) {
+            let (cloud, origin) = node.graph2tree();
+            node.scan = Default::default(); // release each scan once transformed
+            let report = if a.simple {
+                tree.insert_point_cloud_rays(&cloud.points, origin, InnerNodes::Update)
+            } else {
+                tree.insert_point_cloud(&cloud.points, origin, &opts).with_context(|| format!("scan {}", node.id))?
+            };
+            if let Some(c) = colors.next() {
+                integrate_colors(&mut tree, &cloud.points, &c);
+            }
+            after_each(&mut tree, report);
+        }
+    } else {
+        // scan by scan, each released once transformed; with several
+        // threads the next scan is cast while one is applied
+        let ids: Vec<_> = g.nodes.iter().map(|node| node.id).collect();
+        let scans = std::mem::take(&mut g.nodes).into_iter().map(|node| {
+            let (cloud, origin) = node.graph2tree();
+            (cloud.points, origin)
+        });
+        tree.insert_point_clouds(scans, &opts, after_each)
+            .map_err(|(i, e)| anyhow::Error::new(e).context(format!("scan {}", ids[i])))?;
     }
     if a.color {
         // inner nodes: maximum occupancy and average colour of their children

@@ -115,9 +115,9 @@ pub fn evaluate(
             tree.compute_update(&cloud.points, origin, &opts).with_context(|| format!("scan {}", node.id))?;
         acc.scans += 1;
         acc.points += cloud.len();
-        let mut count = |set: &octolinear::scan::KeySet, occupied: bool| {
-            for code in set {
-                match tree.search(code.decode(), 0) {
+        let mut count = |codes: &[u64], occupied: bool| {
+            for &code in codes {
+                match tree.search(octolinear::MortonCode(code).decode(), 0) {
                     Some(f) if tree.is_occupied(f.value) == occupied => acc.correct += 1,
                     Some(_) => acc.wrong += 1,
                     None => acc.unknown += 1,

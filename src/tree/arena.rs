@@ -147,13 +147,39 @@ impl NodeArena {
         })
     }
 
+    /// Appends `len` default slots; returns the first id.
+    #[inline]
     fn push_run(&mut self, len: usize) -> NodeId {
         let start = self.values.len();
+        if len > 8 || start + 8 > self.values.capacity() {
+            return self.push_run_growing(len);
+        }
+        // a group: append eight slots and drop the surplus, which compiles to
+        // a few stores where `resize` would call `memset`
+        self.values.extend_from_slice(&[0.0; 8]);
+        self.values.truncate(start + len);
+        self.masks.extend_from_slice(&[0; 8]);
+        self.masks.truncate(start + len);
+        self.first_child.extend_from_slice(&[NO_CHILD; 8]);
+        self.first_child.truncate(start + len);
+        if let Some(e) = self.default_extra {
+            self.extras.extend_from_slice(&[e; 8]);
+            self.extras.truncate(start + len);
+        }
+        start as NodeId
+    }
+
+    /// [`Self::push_run`] when the arena has to grow first.
+    #[cold]
+    #[inline(never)]
+    fn push_run_growing(&mut self, len: usize) -> NodeId {
+        let start = self.values.len();
         assert!(start + len <= u32::MAX as usize - 2, "node arena exceeds 2^32 slots");
-        if start + len > self.values.capacity() {
-            // grow by a quarter rather than doubling: large reallocations are
-            // remapped in place by the allocator, and peak memory stays low
-            let more = len.max(start / 4).max(1024);
+        // grow by a quarter rather than doubling: large reallocations are
+        // remapped in place by the allocator, and peak memory stays low; keep
+        // room for eight more slots, which the fast path appends
+        let more = (len + 8).max(start / 4).max(1024);
+        if start + len + 8 > self.values.capacity() {
             self.values.reserve_exact(more);
             self.masks.reserve_exact(more);
             self.first_child.reserve_exact(more);
@@ -242,10 +268,27 @@ impl NodeArena {
     fn add_children_with(&mut self, n: NodeId, mask: u8, value: f32, extra: Option<u32>) -> NodeId {
         debug_assert_eq!(self.masks[n as usize], 0);
         let len = mask.count_ones();
-        let new = if len == 0 { NO_CHILD } else { self.alloc_run(len as usize) };
-        for i in 0..len {
-            self.init_slot(new + i, value, extra);
-        }
+        let new = if len == 0 {
+            NO_CHILD
+        } else if let Some(start) = self.free[len as usize].pop() {
+            self.free_slots -= len as usize;
+            for i in 0..len {
+                self.init_slot(start + i, value, extra);
+            }
+            start
+        } else {
+            let start = self.push_run(len as usize);
+            // fresh slots hold the defaults; only the value and extra differ
+            for i in 0..len {
+                self.values[(start + i) as usize] = value;
+            }
+            if let Some(e) = extra {
+                for i in 0..len {
+                    self.extras[(start + i) as usize] = e;
+                }
+            }
+            start
+        };
         self.masks[n as usize] = mask;
         self.first_child[n as usize] = new;
         new

@@ -904,22 +904,43 @@ impl Batch<'_> {
         let shift = 3 * (15 - u32::from(depth));
         let child_of = |c: u64| ((c >> shift) & 7) as usize;
         let mut bounds = [codes.len(); 9];
-        if codes.len() <= 16 {
-            for (i, &c) in codes.iter().enumerate().rev() {
-                bounds[child_of(c)] = i;
-            }
-            for pos in (0..8).rev() {
-                bounds[pos] = bounds[pos].min(bounds[pos + 1]);
+        let mut needed = 0u8;
+        if depth == TREE_DEPTH - 1 {
+            // children are voxels, one code each: no ranges needed
+            for &c in codes {
+                needed |= 1 << (c & 7);
             }
         } else {
-            for (pos, b) in bounds.iter_mut().enumerate().take(8) {
-                *b = codes.partition_point(|&c| child_of(c) < pos);
+            if codes.len() <= 64 {
+                // a linear pass: stores only, no mispredicted search branches
+                for (i, &c) in codes.iter().enumerate().rev() {
+                    bounds[child_of(c)] = i;
+                }
+                for pos in (0..8).rev() {
+                    bounds[pos] = bounds[pos].min(bounds[pos + 1]);
+                }
+            } else {
+                // each child's range ends where the next begins: gallop
+                // forwards from its start (the memory just read) instead of
+                // binary searches over the whole list
+                let n = codes.len();
+                let mut start = 0;
+                for (pos, b) in bounds.iter_mut().enumerate().take(8) {
+                    *b = start;
+                    if start == n || child_of(codes[start]) != pos {
+                        continue;
+                    }
+                    let (mut last, mut step) = (start, 1);
+                    while last + step < n && child_of(codes[last + step]) == pos {
+                        last += step;
+                        step *= 2;
+                    }
+                    let limit = (last + step).min(n);
+                    start = last + 1 + codes[last + 1..limit].partition_point(|&c| child_of(c) == pos);
+                }
             }
-        }
-        let mut needed = 0u8;
-        for pos in 0..8 {
-            if bounds[pos] < bounds[pos + 1] {
-                needed |= 1 << pos;
+            for pos in 0..8 {
+                needed |= u8::from(bounds[pos] < bounds[pos + 1]) << pos;
             }
         }
         let a = &mut *self.arena;
@@ -941,16 +962,28 @@ impl Batch<'_> {
         }
         let (first, mask) = (a.first_child(n), a.mask(n));
         let mut changed = false;
-        for pos in 0..8 {
-            if needed & (1 << pos) == 0 {
-                continue;
+        if depth == TREE_DEPTH - 1 {
+            for &c in codes {
+                let pos = (c & 7) as u32;
+                let child = first + (u32::from(mask) & ((1 << pos) - 1)).count_ones();
+                changed |= self.apply_leaf(child, c, new_children & (1 << pos) != 0);
             }
-            let child = first + (mask & ((1u8 << pos) - 1)).count_ones();
-            let range = &codes[bounds[pos]..bounds[pos + 1]];
-            changed |= self.apply(child, depth + 1, range, new_children & (1 << pos) != 0);
+        } else {
+            let mut rest = needed;
+            while rest != 0 {
+                let pos = rest.trailing_zeros() as usize;
+                rest &= rest - 1;
+                let child = first + (mask & ((1u8 << pos) - 1)).count_ones();
+                let range = &codes[bounds[pos]..bounds[pos + 1]];
+                changed |= self.apply(child, depth + 1, range, new_children & (1 << pos) != 0);
+            }
         }
         if changed && !self.lazy {
-            if prune_node(self.arena, n, self.rules).is_some() {
+            if self.rules.kind == NodeKind::Plain {
+                if prune_or_update_plain(self.arena, n) {
+                    self.size -= 8;
+                }
+            } else if prune_node(self.arena, n, self.rules).is_some() {
                 self.size -= 8;
             } else {
                 update_from_children(self.arena, n, self.rules);
@@ -959,6 +992,7 @@ impl Batch<'_> {
         changed
     }
 
+    #[inline]
     fn apply_leaf(&mut self, n: NodeId, code: u64, created: bool) -> bool {
         let before = self.arena.value(n);
         if !created && self.sensor.is_saturated(before, self.delta) {
@@ -1185,6 +1219,32 @@ fn prune_node(a: &mut NodeArena, n: NodeId, rules: Rules) -> Option<f32> {
     a.set_value(n, v);
     a.set_extra(n, extra);
     Some(v)
+}
+
+/// [`prune_node`], else [`update_from_children`], for plain trees in one
+/// pass over the children; returns whether `n` was pruned.
+#[inline]
+fn prune_or_update_plain(a: &mut NodeArena, n: NodeId) -> bool {
+    let mask = a.mask(n);
+    let first = a.first_child(n);
+    let v0 = a.value(first);
+    let mut max = -f32::MAX;
+    let mut same = mask == 0xff;
+    for i in 0..mask.count_ones() {
+        let c = first + i;
+        let v = a.value(c);
+        if v > max {
+            max = v;
+        }
+        same &= (v == v0) & !a.has_children(c);
+    }
+    if same {
+        a.remove_all_children(n);
+        a.set_value(n, v0);
+    } else {
+        a.set_value(n, max);
+    }
+    same
 }
 
 /// `updateOccupancyChildren`: the maximum of the children's values (and,

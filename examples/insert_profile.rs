@@ -1,0 +1,58 @@
+//! Scan insertion under a profiler: `cargo run --release --example
+//! insert_profile -- indoor|outdoor RES THREADS [SCANS]` builds the
+//! bench's simulated scans, then times their insertion into a fresh tree.
+//! Meant for `valgrind --tool=callgrind` or `perf record`.
+
+use octolinear::simulate::{simulate, LidarConfig, SceneKind};
+use octolinear::{OccupancyTree, ScanOptions};
+use std::time::Instant;
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let kind = match args.first().map(String::as_str) {
+        Some("outdoor") => SceneKind::Outdoor,
+        _ => SceneKind::Indoor,
+    };
+    let res: f64 = args.get(1).map_or(0.1, |s| s.parse().expect("RES"));
+    let threads: usize = args.get(2).map_or(1, |s| s.parse().expect("THREADS"));
+    let default_scans = if kind == SceneKind::Indoor { 24 } else { 6 };
+    let n: usize = args.get(3).map_or(default_scans, |s| s.parse().expect("SCANS"));
+    let cfg = if kind == SceneKind::Indoor { LidarConfig::indoor() } else { LidarConfig::outdoor() };
+    let graph = simulate(kind, n, 7, &cfg).expect("simulate");
+    let scans: Vec<_> = graph.nodes.iter().map(|node| node.graph2tree()).collect();
+    let points: usize = scans.iter().map(|(c, _)| c.points.len()).sum();
+    let opts = ScanOptions { threads: Some(threads), ..ScanOptions::default() };
+    // REPS=n repeats the whole insertion and reports the fastest run
+    let reps: usize = std::env::var("REPS").map_or(1, |s| s.parse().expect("REPS"));
+    let mut secs = f64::MAX;
+    let mut cpu = f64::MAX;
+    let mut tree = OccupancyTree::new(res).expect("resolution");
+    let mut updates = 0;
+    for _ in 0..reps {
+        let t = Instant::now();
+        let c = cpu_time();
+        tree = OccupancyTree::new(res).expect("resolution");
+        updates = 0;
+        let clouds = scans.iter().map(|(cloud, origin)| (cloud.points.as_slice(), *origin));
+        tree.insert_point_clouds(clouds, &opts, |_, r| updates += r.free_updates + r.occupied_updates).expect("insert");
+        secs = secs.min(t.elapsed().as_secs_f64());
+        cpu = cpu.min(cpu_time() - c);
+    }
+    println!(
+        "{points} points, {updates} voxel updates, {} nodes: {:.1} ms, CPU {:.1} ms ({:.2} Mpt/s, {:.1} M updates/s)",
+        tree.size(),
+        secs * 1e3,
+        cpu * 1e3,
+        points as f64 / secs / 1e6,
+        updates as f64 / secs / 1e6
+    );
+}
+
+/// CPU time of the whole process (all threads), in seconds: less disturbed
+/// than wall time by other work on a shared machine.
+fn cpu_time() -> f64 {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: `ts` is a valid, writable timespec for the call.
+    unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut ts) };
+    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
+}
