@@ -704,6 +704,8 @@ fn cast_scan(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sensor::SensorModel;
+    use crate::tree::NodeKind;
 
     fn scan() -> Vec<Point3> {
         vec![
@@ -796,19 +798,37 @@ mod tests {
             crate::formats::ot::write(t, &mut out).unwrap();
             out
         };
-        let mut expected = OccupancyTree::new(0.1).unwrap();
-        let mut reports = Vec::new();
-        for (points, origin) in &scans {
-            reports.push(expected.insert_point_cloud(points, *origin, &ScanOptions::default()).unwrap());
-        }
-        for threads in [Some(1), Some(2), Some(8), None] {
-            let mut t = OccupancyTree::new(0.1).unwrap();
-            let opts = ScanOptions { threads, ..Default::default() };
-            let mut got = Vec::new();
-            let input = scans.iter().map(|(p, o)| (p.as_slice(), *o));
-            t.insert_point_clouds(input, &opts, |_, r| got.push(r)).unwrap();
-            assert_eq!(got, reports, "{threads:?} threads");
-            assert!(ot(&t) == ot(&expected), "{threads:?} threads");
+        // colour trees must keep OctoMap's key order: colours blended in
+        // after each scan make that order visible in the next one
+        for kind in [NodeKind::Plain, NodeKind::Color, NodeKind::Stamped] {
+            let new_tree = || OccupancyTree::with_kind(0.1, SensorModel::default(), kind).unwrap();
+            let paint = |t: &mut OccupancyTree, scan: usize| {
+                if kind == NodeKind::Color {
+                    for (i, p) in scans[scan].0.iter().enumerate() {
+                        let k = t.key(*p).unwrap();
+                        t.integrate_color(k, [(i * 7) as u8, (scan * 50) as u8, (i * 13) as u8]);
+                    }
+                }
+            };
+            let mut expected = new_tree();
+            let mut reports = Vec::new();
+            for (i, (points, origin)) in scans.iter().enumerate() {
+                reports.push(expected.insert_point_cloud(points, *origin, &ScanOptions::default()).unwrap());
+                paint(&mut expected, i);
+            }
+            for threads in [Some(1), Some(2), Some(8), None] {
+                let mut t = new_tree();
+                let opts = ScanOptions { threads, ..Default::default() };
+                let mut got = Vec::new();
+                let input = scans.iter().map(|(p, o)| (p.as_slice(), *o));
+                t.insert_point_clouds(input, &opts, |t, r| {
+                    paint(t, got.len());
+                    got.push(r)
+                })
+                .unwrap();
+                assert_eq!(got, reports, "{kind:?}, {threads:?} threads");
+                assert!(ot(&t) == ot(&expected), "{kind:?}, {threads:?} threads");
+            }
         }
 
         // a refused scan stops the sequence after the scans before it

@@ -174,6 +174,11 @@ fn color_case(seed: u64, res: f64, custom_sensor: bool) -> Result<(), OracleErro
         if op == ColorOp::Integrate && rng.below(2) == 0 {
             // the library's one-call form
             ours.insert_colored_point_cloud(&points, &cols, p3(origin), &opts).unwrap();
+        } else if rng.below(3) == 0 {
+            // the pipelined form on two threads must keep OctoMap's key order
+            let two = ScanOptions { threads: Some(2), ..opts };
+            ours.insert_point_clouds([(points.as_slice(), p3(origin))], &two, |_, _| {}).unwrap();
+            apply_color(&mut ours, op, &pts, &cols);
         } else {
             ours.insert_point_cloud(&points, p3(origin), &opts).unwrap();
             apply_color(&mut ours, op, &pts, &cols);
