@@ -101,12 +101,6 @@ impl NodeArena {
         self.first_child[n as usize]
     }
 
-    /// The child masks and first-child ids of all slots, for tight loops.
-    #[inline(always)]
-    pub fn links(&self) -> (&[u8], &[NodeId]) {
-        (&self.masks, &self.first_child)
-    }
-
     /// Prefetches the child groups of `n`'s inner children: a depth-first
     /// walk visits them next, and on a tree fresh from updates they lie
     /// scattered, so asking for all of them at once overlaps the misses.

@@ -586,7 +586,7 @@ impl OccupancyTree {
             return;
         };
         let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
-        let (masks, first_child) = a.links();
+        let (_, masks, first_child, _) = a.parts();
         for chunk in keys.chunks(LANES) {
             let mut code = [0u64; LANES];
             for (c, k) in code.iter_mut().zip(chunk) {
