@@ -392,7 +392,15 @@ fn mapped_rows(args: &Args, om: &OracleTree, ol: &OccupancyTree, queries: &[Poin
         args.reps,
         "search",
         || om.bench_search(&q_arr, 0, &mut out),
-        || queries.iter().filter(|&&p| view.search_point(p, 0).is_ok_and(|f| f.is_some())).count(),
+        || {
+            queries
+                .iter()
+                .filter_map(|&p| view.search_point(p, 0).ok().flatten())
+                .inspect(|f| {
+                    black_box(f.value);
+                })
+                .count()
+        },
     );
     row("random search", times, n, "q");
     let mut out = vec![0f32; queries.len()];
@@ -434,86 +442,50 @@ fn mapped_rows(args: &Args, om: &OracleTree, ol: &OccupancyTree, queries: &[Poin
 /// Random point search (one query at a time, then batched) and full leaf
 /// iteration on the same tree in both libraries.
 fn search_and_iterate(args: &Args, om: &OracleTree, ol: &OccupancyTree, queries: &[Point3], suffix: &str) {
-    // ----- random search (half leaf centres, half uniform in the bounds)
     let q_arr = to_arrays(queries);
     let mut out = vec![0f32; queries.len()];
-    let (mut a, mut b) = (Vec::new(), Vec::new());
-    for _ in 0..args.reps {
-        let (d, n_om) = time(|| om.bench_search(&q_arr, 0, &mut out));
-        a.push(d);
-        let (d, n_ol) = time(|| {
-            let mut n = 0usize;
-            for &p in queries {
-                if let Ok(Some(f)) = ol.search_point(p, 0) {
-                    n += 1;
+    let row = |job: &str, (octomap, octolinear): (Stat, Stat), work: usize, unit| {
+        Row { job: format!("{job}{suffix}"), octomap, octolinear, work: work as f64, unit }.print()
+    };
+    // random search (half leaf centres, half uniform in the bounds)
+    let times = race(
+        args.reps,
+        "search",
+        || om.bench_search(&q_arr, 0, &mut out),
+        || {
+            queries
+                .iter()
+                .filter_map(|&p| ol.search_point(p, 0).ok().flatten())
+                .inspect(|f| {
                     black_box(f.value);
-                }
-            }
-            n
-        });
-        b.push(d);
-        assert_eq!(n_om, n_ol, "search: different hit counts");
-    }
-    Row {
-        job: format!("random search{suffix}"),
-        octomap: median(a),
-        octolinear: median(b),
-        work: queries.len() as f64,
-        unit: "q",
-    }
-    .print();
-
-    // ----- the same queries through search_many (eight descents in lockstep)
-    let (mut a, mut b) = (Vec::new(), Vec::new());
+                })
+                .count()
+        },
+    );
+    row("random search", times, queries.len(), "q");
+    // the same queries through search_many (eight descents in lockstep)
+    let mut out = vec![0f32; queries.len()];
     let (mut keys, mut found) = (Vec::with_capacity(queries.len()), Vec::with_capacity(queries.len()));
-    for _ in 0..args.reps {
-        let (d, n_om) = time(|| om.bench_search(&q_arr, 0, &mut out));
-        a.push(d);
-        let (d, n_ol) = time(|| {
+    let times = race(
+        args.reps,
+        "search_many",
+        || om.bench_search(&q_arr, 0, &mut out),
+        || {
             keys.clear();
             keys.extend(queries.iter().filter_map(|&p| ol.key(p).ok()));
             ol.search_many(&keys, 0, &mut found);
             found.iter().filter(|f| f.is_some()).count()
-        });
-        b.push(d);
-        assert_eq!(n_om, n_ol, "search_many: different hit counts");
-    }
-    Row {
-        job: format!("random search, batched{suffix}"),
-        octomap: median(a),
-        octolinear: median(b),
-        work: queries.len() as f64,
-        unit: "q",
-    }
-    .print();
-
-    // ----- full leaf iteration
-    let (mut a, mut b) = (Vec::new(), Vec::new());
-    let mut nleaves = 0;
-    for _ in 0..args.reps {
-        let (d, (n_om, s_om)) = time(|| om.bench_leaf_sum(0));
-        a.push(d);
-        let (d, (n_ol, s_ol)) = time(|| {
-            let mut n = 0usize;
-            let mut s = 0f64;
-            for l in ol.leaves(0) {
-                n += 1;
-                s += f64::from(l.value);
-            }
-            (n, s)
-        });
-        b.push(d);
-        assert_eq!((n_om, s_om), (n_ol, s_ol), "leaf iteration differs");
-        nleaves = n_ol;
-    }
-    Row {
-        job: format!("leaf iteration{suffix}"),
-        octomap: median(a),
-        octolinear: median(b),
-        work: nleaves as f64,
-        unit: "leaf",
-    }
-    .print();
+        },
+    );
+    row("random search, batched", times, queries.len(), "q");
+    // full leaf iteration
+    let times = race(
+        args.reps,
+        "leaf iteration",
+        || om.bench_leaf_sum(0),
+        || ol.leaves(0).fold((0, 0f64), |(n, s), l| (n + 1, s + f64::from(l.value))),
+    );
+    row("leaf iteration", times, ol.num_leaves(), "leaf");
 }
 
 fn main() {
