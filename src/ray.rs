@@ -80,13 +80,14 @@ impl Dda {
         Dda { key, step, t_max, t_delta }
     }
 
-    /// Advances one voxel; returns the axis stepped along.
+    /// Advances one voxel along `dim` (the axis of the smallest `t_max`);
+    /// returns the ray parameter where the new voxel is entered.
     #[inline(always)]
-    fn advance(&mut self) -> usize {
-        let dim = min_axis(&self.t_max);
+    fn advance(&mut self, dim: usize) -> f64 {
+        let t_entry = self.t_max[dim];
         self.key.0[dim] = self.key.0[dim].wrapping_add(self.step[dim] as u16);
         self.t_max[dim] += self.t_delta[dim];
-        dim
+        t_entry
     }
 }
 
@@ -436,7 +437,7 @@ impl Iterator for RayKeys {
             self.pending_origin = false;
             return Some(dda.key);
         }
-        dda.advance();
+        dda.advance(min_axis(&dda.t_max));
         if dda.key == self.end {
             self.dda = None;
             return None;
@@ -590,9 +591,7 @@ pub(crate) fn cast_ray_with(
         if (dda.step[dim] < 0 && k == 0) || (dda.step[dim] > 0 && u32::from(k) == 2 * KEY_CENTER - 1) {
             return Ok(CastOutcome::LeftMap { end: keys.key_to_point(dda.key) });
         }
-        let t_entry = dda.t_max[dim];
-        dda.key.0[dim] = k.wrapping_add(dda.step[dim] as u16);
-        dda.t_max[dim] += dda.t_delta[dim];
+        let t_entry = dda.advance(dim);
         if max_range_set && t_entry >= surely_inside {
             let end = keys.key_to_point(dda.key);
             let e = [end.x, end.y, end.z];

@@ -86,18 +86,6 @@ impl RankNav<'_> {
         let mut s = u32_at(self.dir, 4 * b)?;
         let end = i >> 3;
         let mut w = (b << self.log2) >> 3;
-        if self.log2 == 6 {
-            // the default block is one 64-byte line of masks: sum its words
-            // before `end` without a data-dependent loop
-            if let Some(line) = self.masks.get(8 * w..8 * w + 64) {
-                let before = end - w;
-                for (k, word) in line.chunks_exact(8).enumerate() {
-                    let word = u64::from_le_bytes(word.try_into().ok()?);
-                    s = s.wrapping_add(if k < before { word.count_ones() } else { 0 });
-                }
-                w = end;
-            }
-        }
         while w < end {
             s = s.wrapping_add(u64_at(self.masks, 8 * w)?.count_ones());
             w += 1;
