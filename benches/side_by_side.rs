@@ -11,7 +11,7 @@ use common::*;
 use octolinear::formats::{bt, ot};
 use octolinear::mapped;
 use octolinear::simulate::SceneKind;
-use octolinear::{CastOptions, OccupancyTree, Point3};
+use octolinear::{CastOptions, OccupancyTree, Point3, SearchIndex};
 use octolinear_oracle::{OracleTree, ScanBatch};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -351,6 +351,7 @@ fn run_case(args: &Args, kind: SceneKind, res: f64, scans: &[Scan]) {
     println!();
     header();
     search_and_iterate(args, &om, &ol, &queries, " (compacted)");
+    indexed_rows(args, &om, &ol, &queries);
     mapped_rows(args, &om, &ol, &queries, scans);
 }
 
@@ -437,6 +438,53 @@ fn mapped_rows(args: &Args, om: &OracleTree, ol: &OccupancyTree, queries: &[Poin
         || origins.iter().zip(&dirs).filter(|(&o, &d)| view.cast_ray(o, d, opts).is_ok_and(|c| c.hit())).count(),
     );
     row("castRay (20 m, ign. unknown)", times, origins.len(), "ray");
+}
+
+/// Random search through a [`SearchIndex`] (level-skip hash table) on the
+/// compacted tree, one query at a time and batched.
+fn indexed_rows(args: &Args, om: &OracleTree, ol: &OccupancyTree, queries: &[Point3]) {
+    let t = Instant::now();
+    let index = SearchIndex::new(ol);
+    let built = t.elapsed();
+    println!(
+        "search index: depth {}, {:.2} MB ({:.2} B/node), built in {:.1} ms",
+        index.depth(),
+        index.bytes() as f64 / 1e6,
+        index.bytes() as f64 / ol.calc_num_nodes() as f64,
+        built.as_secs_f64() * 1e3
+    );
+    let q_arr = to_arrays(queries);
+    let keys: Vec<_> = queries.iter().filter_map(|&p| ol.key(p).ok()).collect();
+    let mut out = vec![0f32; queries.len()];
+    let row = |job: &str, (octomap, octolinear): (Stat, Stat)| {
+        Row { job: job.to_string(), octomap, octolinear, work: queries.len() as f64, unit: "q" }.print()
+    };
+    let times = race(
+        args.reps,
+        "indexed search",
+        || om.bench_search(&q_arr, 0, &mut out),
+        || {
+            queries
+                .iter()
+                .filter_map(|&p| index.search(ol.key(p).ok()?, 0))
+                .inspect(|f| {
+                    black_box(f.value);
+                })
+                .count()
+        },
+    );
+    row("random search, indexed", times);
+    let mut found = Vec::with_capacity(keys.len());
+    let times = race(
+        args.reps,
+        "indexed search_many",
+        || om.bench_search(&q_arr, 0, &mut out),
+        || {
+            index.search_many(&keys, 0, &mut found);
+            found.iter().filter(|f| f.is_some()).count()
+        },
+    );
+    row("random search, indexed + batched", times);
 }
 
 /// Random point search (one query at a time, then batched) and full leaf

@@ -41,5 +41,5 @@ pub use ray::{CastOptions, CastOutcome, FanRay, RayFan, RayKeys};
 pub use scan::{OutOfMap, ScanOptions, ScanReport, UpdateBox};
 pub use sensor::{SensorModel, SensorProbabilities};
 pub use tree::{
-    Bounds, BoundsRule, Clock, CountingTree, Found, InnerNodes, KeyBox, NodeKind, OccupancyTree, TreeError,
+    Bounds, BoundsRule, Clock, CountingTree, Found, InnerNodes, KeyBox, NodeKind, OccupancyTree, SearchIndex, TreeError,
 };

@@ -4,6 +4,7 @@ mod arena;
 mod counting;
 mod cursor;
 mod iter;
+mod search_index;
 
 pub(crate) use arena::prefetch;
 pub(crate) use arena::LabelFill;
@@ -12,6 +13,7 @@ pub use arena::{ArenaUsage, NodeArena, NodeId};
 pub use counting::CountingTree;
 pub(crate) use cursor::PathSearch;
 pub use iter::{KeyBox, NodeItem, NodeIter};
+pub use search_index::SearchIndex;
 
 use crate::geometry::Point3;
 use crate::key::{adjust_key_to_depth, Key, KeyError, KeySpace, TREE_DEPTH};

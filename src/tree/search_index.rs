@@ -1,0 +1,313 @@
+//! A level-skip index for read-heavy work: random point queries that start
+//! below the root.
+//!
+//! A search walks 16 dependent levels, and on a large map each one can miss
+//! the cache. [`SearchIndex`] hashes the nodes of a few depths `D`, `D - 3`,
+//! `D - 6`, ... by their key prefix, so a query makes one probe (two or
+//! three when its path ends above `D`, as in unknown space) and then walks
+//! only the levels below the table that answered. The index borrows the
+//! tree, so the borrow checker rules out the tree changing under it (node
+//! ids move on structural changes). Answers are exactly
+//! [`OccupancyTree::search`]'s.
+
+use super::{Found, NodeArena, NodeId, OccupancyTree, ROOT};
+use crate::key::{adjust_key_to_depth, Key, TREE_DEPTH};
+
+/// One hash slot: the key prefix plus one (0 = empty) and its node.
+#[derive(Clone, Copy, Default)]
+struct Slot {
+    tag: u64,
+    node: NodeId,
+}
+
+/// Multiplier of the Fibonacci hash over prefixes.
+const HASH: u64 = 0x9E37_79B9_7F4A_7C15;
+
+/// When the depth is chosen automatically, the deepest table holds at most
+/// one entry per this many tree nodes (the tables then cost at most about
+/// one byte per tree node) ...
+const NODES_PER_ENTRY: usize = 32;
+
+/// ... and at most this many entries, so that the tables stay in a core's
+/// cache (256 KiB of slots): a table that misses the cache costs as much as
+/// the levels it skips, which on a large map are cached anyway.
+const MAX_ENTRIES: usize = 8192;
+
+/// Depths between consecutive tables.
+const TABLE_STEP: u8 = 3;
+
+/// The nodes of one depth, hashed by key prefix (open addressing, linear
+/// probing, at most half full).
+struct Table {
+    depth: u8,
+    /// `slots.len() - 1`; the length is a power of two.
+    slot_mask: usize,
+    /// `64 - log2(slots.len())`.
+    hash_shift: u32,
+    slots: Vec<Slot>,
+}
+
+impl Table {
+    fn new(a: &NodeArena, depth: u8) -> Table {
+        let mut found = Vec::new();
+        collect_at_depth(a, ROOT, 0, Key::ROOT, depth, &mut found);
+        let cap = (found.len() * 2).next_power_of_two().max(8);
+        let mut t = Table { depth, slot_mask: cap - 1, hash_shift: 64 - cap.trailing_zeros(), slots: Vec::new() };
+        t.slots = vec![Slot::default(); cap];
+        for (prefix, node) in found {
+            let mut h = t.home(prefix);
+            while t.slots[h].tag != 0 {
+                h = (h + 1) & t.slot_mask;
+            }
+            t.slots[h] = Slot { tag: prefix + 1, node };
+        }
+        t
+    }
+
+    #[inline(always)]
+    fn home(&self, prefix: u64) -> usize {
+        (prefix.wrapping_mul(HASH) >> self.hash_shift) as usize & self.slot_mask
+    }
+
+    /// The node at this table's depth on the path of `key`.
+    #[inline(always)]
+    fn lookup(&self, key: Key) -> Option<NodeId> {
+        let prefix = prefix_at(key, self.depth);
+        let mut h = self.home(prefix);
+        loop {
+            let s = self.slots[h];
+            if s.tag == prefix + 1 {
+                return Some(s.node);
+            }
+            if s.tag == 0 {
+                return None;
+            }
+            h = (h + 1) & self.slot_mask;
+        }
+    }
+}
+
+/// A search accelerator over one tree; see the module documentation.
+pub struct SearchIndex<'t> {
+    tree: &'t OccupancyTree,
+    /// Deepest first; empty for an empty tree or an index at depth 0, and
+    /// then every query is an ordinary search.
+    tables: Vec<Table>,
+}
+
+impl<'t> SearchIndex<'t> {
+    /// An index whose deepest table is at the deepest depth holding at most
+    /// one node per 32 of the tree and at most 8192 nodes.
+    pub fn new(tree: &'t OccupancyTree) -> Self {
+        let counts = nodes_per_depth(tree);
+        let total: usize = counts.iter().sum();
+        let budget = (total / NODES_PER_ENTRY).clamp(64, MAX_ENTRIES);
+        let depth = (1..TREE_DEPTH).rev().find(|&d| counts[d as usize] <= budget).unwrap_or(0);
+        Self::at_depth(tree, depth)
+    }
+
+    /// An index with tables at `depth`, `depth - 3`, ... down to depth 1
+    /// (none for depth 0; depths above 15 count as 15).
+    pub fn at_depth(tree: &'t OccupancyTree, depth: u8) -> Self {
+        let mut tables = Vec::new();
+        if let Some(a) = tree.arena() {
+            let mut d = depth.min(TREE_DEPTH - 1);
+            while d > 0 {
+                tables.push(Table::new(a, d));
+                d = d.saturating_sub(TABLE_STEP);
+            }
+        }
+        SearchIndex { tree, tables }
+    }
+
+    /// The depth of the deepest table (0: none).
+    pub fn depth(&self) -> u8 {
+        self.tables.first().map_or(0, |t| t.depth)
+    }
+
+    /// Heap bytes of the tables.
+    pub fn bytes(&self) -> usize {
+        self.tables.iter().map(|t| t.slots.capacity() * std::mem::size_of::<Slot>()).sum()
+    }
+
+    /// The deepest indexed node on the path of `key` at or above `depth`,
+    /// with its depth; the root when no table answers.
+    #[inline(always)]
+    fn start(&self, key: Key, depth: u8) -> (NodeId, u8) {
+        for t in &self.tables {
+            if t.depth <= depth {
+                if let Some(n) = t.lookup(key) {
+                    return (n, t.depth);
+                }
+            }
+        }
+        (ROOT, 0)
+    }
+
+    /// `tree.search(key, depth)`.
+    #[inline]
+    pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
+        let a = self.tree.arena()?;
+        let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
+        let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
+        let (mut node, from) = self.start(key, depth);
+        for d in from..depth {
+            match a.child(node, key.child_index(d)) {
+                Some(c) => node = c,
+                None if a.has_children(node) => return None,
+                None => return Some(found(a, node, d, true)),
+            }
+        }
+        Some(found(a, node, depth, !a.has_children(node)))
+    }
+
+    /// [`Self::search`] for many keys, answers in `out` (cleared first) in
+    /// the order of `keys`: eight queries advance in lockstep so that their
+    /// cache misses overlap.
+    pub fn search_many(&self, keys: &[Key], depth: u8, out: &mut Vec<Option<Found>>) {
+        const LANES: usize = 8;
+        out.clear();
+        let Some(a) = self.tree.arena() else {
+            out.resize(keys.len(), None);
+            return;
+        };
+        let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
+        for chunk in keys.chunks(LANES) {
+            let mut key = [Key::ROOT; LANES];
+            let mut node = [ROOT; LANES];
+            // lanes whose walk begins at each depth
+            let mut begin = [0u32; TREE_DEPTH as usize + 1];
+            for (l, q) in chunk.iter().enumerate() {
+                key[l] = if depth == TREE_DEPTH { *q } else { adjust_key_to_depth(*q, depth) };
+                let (n, from) = self.start(key[l], depth);
+                node[l] = n;
+                begin[from as usize] |= 1 << l;
+            }
+            let mut answer: [Option<Found>; LANES] = [None; LANES];
+            let mut walking = 0u32;
+            for d in 0..depth {
+                walking |= begin[d as usize];
+                let mut lanes = walking;
+                while lanes != 0 {
+                    let l = lanes.trailing_zeros() as usize;
+                    lanes &= lanes - 1;
+                    match a.child(node[l], key[l].child_index(d)) {
+                        Some(c) => node[l] = c,
+                        None => {
+                            walking &= !(1 << l);
+                            if !a.has_children(node[l]) {
+                                answer[l] = Some(found(a, node[l], d, true));
+                            }
+                        }
+                    }
+                }
+            }
+            walking |= begin[depth as usize];
+            while walking != 0 {
+                let l = walking.trailing_zeros() as usize;
+                walking &= walking - 1;
+                answer[l] = Some(found(a, node[l], depth, !a.has_children(node[l])));
+            }
+            out.extend_from_slice(&answer[..chunk.len()]);
+        }
+    }
+}
+
+#[inline(always)]
+fn found(a: &NodeArena, node: NodeId, depth: u8, is_leaf: bool) -> Found {
+    Found { value: a.value(node), depth, is_leaf, extra: a.extra(node) }
+}
+
+/// Number of nodes at each depth `0..=16`.
+fn nodes_per_depth(tree: &OccupancyTree) -> [usize; TREE_DEPTH as usize + 1] {
+    let mut counts = [0; TREE_DEPTH as usize + 1];
+    for n in tree.nodes(0) {
+        counts[n.depth as usize] += 1;
+    }
+    counts
+}
+
+/// The top `depth` bits of each coordinate of `key`, packed in 16-bit
+/// fields: the identity of the key's node at `depth`.
+#[inline(always)]
+fn prefix_at(key: Key, depth: u8) -> u64 {
+    let shift = TREE_DEPTH - depth;
+    let [x, y, z] = key.0.map(|k| u64::from(k >> shift));
+    x | (y << 16) | (z << 32)
+}
+
+/// Pushes `(prefix_at(key, depth), id)` of every node at `depth` below `n`,
+/// the node at depth `d` on the path of `key`.
+fn collect_at_depth(a: &NodeArena, n: NodeId, d: u8, key: Key, depth: u8, out: &mut Vec<(u64, NodeId)>) {
+    if d == depth {
+        out.push((prefix_at(key, depth), n));
+        return;
+    }
+    for (pos, c) in a.children(n) {
+        collect_at_depth(a, c, d + 1, key.child_key(pos, d), depth, out);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Point3;
+
+    fn sample_tree() -> OccupancyTree {
+        let mut t = OccupancyTree::new(0.1).unwrap();
+        let mut s = 12345u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s % 2000) as f32 / 100.0 - 10.0
+        };
+        for i in 0..4000 {
+            let p = Point3::new(next(), next(), next() / 4.0);
+            t.update_point(p, i % 3 != 0, crate::tree::InnerNodes::Update).unwrap();
+        }
+        t.prune();
+        t
+    }
+
+    #[test]
+    fn answers_equal_ordinary_search_at_every_index_depth() {
+        let t = sample_tree();
+        let keys: Vec<Key> = {
+            let mut s = 99u64;
+            (0..3000)
+                .map(|i| {
+                    s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                    let r = (s >> 16) as u16;
+                    if i % 2 == 0 {
+                        // near the data: keys around the centre
+                        Key([32768 - 100 + r % 200, 32768 - 100 + (r >> 4) % 200, 32768 - 30 + (r >> 8) % 60])
+                    } else {
+                        Key([r, r.rotate_left(5), r.rotate_left(11)])
+                    }
+                })
+                .collect()
+        };
+        let mut out = Vec::new();
+        for d in 0..=TREE_DEPTH {
+            let index = SearchIndex::at_depth(&t, d);
+            for depth in [0, 1, 5, 12, 15, 16] {
+                let want: Vec<_> = keys.iter().map(|&k| t.search(k, depth)).collect();
+                let got: Vec<_> = keys.iter().map(|&k| index.search(k, depth)).collect();
+                assert_eq!(got, want, "index depth {d}, query depth {depth}");
+                index.search_many(&keys, depth, &mut out);
+                assert_eq!(out, want, "search_many, index depth {d}, query depth {depth}");
+            }
+        }
+        let auto = SearchIndex::new(&t);
+        assert!(auto.depth() > 0 && auto.bytes() > 0);
+    }
+
+    #[test]
+    fn empty_tree_has_no_table() {
+        let t = OccupancyTree::new(0.1).unwrap();
+        let index = SearchIndex::new(&t);
+        assert_eq!(index.depth(), 0);
+        assert_eq!(index.search(Key([1, 2, 3]), 0), None);
+    }
+}
