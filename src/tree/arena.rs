@@ -58,6 +58,12 @@ impl NodeArena {
         a
     }
 
+    /// Slots held (live and free).
+    #[inline]
+    pub fn slot_count(&self) -> usize {
+        self.values.len()
+    }
+
     #[inline(always)]
     pub fn has_extras(&self) -> bool {
         self.default_extra.is_some()

@@ -59,18 +59,39 @@ impl NodeItem<'_> {
 ///
 /// Keeps one frame per level (the parent's key, the id of its next child
 /// and the children still to visit) instead of a stack of pushed children,
-/// so a node costs one mask test and one key step.
+/// so a node costs one mask test and one key step. `fold` (and so
+/// `for_each`, `sum`, `count`, ...) runs the same steps with the frames in
+/// local variables, which the compiler keeps in registers.
 pub struct NodeIter<'a> {
+    walk: Walk<'a>,
+    stack: Stack,
+    root_pending: bool,
+}
+
+/// What an iteration visits; fixed when it starts.
+#[derive(Clone, Copy)]
+struct Walk<'a> {
     arena: Option<&'a NodeArena>,
     keys: &'a KeySpace,
-    /// `frames[..len]`: frame `d` walks the children of a node at depth `d`.
-    frames: [Frame; TREE_DEPTH as usize],
-    len: usize,
-    root_pending: bool,
     max_depth: u8,
     leaves_only: bool,
     bbx: Option<KeyBox>,
+    /// Prefetch child groups: only for arenas that outgrow the last-level
+    /// cache; below that the prefetches cost more than they save (a compacted
+    /// or small tree streams through the hardware prefetchers).
+    prefetch: bool,
 }
+
+/// Where an iteration is: `frames[..len]`, frame `d` walking the children
+/// of a node at depth `d`.
+#[derive(Clone, Copy)]
+struct Stack {
+    frames: [Frame; TREE_DEPTH as usize],
+    len: usize,
+}
+
+/// Arena slots above which iteration prefetches (about 36 MB of nodes).
+const PREFETCH_MIN_SLOTS: usize = 4 << 20;
 
 #[derive(Clone, Copy, Default)]
 struct Frame {
@@ -92,47 +113,43 @@ impl<'a> NodeIter<'a> {
         bbx: Option<KeyBox>,
     ) -> Self {
         let max_depth = if max_depth == 0 || max_depth > TREE_DEPTH { TREE_DEPTH } else { max_depth };
+        let prefetch = arena.is_some_and(|a| a.slot_count() > PREFETCH_MIN_SLOTS);
         NodeIter {
-            arena,
-            keys,
-            frames: [Frame::default(); TREE_DEPTH as usize],
-            len: 0,
+            walk: Walk { arena, keys, max_depth, leaves_only, bbx, prefetch },
+            stack: Stack { frames: [Frame::default(); TREE_DEPTH as usize], len: 0 },
             root_pending: arena.is_some(),
-            max_depth,
-            leaves_only,
-            bbx,
         }
     }
 
+    /// The root's item, if it is to be reported, after opening its frame.
+    fn start(&mut self, a: &'a NodeArena) -> Option<NodeItem<'a>> {
+        self.root_pending = false;
+        let mask = a.mask(ROOT);
+        if mask != 0 {
+            self.stack.frames[0] = Frame { key: Key::ROOT, next: a.first_child(ROOT), remaining: mask };
+            self.stack.len = 1;
+            if self.walk.leaves_only {
+                return None;
+            }
+        }
+        Some(self.walk.item(a, ROOT, Key::ROOT, 0, mask == 0))
+    }
+}
+
+impl<'a> Walk<'a> {
     #[inline(always)]
     fn item(&self, a: &NodeArena, n: NodeId, key: Key, depth: u8, is_leaf: bool) -> NodeItem<'a> {
         NodeItem { key, depth, value: a.value(n), extra: a.extra(n), is_leaf, keys: self.keys }
     }
-}
 
-impl<'a> Iterator for NodeIter<'a> {
-    type Item = NodeItem<'a>;
-
-    #[inline]
-    fn next(&mut self) -> Option<NodeItem<'a>> {
-        let a = self.arena?;
-        if self.root_pending {
-            self.root_pending = false;
-            let mask = a.mask(ROOT);
-            if mask != 0 {
-                self.frames[0] = Frame { key: Key::ROOT, next: a.first_child(ROOT), remaining: mask };
-                self.len = 1;
-                if self.leaves_only {
-                    return self.next();
-                }
-            }
-            return Some(self.item(a, ROOT, Key::ROOT, 0, mask == 0));
-        }
-        while self.len > 0 {
-            let parent_depth = (self.len - 1) as u8;
-            let f = &mut self.frames[self.len - 1];
+    /// The next node below the frames of `st`, if any.
+    #[inline(always)]
+    fn step(&self, a: &NodeArena, st: &mut Stack) -> Option<NodeItem<'a>> {
+        while st.len > 0 {
+            let parent_depth = (st.len - 1) as u8;
+            let f = &mut st.frames[st.len - 1];
             if f.remaining == 0 {
-                self.len -= 1;
+                st.len -= 1;
                 continue;
             }
             let pos = f.remaining.trailing_zeros() as usize;
@@ -147,9 +164,11 @@ impl<'a> Iterator for NodeIter<'a> {
             let mask = a.mask(id);
             let is_leaf = mask == 0 || depth >= self.max_depth;
             if !is_leaf {
-                a.prefetch_grandchildren(id);
-                self.frames[self.len] = Frame { key, next: a.first_child(id), remaining: mask };
-                self.len += 1;
+                if self.prefetch {
+                    a.prefetch_grandchildren(id);
+                }
+                st.frames[st.len] = Frame { key, next: a.first_child(id), remaining: mask };
+                st.len += 1;
                 if self.leaves_only {
                     continue;
                 }
@@ -157,5 +176,73 @@ impl<'a> Iterator for NodeIter<'a> {
             return Some(self.item(a, id, key, depth, is_leaf));
         }
         None
+    }
+}
+
+impl<'a> Iterator for NodeIter<'a> {
+    type Item = NodeItem<'a>;
+
+    #[inline]
+    fn next(&mut self) -> Option<NodeItem<'a>> {
+        let a = self.walk.arena?;
+        if self.root_pending {
+            if let Some(root) = self.start(a) {
+                return Some(root);
+            }
+        }
+        self.walk.step(a, &mut self.stack)
+    }
+
+    #[inline]
+    fn fold<B, F: FnMut(B, Self::Item) -> B>(mut self, init: B, mut f: F) -> B {
+        let Some(a) = self.walk.arena else { return init };
+        let mut acc = init;
+        if self.root_pending {
+            if let Some(root) = self.start(a) {
+                acc = f(acc, root);
+            }
+        }
+        let (walk, mut stack) = (self.walk, self.stack);
+        while let Some(item) = walk.step(a, &mut stack) {
+            acc = f(acc, item);
+        }
+        acc
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::geometry::Point3;
+    use crate::tree::{InnerNodes, OccupancyTree};
+
+    /// `fold` (used by `collect`, `count`, `for_each`, ...) continues from
+    /// wherever `next` left off, for nodes and leaves alike.
+    #[test]
+    fn fold_resumes_where_next_stopped() {
+        let mut t = OccupancyTree::new(0.5).unwrap();
+        for i in 0..40 {
+            let f = i as f32;
+            t.update_point(Point3::new(f * 0.7 - 9.0, (f * 1.3) % 5.0, f * 0.1), i % 4 != 0, InnerNodes::Update)
+                .unwrap();
+        }
+        for leaves in [false, true] {
+            let iter = || if leaves { t.leaves(0) } else { t.nodes(0) };
+            let all: Vec<_> = {
+                let mut it = iter();
+                std::iter::from_fn(|| it.next()).map(|n| (n.key, n.depth, n.value.to_bits())).collect()
+            };
+            assert!(all.len() >= 10, "{} items", all.len());
+            for skip in 0..=all.len() {
+                let mut it = iter();
+                for _ in 0..skip {
+                    it.next();
+                }
+                let rest = it.fold(Vec::new(), |mut v, n| {
+                    v.push((n.key, n.depth, n.value.to_bits()));
+                    v
+                });
+                assert_eq!(rest, all[skip..], "leaves {leaves}, after {skip} items");
+            }
+        }
     }
 }
