@@ -1304,3 +1304,45 @@ fn olm_maps_convert_verify_and_answer_queries_like_the_source() {
     fail(&["verify", truncated], "not a valid .olm map");
     fail(&["query", truncated, "--points", points], "not a valid .olm map");
 }
+
+#[test]
+fn counting_trees_convert_between_ot_and_olm_and_answer_counts() {
+    let f = Fixture::new();
+    // a counting tree of the fixture's occupied leaves, some counted twice
+    let tree = read_tree(f.p("a.ot"));
+    let mut counting = octolinear::CountingTree::new(tree.resolution()).unwrap();
+    let centers: Vec<Point3> = tree.leaves(0).filter(|l| tree.is_occupied(l.value)).map(|l| l.center_point()).collect();
+    for (i, c) in centers.iter().enumerate() {
+        for _ in 0..1 + i % 2 {
+            counting.update_point(*c).unwrap();
+        }
+    }
+    let mut bytes = Vec::new();
+    ot::write_counting(&counting, &mut bytes).unwrap();
+    let src = f.write("c.ot", &bytes);
+    ok(&["convert", src, f.p("c.olm")]);
+    assert!(ok(&["verify", f.p("c.olm")]).contains(": ok"));
+    ok(&["convert", f.p("c.olm"), f.p("c2.ot")]);
+    assert_eq!(std::fs::read(f.path("c2.ot")).unwrap(), bytes, ".ot -> .olm -> .ot changed the bytes");
+    fail(&["convert", src, f.p("c.bt")], "no .bt form");
+    fail(&["info", src], "counting tree holds no occupancy");
+    // queries: each point's count, as CountingOcTree::search gives it
+    let mut pts = String::new();
+    for c in centers.iter().step_by(7) {
+        pts.push_str(&format!("{} {} {}\n", c.x, c.y, c.z));
+    }
+    pts.push_str("1e9 0 0\n");
+    let points = f.write("q.xyz", pts);
+    let from_ot = ok(&["query", src, "--points", points]);
+    let cloud = octolinear::formats::xyz::read_file(Path::new(points)).unwrap();
+    assert_eq!(from_ot.lines().count(), cloud.points.len());
+    for (line, p) in from_ot.lines().zip(&cloud.points) {
+        let want = match counting.key_space().key(*p).ok().and_then(|k| counting.count(k, 0)) {
+            Some(c) => format!(",counted,{c}"),
+            None => ",unknown,".to_string(),
+        };
+        assert!(line.ends_with(&want), "{line}: expected {want}");
+    }
+    assert!(from_ot.contains(",counted,2") && from_ot.contains(",counted,1") && from_ot.contains(",unknown,"));
+    assert_eq!(ok(&["query", f.p("c.olm"), "--points", points]), from_ot);
+}

@@ -14,7 +14,7 @@ use octolinear::formats::{bt, ot};
 use octolinear::mapped::{self, format, MapItem, MapView, MappedMap, OccupancyLookup, OlmError, Variant, WriteOptions};
 use octolinear::ray::CastError;
 use octolinear::simulate::{simulate, LidarConfig, SceneKind, SplitMix64};
-use octolinear::{CastOptions, CastOutcome, Found, Key, KeyBox, NodeKind, OccupancyTree, Point3};
+use octolinear::{CastOptions, CastOutcome, CountingTree, Found, Key, KeyBox, NodeKind, OccupancyTree, Point3};
 use octolinear::{ScanOptions, SensorModel};
 use std::fmt::Write as _;
 
@@ -308,7 +308,7 @@ fn colour_and_stamped_maps_answer_like_the_tree() {
         let bytes = mapped::to_bytes(&tree, WriteOptions::default()).unwrap();
         let map = MappedMap::new(&bytes[..]).unwrap();
         let view = map.view();
-        assert_eq!(view.kind().node_kind(), kind);
+        assert_eq!(view.kind().node_kind(), Some(kind));
         // the colour / stamp accessors
         for leaf in tree.leaves(0).step_by(97) {
             match kind {
@@ -395,7 +395,7 @@ fn golden_ot_files_round_trip() {
         return;
     };
     let mut f = Failures::default();
-    let (mut files, mut identical) = (0, 0);
+    let (mut files, mut identical, mut counting) = (0, 0, 0);
     let mut kinds = std::collections::BTreeMap::new();
     for case in g.manifest["cases"].as_array().unwrap() {
         let id = case["id"].as_str().unwrap();
@@ -405,8 +405,14 @@ fn golden_ot_files_round_trip() {
             }
             let name = file["name"].as_str().unwrap();
             let bytes = g.load(case, name).unwrap();
-            let Ok(ot::AnyTree::Occupancy(tree)) = ot::read(&bytes[..]) else {
-                continue; // counting trees hold no occupancy
+            let tree = match ot::read(&bytes[..]) {
+                Ok(ot::AnyTree::Occupancy(tree)) => tree,
+                Ok(ot::AnyTree::Counting(tree)) => {
+                    counting += 1;
+                    check_counting_round_trip(&mut f, &format!("{id}/{name}"), &tree, &bytes);
+                    continue;
+                }
+                Err(e) => panic!("{id}/{name}: {e}"),
             };
             files += 1;
             *kinds.entry(format!("{:?}", tree.kind())).or_insert(0) += 1;
@@ -433,10 +439,77 @@ fn golden_ot_files_round_trip() {
             f.check(bt_const(&back) == bt_bytes(&tree), || format!("{id}/{name} ml: .bt bytes differ after .olm"));
         }
     }
-    eprintln!("{files} golden .ot files ({kinds:?}), {identical} rewritten byte-identically by the .ot writer");
+    eprintln!(
+        "{files} golden .ot files ({kinds:?}), {identical} rewritten byte-identically by the .ot writer; \
+         {counting} counting trees"
+    );
     assert!(files > 50);
+    assert!(counting > 0, "the golden set has counting trees");
     assert!(kinds.get("Color").is_some_and(|&n| n > 0) && kinds.get("Stamped").is_some_and(|&n| n > 0), "{kinds:?}");
     f.finish("golden .ot round trips");
+}
+
+/// A counting tree through `.olm` in both layouts: the same `.ot` bytes
+/// back, the same counts from `count` at every depth, the same nodes.
+fn check_counting_round_trip(f: &mut Failures, what: &str, tree: &CountingTree, ot_file: &[u8]) {
+    let mut plain = Vec::new();
+    ot::write_counting(tree, &mut plain).unwrap();
+    for (label, opts) in [("full/rank", WriteOptions::default()), ("full/pointers", WriteOptions::pointers())] {
+        let map = MappedMap::new(mapped::counting_to_bytes(tree, opts).unwrap()).unwrap();
+        let view = map.view();
+        assert_eq!(view.kind(), format::TreeKind::CountingOcTree);
+        let back = view.to_counting_tree().unwrap();
+        let mut again = Vec::new();
+        ot::write_counting(&back, &mut again).unwrap();
+        f.check(again == plain && plain == ot_file, || format!("{what} {label}: .ot bytes differ after .olm"));
+        let nodes = |it: &mut dyn Iterator<Item = (Key, u8, bool, u32)>| it.collect::<Vec<_>>();
+        let want = nodes(&mut tree.nodes(0).map(|n| (n.key, n.depth, n.is_leaf, n.extra)));
+        let got = nodes(&mut view.nodes(0).map(|n| (n.key, n.depth, n.is_leaf, n.extra)));
+        f.check(want == got, || format!("{what} {label}: nodes differ"));
+        f.check(view.nodes(0).all(|n| n.value == 0.0), || format!("{what} {label}: counting values are not 0"));
+        for n in tree.nodes(0) {
+            for depth in [0, n.depth, n.depth.saturating_sub(2)] {
+                let want = tree.count(n.key, depth);
+                f.check(view.count(n.key, depth) == want, || {
+                    format!("{what} {label}: count at {} depth {depth}", n.key)
+                });
+            }
+        }
+        f.check(view.count(Key::new(1, 2, 3), 0) == tree.count(Key::new(1, 2, 3), 0), || format!("{what}: far key"));
+        f.check(matches!(view.to_tree(), Err(OlmError::Kind { .. })), || format!("{what}: to_tree accepted counts"));
+        f.check(view.color(Key::ROOT, 0).is_none() && view.stamp(Key::ROOT, 0).is_none(), || what.to_string());
+    }
+    let ml = mapped::counting_to_bytes(tree, WriteOptions::max_likelihood());
+    f.check(ml.is_err(), || format!("{what}: a counting tree written as maximum likelihood"));
+}
+
+#[test]
+fn counting_trees_through_olm() {
+    // a counting tree with repeated hits, and an empty one
+    let mut tree = CountingTree::new(0.1).unwrap();
+    let mut rng = SplitMix64(5);
+    for i in 0..3000 {
+        let c = |r: &mut SplitMix64| (r.below(400) as f32 - 200.0) / 100.0;
+        let p = Point3::new(c(&mut rng), c(&mut rng), c(&mut rng) / 4.0);
+        tree.update_point(p).unwrap();
+        if i % 3 == 0 {
+            tree.update_point(p).unwrap();
+        }
+    }
+    let mut f = Failures::default();
+    let mut ot_file = Vec::new();
+    ot::write_counting(&tree, &mut ot_file).unwrap();
+    assert!(tree.nodes(0).map(|n| n.extra).max() > Some(2));
+    check_counting_round_trip(&mut f, "random counts", &tree, &ot_file);
+    let empty = CountingTree::new(0.2).unwrap();
+    let mut ot_file = Vec::new();
+    ot::write_counting(&empty, &mut ot_file).unwrap();
+    check_counting_round_trip(&mut f, "empty", &empty, &ot_file);
+    // occupancy maps have no counts, counting maps no occupancy tree
+    let plain = MappedMap::new(sample_bytes(WriteOptions::default())).unwrap();
+    assert_eq!(plain.view().count(Key::ROOT, 0), None);
+    assert!(matches!(plain.view().to_counting_tree(), Err(OlmError::Kind { .. })));
+    f.finish("counting trees through .olm");
 }
 
 /// `.bt → .olm (ML) → .bt` restores the input bytes: the example map and
@@ -617,6 +690,19 @@ fn sample_bytes_of(opts: WriteOptions, kind: NodeKind) -> Vec<u8> {
     mapped::to_bytes(&tree, opts).unwrap()
 }
 
+/// A small counting tree with varied counts, as `.olm`.
+fn counting_sample_bytes(opts: WriteOptions) -> Vec<u8> {
+    let mut t = CountingTree::new(0.1).unwrap();
+    for i in 0..60u32 {
+        let f = i as f32;
+        let p = Point3::new((f * 0.37) % 1.5 - 0.7, (f * 0.73) % 1.1 - 0.5, (f * 0.11) % 0.6);
+        for _ in 0..=(i % 3) {
+            t.update_point(p).unwrap();
+        }
+    }
+    mapped::counting_to_bytes(&t, opts).unwrap()
+}
+
 fn fix_header_crc(b: &mut [u8]) {
     if b.len() >= format::HEADER_LEN {
         let crc = crc32fast::hash(&b[..252]);
@@ -669,10 +755,21 @@ fn header_checks_name_the_problem() {
         fix_header_crc(&mut b);
         assert!(matches!(err(&b), OlmError::Section { kind: 7 | 8, .. }), "{:?}", err(&b));
     }
+    // an occupancy map relabelled as counts: its sensor fields give it away
     let mut b = good.clone();
     b[20] = 3;
     fix_header_crc(&mut b);
+    assert!(matches!(err(&b), OlmError::BadField { field: "sensor", .. }), "{:?}", err(&b));
+    let mut b = good.clone();
+    b[20] = 4;
+    fix_header_crc(&mut b);
     assert!(matches!(err(&b), OlmError::BadField { field: "tree_kind", .. }));
+    // counts have no maximum-likelihood variant
+    let mut b = counting_sample_bytes(WriteOptions::default());
+    assert!(MappedMap::new(&b[..]).is_ok());
+    b[21] = 1;
+    fix_header_crc(&mut b);
+    assert!(matches!(err(&b), OlmError::BadField { field: "variant", .. }), "{:?}", err(&b));
     let mut b = good.clone();
     b.push(0);
     assert!(matches!(err(&b), OlmError::FileLength { .. }));
@@ -875,6 +972,9 @@ fn corrupted_files_never_panic() {
         for (label, opts) in [("full/rank", WriteOptions::default()), ("full/pointers", WriteOptions::pointers())] {
             bases.push((format!("{kind:?} {label}"), sample_bytes_of(opts, kind)));
         }
+    }
+    for (label, opts) in [("full/rank", WriteOptions::default()), ("full/pointers", WriteOptions::pointers())] {
+        bases.push((format!("counting {label}"), counting_sample_bytes(opts)));
     }
     for (label, base) in &bases {
         let mut rng = SplitMix64(0x0c70_11ea_u64 ^ base.len() as u64);

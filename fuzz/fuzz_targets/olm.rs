@@ -2,7 +2,8 @@
 //! (`cargo +nightly fuzz run olm`).
 //!
 //! [`check`] must never panic: opening checks the header, then `verify`,
-//! searches, iterations, `castRay` and the conversion to a tree run on
+//! searches, iterations, `castRay` and the conversion to a tree (or a
+//! counting tree) run on
 //! whatever the bytes hold. When `verify` accepts, every answer must be the
 //! answer of the tree the file converts to, and that tree written again
 //! must verify and answer the same. Built without cargo-fuzz this replays
@@ -26,7 +27,7 @@ fn main() {
     }
 }
 
-/// Value bits, depth, leaf flag and colour or stamp.
+/// Value bits, depth, leaf flag and colour, stamp or count.
 type Answer = Option<(u32, u8, bool, u32)>;
 
 fn bits(f: Option<Found>) -> Answer {
@@ -84,11 +85,28 @@ pub fn check(data: &[u8]) -> (bool, bool) {
     let origin = Point3::new(0.05, 0.05, 0.05);
     let dirs = [Point3::new(1.0, 0.3, 0.1), Point3::new(-0.2, -1.0, 0.5)];
     let rays: Vec<_> = dirs.iter().map(|&d| view.cast_ray(origin, d, opts)).collect();
+    let counts: Vec<_> = keys.iter().map(|&k| view.count(k, 0)).collect();
     let tree = view.to_tree();
+    let counting = view.to_counting_tree();
     if !verified {
         assert!(tree.is_err(), "to_tree accepted an unverified file");
+        assert!(counting.is_err(), "to_counting_tree accepted an unverified file");
         return (true, false);
     }
+    if view.kind() == mapped::TreeKind::CountingOcTree {
+        assert!(tree.is_err(), "to_tree accepted a counting map");
+        let counting = counting.expect("a verified counting file converts to a counting tree");
+        assert_eq!(counts, keys.iter().map(|&k| counting.count(k, 0)).collect::<Vec<_>>());
+        let node = |key, depth, extra| (key, depth, extra);
+        let nodes: Vec<_> = view.nodes(0).map(|n| node(n.key, n.depth, n.extra)).collect();
+        assert_eq!(nodes, counting.nodes(0).map(|n| node(n.key, n.depth, n.extra)).collect::<Vec<_>>());
+        let again = mapped::counting_to_bytes(&counting, WriteOptions::default()).expect("writing to memory");
+        let again = MappedMap::new(&again[..]).expect("a written file opens");
+        again.verify().expect("a written file verifies");
+        assert_eq!(counts, keys.iter().map(|&k| again.view().count(k, 0)).collect::<Vec<_>>());
+        return (true, true);
+    }
+    assert!(counting.is_err() && counts.iter().all(Option::is_none), "counts from an occupancy map");
     let tree = tree.expect("a verified file converts to a tree");
     assert_eq!(found, answers(|k, d| tree.search(k, d), &keys));
     let tree_leaves: Vec<_> = tree.leaves(0).map(|l| (l.key, l.depth, l.value.to_bits())).collect();

@@ -2,7 +2,8 @@
 
 use anyhow::{bail, Context, Result};
 use octolinear::formats::{bt, ot, write_atomically};
-use octolinear::OccupancyTree;
+use octolinear::mapped::TreeKind;
+use octolinear::{CountingTree, OccupancyTree};
 use std::fs::File;
 use std::io::BufReader;
 use std::path::Path;
@@ -33,33 +34,54 @@ pub struct LoadedMap {
     pub kind: &'static str,
 }
 
+/// An occupancy map or a counting tree, as read from disk.
+pub enum AnyMap {
+    Occupancy(LoadedMap),
+    Counting(CountingTree),
+}
+
+/// Reads an occupancy map; a counting tree is an error.
 pub fn load_map(path: &Path) -> Result<LoadedMap> {
+    match load_any(path)? {
+        AnyMap::Occupancy(m) => Ok(m),
+        AnyMap::Counting(_) => bail!("{}: a counting tree holds no occupancy", path.display()),
+    }
+}
+
+/// Reads any map by extension (`.ot` and `.olm` may hold a counting tree).
+pub fn load_any(path: &Path) -> Result<AnyMap> {
     let format = MapFormat::of(path)?;
     if format == MapFormat::Olm {
-        let tree =
-            octolinear::mapped::read_file(path).with_context(|| format!("{}: not a valid .olm map", path.display()))?;
-        let kind = match tree.kind() {
-            octolinear::NodeKind::Plain => "OcTree (.olm, memory-mapped)",
-            octolinear::NodeKind::Color => "ColorOcTree (.olm, memory-mapped)",
-            octolinear::NodeKind::Stamped => "OcTreeStamped (.olm, memory-mapped)",
+        let mapped =
+            octolinear::mapped::open(path).with_context(|| format!("{}: not a valid .olm map", path.display()))?;
+        let view = mapped.view();
+        let kind = match view.kind() {
+            TreeKind::CountingOcTree => {
+                let t = view.to_counting_tree().with_context(|| format!("{}: not a valid .olm map", path.display()))?;
+                return Ok(AnyMap::Counting(t));
+            }
+            TreeKind::OcTree => "OcTree (.olm, memory-mapped)",
+            TreeKind::ColorOcTree => "ColorOcTree (.olm, memory-mapped)",
+            TreeKind::OcTreeStamped => "OcTreeStamped (.olm, memory-mapped)",
         };
-        return Ok(LoadedMap { tree, kind });
+        let tree = view.to_tree().with_context(|| format!("{}: not a valid .olm map", path.display()))?;
+        return Ok(AnyMap::Occupancy(LoadedMap { tree, kind }));
     }
     let file = File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
     let r = BufReader::with_capacity(1 << 16, file);
     Ok(match format {
-        MapFormat::Bt => LoadedMap {
+        MapFormat::Bt => AnyMap::Occupancy(LoadedMap {
             tree: bt::read(r).with_context(|| format!("{}: not a valid .bt map", path.display()))?,
             kind: "OcTree (.bt, maximum likelihood)",
-        },
+        }),
         MapFormat::Olm => unreachable!("handled above"),
         MapFormat::Ot => {
             let t = ot::read(r).with_context(|| format!("{}: not a valid .ot map", path.display()))?;
             let kind = t.kind().id();
-            let tree = t
-                .into_occupancy()
-                .ok_or_else(|| anyhow::anyhow!("{}: a counting tree holds no occupancy", path.display()))?;
-            LoadedMap { kind, tree }
+            match t {
+                ot::AnyTree::Occupancy(tree) => AnyMap::Occupancy(LoadedMap { kind, tree }),
+                ot::AnyTree::Counting(t) => AnyMap::Counting(t),
+            }
         }
     })
 }
@@ -76,6 +98,19 @@ pub fn save_map(tree: &OccupancyTree, path: &Path) -> Result<()> {
         MapFormat::Olm => unreachable!("handled above"),
     })
     .with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// Writes a counting tree as `.ot` or `.olm`, atomically (`.bt` has no
+/// counting form).
+pub fn save_counting(tree: &CountingTree, path: &Path) -> Result<()> {
+    let written = match MapFormat::of(path)? {
+        MapFormat::Bt => bail!("{}: a counting tree has no .bt form (write .ot or .olm)", path.display()),
+        MapFormat::Ot => write_atomically(path, |w| ot::write_counting(tree, w)),
+        MapFormat::Olm => {
+            octolinear::mapped::write_counting_file(tree, path, octolinear::mapped::WriteOptions::default())
+        }
+    };
+    written.with_context(|| format!("cannot write {}", path.display()))
 }
 
 /// A progress bar on a terminal, hidden otherwise.

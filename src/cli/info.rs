@@ -1,9 +1,9 @@
 //! `octolinear info`, `convert` and `query`: inspect, convert and query maps.
 
-use super::common::{load_map, save_map, MapFormat};
+use super::common::{load_any, load_map, save_counting, save_map, AnyMap, MapFormat};
 use anyhow::{bail, Context, Result};
 use octolinear::formats::xyz;
-use octolinear::{BoundsRule, Key, KeySpace, NodeKind, OccupancyTree};
+use octolinear::{BoundsRule, Key, KeySpace, NodeKind, OccupancyTree, Point3};
 use std::path::PathBuf;
 
 /// Print the kind, resolution and statistics of a map (.bt or .ot).
@@ -87,7 +87,7 @@ pub fn run(a: Args) -> Result<()> {
 /// Convert a map between formats, chosen by extension (.bt, .ot, .olm).
 ///
 /// Colour and stamped trees keep their colours and stamps in .ot and .olm;
-/// .bt holds occupancy only.
+/// .bt holds occupancy only. Counting trees convert between .ot and .olm.
 ///
 /// Example: octolinear convert map.ot map.bt
 #[derive(clap::Args)]
@@ -97,8 +97,10 @@ pub struct ConvertArgs {
 }
 
 pub fn convert(a: ConvertArgs) -> Result<()> {
-    let m = load_map(&a.input)?;
-    save_map(&m.tree, &a.output)
+    match load_any(&a.input)? {
+        AnyMap::Occupancy(m) => save_map(&m.tree, &a.output),
+        AnyMap::Counting(t) => save_counting(&t, &a.output),
+    }
 }
 
 /// Look up points in a map: prints `x,y,z,state,logodds_bits` per point.
@@ -106,7 +108,10 @@ pub fn convert(a: ConvertArgs) -> Result<()> {
 /// `state` is occupied, free or unknown; `logodds_bits` the f32 bits in hex
 /// (empty when unknown). Colour maps (ColorOcTree) add `,r,g,b` (decimal,
 /// white when never set) and stamped maps (OcTreeStamped) `,stamp`; these
-/// fields are empty when unknown.
+/// fields are empty when unknown. Counting trees (CountingOcTree, `.ot` or
+/// `.olm`) print `x,y,z,state,count` instead, with state `counted` or
+/// `unknown` and the decimal hit count of the node found (empty when
+/// unknown).
 ///
 /// Example: octolinear query map.bt --points points.xyz
 #[derive(clap::Args)]
@@ -120,6 +125,9 @@ pub struct QueryArgs {
 pub fn query(a: QueryArgs) -> Result<()> {
     use std::io::Write;
     let pts = xyz::read_file(&a.points).with_context(|| format!("cannot read {}", a.points.display()))?;
+    if pts.points.is_empty() {
+        bail!("{}: no points", a.points.display());
+    }
     // `.olm` maps are queried where they lie, without a parse step; both
     // answer the whole batch with `search_many` (eight descents in flight);
     // points outside the map (or not finite) are unknown
@@ -130,11 +138,22 @@ pub fn query(a: QueryArgs) -> Result<()> {
     let (kind, point_keys, occupied): (_, _, Box<dyn Fn(f32) -> bool>) = if MapFormat::of(&a.map)? == MapFormat::Olm {
         mapped =
             octolinear::mapped::open(&a.map).with_context(|| format!("{}: not a valid .olm map", a.map.display()))?;
-        let point_keys = keys_of(mapped.view().key_space());
+        let view = mapped.view();
+        let point_keys = keys_of(view.key_space());
+        let Some(kind) = view.kind().node_kind() else {
+            let counts = point_keys.iter().map(|k| k.and_then(|k| view.count(k, 0)));
+            return print_counts(&pts.points, counts);
+        };
         mapped.search_many(&valid(&point_keys), 0, &mut answers);
-        (mapped.view().kind().node_kind(), point_keys, Box::new(|v| mapped.view().is_occupied(v)))
+        (kind, point_keys, Box::new(|v| mapped.view().is_occupied(v)))
     } else {
-        loaded = load_map(&a.map)?;
+        loaded = match load_any(&a.map)? {
+            AnyMap::Occupancy(m) => m,
+            AnyMap::Counting(t) => {
+                let counts = pts.points.iter().map(|p| t.key_space().key(*p).ok().and_then(|k| t.count(k, 0)));
+                return print_counts(&pts.points, counts);
+            }
+        };
         let point_keys = keys_of(loaded.tree.key_space());
         loaded.tree.search_many(&valid(&point_keys), 0, &mut answers);
         (loaded.tree.kind(), point_keys, Box::new(|v| loaded.tree.is_occupied(v)))
@@ -167,9 +186,21 @@ pub fn query(a: QueryArgs) -> Result<()> {
         writeln!(out, "{},{},{},{state},{bits}{extra}", p.x, p.y, p.z)?;
     }
     out.flush()?;
-    if pts.points.is_empty() {
-        bail!("{}: no points", a.points.display());
+    Ok(())
+}
+
+/// `x,y,z,counted,COUNT` or `x,y,z,unknown,` per point.
+fn print_counts(points: &[Point3], counts: impl Iterator<Item = Option<u32>>) -> Result<()> {
+    use std::io::Write;
+    let stdout = std::io::stdout();
+    let mut out = std::io::BufWriter::new(stdout.lock());
+    for (p, c) in points.iter().zip(counts) {
+        match c {
+            Some(c) => writeln!(out, "{},{},{},counted,{c}", p.x, p.y, p.z)?,
+            None => writeln!(out, "{},{},{},unknown,", p.x, p.y, p.z)?,
+        }
     }
+    out.flush()?;
     Ok(())
 }
 

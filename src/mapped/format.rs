@@ -16,7 +16,7 @@ pub const MAGIC: [u8; 8] = *b"OCTOLIN\0";
 /// Major version this reader understands; files of another major are refused.
 pub const VERSION_MAJOR: u16 = 1;
 /// Minor version written; readers accept any minor of their major.
-pub const VERSION_MINOR: u16 = 0;
+pub const VERSION_MINOR: u16 = 1;
 /// Written as a little-endian `u32`; reads back as this value only when
 /// the file was produced little-endian (bytes `0d 0c 0b 0a`).
 pub const ENDIAN_CHECK: u32 = 0x0A0B_0C0D;
@@ -62,21 +62,25 @@ pub(crate) mod field {
 /// The tree type stored. The full variant of a colour or stamped tree has
 /// a [`SectionKind::Colors`] or [`SectionKind::Stamps`] section; the
 /// maximum-likelihood variant, like `.bt`, keeps only the type (nodes read
-/// back white, or with stamp 0).
+/// back white, or with stamp 0). A counting tree exists in the full
+/// variant only, its values section holding each node's `u32` count.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TreeKind {
     OcTree = 0,
     ColorOcTree = 1,
     OcTreeStamped = 2,
+    CountingOcTree = 3,
 }
 
 impl TreeKind {
-    /// The node kind of the in-memory tree.
-    pub fn node_kind(self) -> crate::tree::NodeKind {
+    /// The node kind of the in-memory occupancy tree; `None` for a
+    /// counting tree (a [`crate::CountingTree`]).
+    pub fn node_kind(self) -> Option<crate::tree::NodeKind> {
         match self {
-            TreeKind::OcTree => crate::tree::NodeKind::Plain,
-            TreeKind::ColorOcTree => crate::tree::NodeKind::Color,
-            TreeKind::OcTreeStamped => crate::tree::NodeKind::Stamped,
+            TreeKind::OcTree => Some(crate::tree::NodeKind::Plain),
+            TreeKind::ColorOcTree => Some(crate::tree::NodeKind::Color),
+            TreeKind::OcTreeStamped => Some(crate::tree::NodeKind::Stamped),
+            TreeKind::CountingOcTree => None,
         }
     }
 
@@ -366,10 +370,14 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Meta, OlmError> {
         0 => TreeKind::OcTree,
         1 => TreeKind::ColorOcTree,
         2 => TreeKind::OcTreeStamped,
+        3 => TreeKind::CountingOcTree,
         k => return Err(bad("tree_kind", k)),
     };
     let variant = match u8_at(field::VARIANT) {
         0 => Variant::Full,
+        1 if kind == TreeKind::CountingOcTree => {
+            return Err(bad("variant", "1 (maximum likelihood) with tree_kind 3: counts have no such variant"))
+        }
         1 => Variant::MaxLikelihood,
         v => return Err(bad("variant", v)),
     };
@@ -402,6 +410,12 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Meta, OlmError> {
         if !v.is_finite() {
             return Err(bad(name, v));
         }
+    }
+    // a counting tree has no sensor model: its fields are zero (so that a
+    // relabelled occupancy map does not pass as counts)
+    let sensor_bits = [sensor.hit, sensor.miss, sensor.clamping_min, sensor.clamping_max, sensor.occupancy_threshold];
+    if kind == TreeKind::CountingOcTree && sensor_bits.iter().any(|v| v.to_bits() != 0) {
+        return Err(bad("sensor", "not all zero in a counting map (tree_kind 3)"));
     }
     let root_label = u8_at(field::ROOT_LABEL);
     let size_counter = r64(field::SIZE_COUNTER);

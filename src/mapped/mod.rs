@@ -50,13 +50,15 @@ pub use format::{
 };
 pub use query::{cast_ray, MapItem, OccupancyLookup};
 pub use verify::VerifyReport;
-pub use write::{to_bytes, write, write_file, write_file_with, WriteOptions};
+pub use write::{
+    counting_to_bytes, to_bytes, write, write_counting, write_counting_file, write_file, write_file_with, WriteOptions,
+};
 
 use crate::geometry::Point3;
 use crate::key::{Key, KeyError, KeySpace};
 use crate::ray::{CastError, CastOptions, CastOutcome};
 use crate::sensor::SensorModel;
-use crate::tree::{Found, KeyBox, OccupancyTree, PreorderBuilder};
+use crate::tree::{CountingTree, Found, KeyBox, OccupancyTree, PreorderBuilder};
 use format::Meta;
 use nav::{with_nav, AnyNav, Extras, MlNav, Nav, Node, PtrNav, RankNav};
 use query::RawIter;
@@ -88,6 +90,8 @@ pub enum OlmError {
     SectionChecksum { kind: u16, stored: u32, computed: u32 },
     #[error("inconsistent tree structure: {0}")]
     Structure(String),
+    #[error("this is a {found:?} map: {hint}")]
+    Kind { found: TreeKind, hint: &'static str },
 }
 
 /// An `.olm` map over bytes it owns or borrows: `Vec<u8>`, `&[u8]`,
@@ -305,6 +309,16 @@ impl<'a> MapView<'a> {
         self.search(key, depth).map(|f| f.extra)
     }
 
+    /// The hit count of the node [`Self::search`] finds in a counting map
+    /// (`CountingOcTree::search(key, depth)->getCount()`); `None` when
+    /// nothing is found or the map holds no counts.
+    pub fn count(&self, key: Key, depth: u8) -> Option<u32> {
+        if self.meta.header.kind != TreeKind::CountingOcTree {
+            return None;
+        }
+        self.search(key, depth).map(|f| f.extra)
+    }
+
     /// [`Self::search`] at the voxel containing `p`.
     pub fn search_point(&self, p: Point3, depth: u8) -> Result<Option<Found>, KeyError> {
         Ok(self.search(self.meta.keys.key(p)?, depth))
@@ -359,15 +373,37 @@ impl<'a> MapView<'a> {
     /// recounted node count, as after OctoMap's `.ot` reader; the stored
     /// counter is [`Self::size_counter`].
     pub fn to_tree(&self) -> Result<OccupancyTree, OlmError> {
-        self.verify()?;
         let h = &self.meta.header;
-        let mut builder = PreorderBuilder::with_kind(h.kind.node_kind());
-        let pushed = with_nav!(self.nav, |nav| preorder(nav, self.extras, &mut builder));
-        pushed.map_err(OlmError::Structure)?;
+        let kind = h.kind.node_kind().ok_or(OlmError::Kind {
+            found: h.kind,
+            hint: "it holds counts, not occupancy (read it with to_counting_tree)",
+        })?;
+        let builder = self.preorder(PreorderBuilder::with_kind(kind))?;
         builder
             .finish(h.resolution, h.sensor)
             .map_err(|e| OlmError::Structure(e.to_string()))?
             .ok_or_else(|| OlmError::Structure("node stream ended early".into()))
+    }
+
+    /// The in-memory counting tree of a `CountingOcTree` map (after
+    /// [`Self::verify`]).
+    pub fn to_counting_tree(&self) -> Result<CountingTree, OlmError> {
+        let h = &self.meta.header;
+        if h.kind != TreeKind::CountingOcTree {
+            return Err(OlmError::Kind { found: h.kind, hint: "it holds no counts (read it with to_tree)" });
+        }
+        // counts travel as extras, like stamps
+        let builder = self.preorder(PreorderBuilder::with_kind(crate::tree::NodeKind::Stamped))?;
+        let arena = builder.finish_arena().ok_or_else(|| OlmError::Structure("node stream ended early".into()))?;
+        CountingTree::from_arena(h.resolution, arena).map_err(|e| OlmError::Structure(e.to_string()))
+    }
+
+    /// Verifies the file, then feeds its nodes to `builder` in pre-order.
+    fn preorder(&self, mut builder: PreorderBuilder) -> Result<PreorderBuilder, OlmError> {
+        self.verify()?;
+        let pushed = with_nav!(self.nav, |nav| preorder(nav, self.extras, &mut builder));
+        pushed.map_err(OlmError::Structure)?;
+        Ok(builder)
     }
 }
 

@@ -72,6 +72,9 @@ pub(crate) fn label_mask(w: u16) -> u8 {
 pub(crate) struct RankNav<'a> {
     pub masks: &'a [u8],
     pub values: &'a [u8],
+    /// The values section holds counts (a counting tree): values read 0,
+    /// as in the in-memory [`crate::CountingTree`], and counts are extras.
+    pub counts: bool,
     pub dir: &'a [u8],
     pub log2: u32,
     pub n: u32,
@@ -114,7 +117,8 @@ impl Nav for RankNav<'_> {
     #[inline(always)]
     fn get(&self, n: Node) -> Option<(f32, u8)> {
         let i = n.idx as usize;
-        Some((f32_at(self.values, 4 * i)?, *self.masks.get(i)?))
+        let value = if self.counts { 0.0 } else { f32_at(self.values, 4 * i)? };
+        Some((value, *self.masks.get(i)?))
     }
 
     #[inline(always)]
@@ -172,6 +176,8 @@ impl Nav for RankNav<'_> {
 pub(crate) struct PtrNav<'a> {
     pub masks: &'a [u8],
     pub values: &'a [u8],
+    /// As [`RankNav::counts`].
+    pub counts: bool,
     pub first: &'a [u8],
     pub n: u32,
 }
@@ -193,7 +199,8 @@ impl Nav for PtrNav<'_> {
     #[inline(always)]
     fn get(&self, n: Node) -> Option<(f32, u8)> {
         let i = n.idx as usize;
-        Some((f32_at(self.values, 4 * i)?, *self.masks.get(i)?))
+        let value = if self.counts { 0.0 } else { f32_at(self.values, 4 * i)? };
+        Some((value, *self.masks.get(i)?))
     }
 
     #[inline(always)]
@@ -358,9 +365,9 @@ impl Nav for MlNav<'_> {
     }
 }
 
-/// Per-node colours or stamps of the full layouts, by node index (the
-/// index of the node's value). Out-of-range reads (corrupted files) give
-/// the kind's default: white, stamp 0.
+/// Per-node colours, stamps or counts of the full layouts, by node index
+/// (the index of the node's value). Out-of-range reads (corrupted files)
+/// give the kind's default: white, stamp or count 0.
 #[derive(Clone, Copy)]
 pub(crate) struct Extras<'a> {
     pub kind: TreeKind,
@@ -374,12 +381,13 @@ impl<'a> Extras<'a> {
             TreeKind::OcTree => 0..0,
             TreeKind::ColorOcTree => meta.ranges.colors.clone(),
             TreeKind::OcTreeStamped => meta.ranges.stamps.clone(),
+            TreeKind::CountingOcTree => meta.ranges.values.clone(),
         };
         Extras { kind: meta.header.kind, bytes: section(data, &r) }
     }
 
-    /// The node's extra as the tree stores it (`r | g << 8 | b << 16`, or
-    /// the stamp); 0 for plain maps.
+    /// The node's extra as the tree stores it (`r | g << 8 | b << 16`, the
+    /// stamp, or the count); 0 for plain maps.
     #[inline(always)]
     pub fn get(&self, n: Node) -> u32 {
         let i = n.idx as usize;
@@ -389,7 +397,7 @@ impl<'a> Extras<'a> {
                 Some(c) => pack_rgb([c[0], c[1], c[2]]),
                 None => WHITE,
             },
-            TreeKind::OcTreeStamped => u32_at(self.bytes, 4 * i).unwrap_or(0),
+            TreeKind::OcTreeStamped | TreeKind::CountingOcTree => u32_at(self.bytes, 4 * i).unwrap_or(0),
         }
     }
 }
@@ -411,10 +419,12 @@ impl<'a> AnyNav<'a> {
         let h = &meta.header;
         let r = &meta.ranges;
         let n = h.node_count.min(u64::from(u32::MAX)) as u32;
+        let counts = h.kind == TreeKind::CountingOcTree;
         match (h.variant, h.index) {
             (Variant::Full, Index::Rank) => AnyNav::Rank(RankNav {
                 masks: section(data, &r.masks),
                 values: section(data, &r.values),
+                counts,
                 dir: section(data, &r.rank),
                 log2: u32::from(h.rank_block_log2),
                 n,
@@ -422,6 +432,7 @@ impl<'a> AnyNav<'a> {
             (Variant::Full, Index::Pointers) => AnyNav::Ptr(PtrNav {
                 masks: section(data, &r.masks),
                 values: section(data, &r.values),
+                counts,
                 first: section(data, &r.first_child),
                 n,
             }),

@@ -9,7 +9,8 @@ use super::format::{
     HEADER_LEN, MAX_NODES, RANK_BLOCK_LOG2, SECTION_ALIGN, VERSION_MAJOR, VERSION_MINOR,
 };
 use crate::key::TREE_DEPTH;
-use crate::tree::{NodeRef, OccupancyTree};
+use crate::sensor::SensorModel;
+use crate::tree::{CountingTree, NodeRef, OccupancyTree};
 use std::io::{self, Seek, SeekFrom, Write};
 use std::path::Path;
 
@@ -56,6 +57,58 @@ pub fn write_file_with(tree: &OccupancyTree, path: &Path, opts: WriteOptions) ->
     crate::formats::write_atomically(path, |w| write(tree, w, opts))
 }
 
+/// Writes a counting tree (`CountingOcTree`, full variant) to `path`,
+/// atomically; `opts.index` chooses the layout.
+pub fn write_counting_file(tree: &CountingTree, path: &Path, opts: WriteOptions) -> io::Result<()> {
+    crate::formats::write_atomically(path, |w| write_counting(tree, w, opts))
+}
+
+/// A counting tree as `.olm` bytes.
+pub fn counting_to_bytes(tree: &CountingTree, opts: WriteOptions) -> io::Result<Vec<u8>> {
+    let mut c = io::Cursor::new(Vec::new());
+    write_counting(tree, &mut c, opts)?;
+    Ok(c.into_inner())
+}
+
+/// Writes a counting tree: tree kind 3, its counts in the values section
+/// (the four bytes `.ot` stores per node), sensor fields zero. Only the
+/// full variant exists: a count has no maximum-likelihood form.
+pub fn write_counting<W: Write + Seek>(tree: &CountingTree, w: &mut W, opts: WriteOptions) -> io::Result<()> {
+    if opts.variant != Variant::Full {
+        return Err(invalid("a counting tree has the full variant only".into()));
+    }
+    let zero = SensorModel { hit: 0.0, miss: 0.0, clamping_min: 0.0, clamping_max: 0.0, occupancy_threshold: 0.0 };
+    let src = Source {
+        root: tree.root(),
+        kind: TreeKind::CountingOcTree,
+        sensor: zero,
+        size: tree.size(),
+        resolution: tree.resolution(),
+    };
+    write_source(&src, w, opts)
+}
+
+/// What the writer needs of a tree.
+struct Source<'t> {
+    root: Option<NodeRef<'t>>,
+    kind: TreeKind,
+    sensor: SensorModel,
+    /// OctoMap's `size()` counter.
+    size: usize,
+    resolution: f64,
+}
+
+impl Source<'_> {
+    /// The four bytes stored per node in the values section.
+    #[inline]
+    fn value_bytes(&self, n: NodeRef<'_>) -> [u8; 4] {
+        match self.kind {
+            TreeKind::CountingOcTree => n.extra().to_le_bytes(),
+            _ => n.value().to_le_bytes(),
+        }
+    }
+}
+
 /// The `.olm` bytes of `tree`.
 pub fn to_bytes(tree: &OccupancyTree, opts: WriteOptions) -> io::Result<Vec<u8>> {
     let mut c = io::Cursor::new(Vec::new());
@@ -70,6 +123,28 @@ pub fn to_bytes(tree: &OccupancyTree, opts: WriteOptions) -> io::Result<Vec<u8>>
 /// (by its kind's rules), and its type, but no colours or stamps (the
 /// caller's tree is not changed).
 pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOptions) -> io::Result<()> {
+    let ml_tree;
+    let tree = match opts.variant {
+        Variant::Full => tree,
+        Variant::MaxLikelihood => {
+            let mut t = tree.clone();
+            t.to_max_likelihood();
+            t.prune();
+            ml_tree = t;
+            &ml_tree
+        }
+    };
+    let src = Source {
+        root: tree.root(),
+        kind: TreeKind::of(tree.kind()),
+        sensor: *tree.sensor(),
+        size: tree.size(),
+        resolution: tree.resolution(),
+    };
+    write_source(&src, w, opts)
+}
+
+fn write_source<W: Write + Seek>(src: &Source<'_>, w: &mut W, opts: WriteOptions) -> io::Result<()> {
     let log2 = match opts.index {
         Index::Rank => {
             if !RANK_BLOCK_LOG2.contains(&opts.rank_block_log2) {
@@ -84,29 +159,18 @@ pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOption
             0
         }
     };
-    let ml_tree;
-    let tree = match opts.variant {
-        Variant::Full => tree,
-        Variant::MaxLikelihood => {
-            let mut t = tree.clone();
-            t.to_max_likelihood();
-            t.prune();
-            ml_tree = t;
-            &ml_tree
-        }
-    };
-    let (nodes, inner) = count(tree);
+    let (nodes, inner) = count(src.root);
     if nodes > MAX_NODES {
         return Err(invalid(format!("{nodes} nodes exceed the format's {MAX_NODES}")));
     }
-    let sensor = *tree.sensor();
-    let root_label = match (opts.variant, tree.root()) {
+    let sensor = src.sensor;
+    let root_label = match (opts.variant, src.root) {
         (Variant::Full, _) | (_, None) => 0,
         (_, Some(r)) if r.has_children() => 3,
         (_, Some(r)) => ml_label(r, sensor.clamping_max),
     };
     // section offsets: consecutive, each aligned
-    let kind = TreeKind::of(tree.kind());
+    let kind = src.kind;
     let required = required_sections(kind, opts.variant, opts.index, nodes, inner, log2);
     let mut sections = Vec::with_capacity(required.len());
     let mut offset = HEADER_LEN as u64;
@@ -137,13 +201,13 @@ pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOption
             let block = 1u64 << log2;
             let mut i = 0u64;
             let mut children = 0u64;
-            for_each_level(tree, TREE_DEPTH, |n| {
+            for_each_level(src.root, TREE_DEPTH, |n| {
                 let mask = n.child_mask();
                 if i % block == 0 {
                     sinks[r].put(w, &(children as u32).to_le_bytes())?;
                 }
                 sinks[m].put(w, &[mask])?;
-                sinks[v].put(w, &n.value().to_le_bytes())?;
+                sinks[v].put(w, &src.value_bytes(n))?;
                 put_extra(&mut sinks, w, n)?;
                 children += u64::from(mask.count_ones());
                 i += 1;
@@ -156,7 +220,7 @@ pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOption
         }
         (Variant::Full, Index::Pointers) => {
             write_pointers(
-                tree,
+                src,
                 w,
                 &mut sinks,
                 [sink_of(SectionKind::Masks), sink_of(SectionKind::FirstChild), sink_of(SectionKind::Values)],
@@ -171,7 +235,7 @@ pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOption
             let mut j = 0u64;
             let mut inner_children = 0u64;
             let mut bits = 0u64;
-            for_each_level(tree, TREE_DEPTH - 1, |n| {
+            for_each_level(src.root, TREE_DEPTH - 1, |n| {
                 if !n.has_children() {
                     return Ok(());
                 }
@@ -225,10 +289,10 @@ pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOption
         variant: opts.variant,
         index: opts.index,
         rank_block_log2: log2,
-        resolution: tree.resolution(),
+        resolution: src.resolution,
         sensor,
         root_label,
-        size_counter: tree.size() as u64,
+        size_counter: src.size as u64,
         node_count: nodes,
         inner_count: inner,
         file_length,
@@ -258,8 +322,8 @@ fn ml_label(n: NodeRef<'_>, occupied_value: f32) -> u8 {
 }
 
 /// Nodes and inner nodes reachable from the root.
-fn count(tree: &OccupancyTree) -> (u64, u64) {
-    let Some(root) = tree.root() else {
+fn count(root: Option<NodeRef<'_>>) -> (u64, u64) {
+    let Some(root) = root else {
         return (0, 0);
     };
     let mut stack = vec![root];
@@ -276,10 +340,10 @@ fn count(tree: &OccupancyTree) -> (u64, u64) {
 
 /// Calls `f` on every node of depth 0, then depth 1, ... up to `max_depth`,
 /// each level in child order (breadth-first order), by depth-limited walks.
-fn for_each_level(
-    tree: &OccupancyTree,
+fn for_each_level<'t>(
+    root: Option<NodeRef<'t>>,
     max_depth: u8,
-    mut f: impl FnMut(NodeRef<'_>) -> io::Result<()>,
+    mut f: impl FnMut(NodeRef<'t>) -> io::Result<()>,
 ) -> io::Result<()> {
     fn walk<'t>(
         n: NodeRef<'t>,
@@ -297,7 +361,7 @@ fn for_each_level(
         }
         Ok(())
     }
-    let Some(root) = tree.root() else {
+    let Some(root) = root else {
         return Ok(());
     };
     for level in 0..=max_depth {
@@ -312,13 +376,13 @@ fn for_each_level(
 
 /// Depth-first group order with first-child indices.
 fn write_pointers<W: Write + Seek>(
-    tree: &OccupancyTree,
+    src: &Source<'_>,
     w: &mut W,
     sinks: &mut [Sink],
     [m, fc, v]: [usize; 3],
     put_extra: &impl Fn(&mut [Sink], &mut W, NodeRef<'_>) -> io::Result<()>,
 ) -> io::Result<()> {
-    let Some(root) = tree.root() else {
+    let Some(root) = src.root else {
         return Ok(());
     };
     // subtree sizes in depth-first pre-order
@@ -337,7 +401,7 @@ fn write_pointers<W: Write + Seek>(
     let mut put = |sinks: &mut [Sink], n: NodeRef<'_>, first: u32| -> io::Result<()> {
         sinks[m].put(w, &[n.child_mask()])?;
         sinks[fc].put(w, &first.to_le_bytes())?;
-        sinks[v].put(w, &n.value().to_le_bytes())?;
+        sinks[v].put(w, &src.value_bytes(n))?;
         put_extra(sinks, w, n)
     };
     put(sinks, root, u32::from(root.has_children()))?;

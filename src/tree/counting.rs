@@ -70,6 +70,25 @@ impl CountingTree {
         a.extra(node)
     }
 
+    /// The count of the node `search(key, depth)` finds (depth 0 means 16):
+    /// the node at `depth` containing `key`, or the deepest existing leaf
+    /// above it; `None` when the path ends at an inner node lacking the
+    /// child, or the tree is empty.
+    pub fn count(&self, key: Key, depth: u8) -> Option<u32> {
+        let a = self.arena.as_ref()?;
+        let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
+        let key = if depth == TREE_DEPTH { key } else { crate::key::adjust_key_to_depth(key, depth) };
+        let mut node = ROOT;
+        for d in 0..depth {
+            match a.child(node, key.child_index(d)) {
+                Some(c) => node = c,
+                None if a.has_children(node) => return None,
+                None => break,
+            }
+        }
+        Some(a.extra(node))
+    }
+
     /// [`Self::update`] at the voxel containing `p`.
     pub fn update_point(&mut self, p: Point3) -> Result<u32, KeyError> {
         let key = self.keys.key(p)?;
