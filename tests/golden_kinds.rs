@@ -162,6 +162,11 @@ fn golden_counting_trees() {
             writeln!(nodes, "{x},{y},{z},{},{},{}", n.depth, u8::from(n.is_leaf), n.extra).unwrap();
         }
         f.check_digest(&g, case, "nodes.csv", nodes.as_bytes());
+        // `count(key, depth)` finds each of those nodes (CountingOcTree::search;
+        // depth 0 means 16 there, so not the root)
+        for n in tree.nodes(0).skip(1) {
+            f.check(tree.count(n.key, n.depth) == Some(n.extra), || format!("count at {} depth {}", n.key, n.depth));
+        }
         for hits in 1..=3 {
             let mut s = String::from("x,y,z\n");
             for p in tree.centers_min_hits(hits) {
