@@ -88,7 +88,7 @@ fn ml_of(tree: &OccupancyTree) -> OccupancyTree {
 fn all_options() -> Vec<(&'static str, WriteOptions)> {
     vec![
         ("full/rank", WriteOptions::default()),
-        ("full/rank b8", WriteOptions { rank_block_log2: 3, ..Default::default() }),
+        ("full/rank b64", WriteOptions { rank_block_log2: 6, ..Default::default() }),
         ("full/pointers", WriteOptions::pointers()),
         ("ml/rank", WriteOptions::max_likelihood()),
         ("ml/rank b4096", WriteOptions { rank_block_log2: 12, ..WriteOptions::max_likelihood() }),

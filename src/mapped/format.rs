@@ -32,7 +32,7 @@ pub const MAX_NODES: u64 = u32::MAX as u64;
 pub const RANK_BLOCK_LOG2: std::ops::RangeInclusive<u8> = 3..=12;
 /// Block size the writer uses by default (64 records: one 64-byte line of
 /// masks for the full variant).
-pub const DEFAULT_RANK_BLOCK_LOG2: u8 = 6;
+pub const DEFAULT_RANK_BLOCK_LOG2: u8 = 3;
 
 pub(crate) const TABLE_OFFSET: usize = 96;
 pub(crate) const ENTRY_LEN: usize = 24;

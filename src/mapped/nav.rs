@@ -85,6 +85,17 @@ impl RankNav<'_> {
     #[inline(always)]
     pub fn rank(&self, i: u32) -> Option<u32> {
         let i = i as usize;
+        if self.log2 == 3 {
+            // one word of masks per block (the writer's default): one
+            // directory entry plus one masked popcount
+            let base = u32_at(self.dir, 4 * (i >> 3))?;
+            let rem = i & 7;
+            if rem == 0 {
+                return Some(base);
+            }
+            let word = u64_at(self.masks, 8 * (i >> 3))?;
+            return Some(base.wrapping_add((word & ((1u64 << (8 * rem)) - 1)).count_ones()));
+        }
         let b = i >> self.log2;
         let mut s = u32_at(self.dir, 4 * b)?;
         let end = i >> 3;
