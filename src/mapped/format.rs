@@ -30,9 +30,12 @@ pub const MAX_SECTIONS: usize = 6;
 pub const MAX_NODES: u64 = u32::MAX as u64;
 /// Rank-directory block sizes allowed (log2 of the records per block).
 pub const RANK_BLOCK_LOG2: std::ops::RangeInclusive<u8> = 3..=12;
-/// Block size the writer uses by default (64 records: one 64-byte line of
-/// masks for the full variant).
+/// Block size the writer uses by default for the full variant (8 records:
+/// a rank is one directory entry plus one masked popcount of a word).
 pub const DEFAULT_RANK_BLOCK_LOG2: u8 = 3;
+/// ... and for maximum likelihood (64 records: one 128-byte run of labels),
+/// where a directory entry per 8 records would add a quarter to the file.
+pub const ML_RANK_BLOCK_LOG2: u8 = 6;
 
 pub(crate) const TABLE_OFFSET: usize = 96;
 pub(crate) const ENTRY_LEN: usize = 24;

@@ -6,7 +6,7 @@
 
 use super::format::{
     self, required_sections, round8, Header, Index, Section, SectionKind, TreeKind, Variant, DEFAULT_RANK_BLOCK_LOG2,
-    HEADER_LEN, MAX_NODES, RANK_BLOCK_LOG2, SECTION_ALIGN, VERSION_MAJOR, VERSION_MINOR,
+    HEADER_LEN, MAX_NODES, ML_RANK_BLOCK_LOG2, RANK_BLOCK_LOG2, SECTION_ALIGN, VERSION_MAJOR, VERSION_MINOR,
 };
 use crate::key::TREE_DEPTH;
 use crate::sensor::SensorModel;
@@ -33,7 +33,7 @@ impl Default for WriteOptions {
 impl WriteOptions {
     /// Maximum likelihood (what `.bt` holds), rank index.
     pub fn max_likelihood() -> Self {
-        WriteOptions { variant: Variant::MaxLikelihood, ..Self::default() }
+        WriteOptions { variant: Variant::MaxLikelihood, rank_block_log2: ML_RANK_BLOCK_LOG2, ..Self::default() }
     }
 
     /// Full variant with first-child pointers instead of the rank directory.
