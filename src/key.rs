@@ -240,6 +240,81 @@ pub fn adjust_key_to_depth(key: Key, depth: u8) -> Key {
     Key(key.0.map(|k| adjust_to_depth(k, depth)))
 }
 
+/// Keys packed as `x | y << 16 | z << 32` for depth-first walks: a walk
+/// keeps, per open node, the packed key of its child 0, and child `pos` is
+/// then `child0 + (SPREAD[pos] << (15 - depth))` — OctoMap's
+/// `computeChildKey` (centre ± half the child's size per axis) without a
+/// branch per axis.
+pub(crate) mod packed {
+    use super::{Key, KEY_CENTER};
+
+    /// Bit `i` of a child index spread to the 16-bit lane of axis `i`.
+    pub const SPREAD: [u64; 8] = {
+        let mut t = [0u64; 8];
+        let mut pos = 0;
+        while pos < 8 {
+            t[pos] = (pos as u64 & 1) | ((pos as u64 & 2) << 15) | ((pos as u64 & 4) << 30);
+            pos += 1;
+        }
+        t
+    };
+
+    /// The same value in all three lanes.
+    const fn lanes(v: u16) -> u64 {
+        (v as u64) * 0x0000_0001_0001_0001
+    }
+
+    /// The packed key of child 0 of the node at `depth` (< 16) with packed
+    /// centre key `key` (`computeChildKey` subtracts the child offset, and
+    /// one more at depth 15 where the offset is 0).
+    #[inline(always)]
+    pub fn child0(key: u64, depth: u8) -> u64 {
+        let offset = (KEY_CENTER >> (depth + 1)) as u16;
+        key - lanes(offset) - lanes(u16::from(offset == 0))
+    }
+
+    /// The packed key of child `pos` of a node at `depth` whose child 0 is `child0`.
+    #[inline(always)]
+    pub fn child(child0: u64, pos: usize, depth: u8) -> u64 {
+        child0 + (SPREAD[pos] << (15 - depth))
+    }
+
+    #[inline(always)]
+    pub fn pack(k: Key) -> u64 {
+        u64::from(k.0[0]) | (u64::from(k.0[1]) << 16) | (u64::from(k.0[2]) << 32)
+    }
+
+    #[inline(always)]
+    pub fn unpack(k: u64) -> Key {
+        Key([k as u16, (k >> 16) as u16, (k >> 32) as u16])
+    }
+
+    #[cfg(test)]
+    mod tests {
+        use super::*;
+        use crate::key::TREE_DEPTH;
+
+        /// The packed child step gives `computeChildKey`'s keys on random
+        /// paths from the root to depth 16.
+        #[test]
+        fn packed_child_step_equals_child_key() {
+            let mut seed = 0x2545_f491_4f6c_dd1du64;
+            for _ in 0..2000 {
+                let mut key = Key::ROOT;
+                for depth in 0..TREE_DEPTH {
+                    seed ^= seed << 13;
+                    seed ^= seed >> 7;
+                    seed ^= seed << 17;
+                    let pos = (seed % 8) as usize;
+                    let want = key.child_key(pos, depth);
+                    assert_eq!(unpack(child(child0(pack(key), depth), pos, depth)), want, "{key} {pos} {depth}");
+                    key = want;
+                }
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

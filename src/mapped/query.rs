@@ -8,6 +8,7 @@
 
 use super::nav::{Extras, Nav, Node};
 use crate::geometry::Point3;
+use crate::key::packed;
 use crate::key::{adjust_key_to_depth, Key, KeySpace, KEY_CENTER, TREE_DEPTH};
 use crate::ray::{CastError, CastOptions, CastOutcome};
 use crate::sensor::SensorModel;
@@ -183,18 +184,30 @@ impl MapItem<'_> {
     }
 }
 
-/// Depth-first iteration over one layout.
+/// Depth-first iteration over one layout: one frame per open level, with
+/// the node's children (as the layout finds them) and the packed key of
+/// child 0 (see [`crate::key::packed`]).
 pub(crate) struct RawIter<'a, N: Nav> {
     nav: N,
     extras: Extras<'a>,
     keys: &'a KeySpace,
-    stack: Vec<(Node, Key, u8)>,
+    frames: [Frame; TREE_DEPTH as usize],
+    len: usize,
+    root_pending: bool,
     max_depth: u8,
     leaves_only: bool,
     bbx: Option<KeyBox>,
     budget: u64,
     /// Per depth: where the next node's children start (see `Nav::children_seq`).
     seq: [(u32, u32); TREE_DEPTH as usize + 1],
+}
+
+#[derive(Clone, Copy, Default)]
+struct Frame {
+    child0: u64,
+    children: [Node; 8],
+    next: u8,
+    remaining: u8,
 }
 
 impl<'a, N: Nav> RawIter<'a, N> {
@@ -206,17 +219,14 @@ impl<'a, N: Nav> RawIter<'a, N> {
         leaves_only: bool,
         bbx: Option<KeyBox>,
     ) -> Self {
-        let mut stack = Vec::new();
-        if let Some(root) = nav.root() {
-            stack.reserve(8 * TREE_DEPTH as usize + 1);
-            stack.push((root, Key::ROOT, 0));
-        }
         RawIter {
             budget: nav.node_budget(),
+            root_pending: nav.root().is_some(),
             nav,
             extras,
             keys,
-            stack,
+            frames: [Frame::default(); TREE_DEPTH as usize],
+            len: 0,
             max_depth: normalize_depth(max_depth),
             leaves_only,
             bbx,
@@ -224,43 +234,68 @@ impl<'a, N: Nav> RawIter<'a, N> {
         }
     }
 
-    #[inline]
-    pub fn next_item(&mut self) -> Option<MapItem<'a>> {
-        while let Some((n, key, depth)) = self.stack.pop() {
-            if self.budget == 0 {
-                self.stack.clear();
+    /// Reports node `n` (at `key`, `depth`) and opens a frame for its
+    /// children when it is to be descended; `None` when it is not reported
+    /// (an inner node of a leaf iteration, or unreadable bytes).
+    #[inline(always)]
+    fn visit(&mut self, n: Node, packed: u64, depth: u8) -> Option<MapItem<'a>> {
+        if self.budget == 0 {
+            self.len = 0;
+            return None;
+        }
+        self.budget -= 1;
+        let (value, mask) = self.nav.get(n)?;
+        let is_leaf = mask == 0 || depth >= self.max_depth;
+        if mask == 0 && depth < self.max_depth {
+            self.nav.skip_seq(n, &mut self.seq[depth as usize]);
+        }
+        if !is_leaf {
+            let mut children = [Node::default(); 8];
+            let slot = &mut self.seq[depth as usize];
+            // a layout that cannot list all the children (corrupted bytes)
+            // leaves the node without descendants
+            let k = self.nav.children_seq(n, mask, slot, &mut children);
+            if k == Some(mask.count_ones() as usize) {
+                let child0 = packed::child0(packed, depth);
+                self.frames[depth as usize] = Frame { child0, children, next: 0, remaining: mask };
+                self.len = depth as usize + 1;
+            }
+            if self.leaves_only {
                 return None;
             }
-            self.budget -= 1;
-            let Some((value, mask)) = self.nav.get(n) else {
+        }
+        let key = packed::unpack(packed);
+        Some(MapItem { key, depth, value, is_leaf, extra: self.extras.get(n), keys: self.keys })
+    }
+
+    #[inline]
+    pub fn next_item(&mut self) -> Option<MapItem<'a>> {
+        if self.root_pending {
+            self.root_pending = false;
+            let root = self.nav.root()?;
+            if let Some(item) = self.visit(root, packed::pack(Key::ROOT), 0) {
+                return Some(item);
+            }
+        }
+        while self.len > 0 {
+            let depth = self.len - 1;
+            let f = &mut self.frames[depth];
+            if f.remaining == 0 {
+                self.len -= 1;
                 continue;
-            };
-            let is_leaf = mask == 0 || depth >= self.max_depth;
-            if mask == 0 && depth < self.max_depth {
-                self.nav.skip_seq(n, &mut self.seq[depth as usize]);
             }
-            if !is_leaf {
-                let mut children = [Node::default(); 8];
-                let slot = &mut self.seq[depth as usize];
-                if let Some(mut k) = self.nav.children_seq(n, mask, slot, &mut children) {
-                    for pos in (0..8).rev() {
-                        if mask & (1 << pos) != 0 {
-                            if k == 0 {
-                                break;
-                            }
-                            k -= 1;
-                            let ck = key.child_key(pos, depth);
-                            if self.bbx.is_none_or(|b| overlaps(&b, ck, depth + 1)) {
-                                self.stack.push((children[k], ck, depth + 1));
-                            }
-                        }
-                    }
-                }
-                if self.leaves_only {
-                    continue;
-                }
+            let pos = f.remaining.trailing_zeros() as usize;
+            f.remaining &= f.remaining - 1;
+            let n = f.children[usize::from(f.next)];
+            f.next += 1;
+            let child = packed::child(f.child0, pos, depth as u8);
+            let depth = depth as u8 + 1;
+            if self.bbx.is_some_and(|b| !overlaps(&b, packed::unpack(child), depth)) {
+                continue;
             }
-            return Some(MapItem { key, depth, value, is_leaf, extra: self.extras.get(n), keys: self.keys });
+            if let Some(item) = self.visit(n, child, depth) {
+                return Some(item);
+            }
         }
         None
     }

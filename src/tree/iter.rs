@@ -2,6 +2,7 @@
 
 use super::{NodeArena, NodeId, OccupancyTree, ROOT};
 use crate::geometry::Point3;
+use crate::key::packed::{self, child0, pack, unpack};
 use crate::key::{Key, KeySpace, KEY_CENTER, TREE_DEPTH};
 
 /// An inclusive box of keys, as OctoMap's bounding-box iterator takes it.
@@ -93,51 +94,13 @@ struct Stack {
 /// Arena slots above which iteration prefetches (about 36 MB of nodes).
 const PREFETCH_MIN_SLOTS: usize = 4 << 20;
 
-/// One level of the walk. Keys are packed as `x | y << 16 | z << 32`, and
-/// a frame holds the key of its node's child 0, so that child `pos` is
-/// `base + (SPREAD[pos] << (15 - depth))`: OctoMap's `computeChildKey`
-/// (centre ± half the child's size per axis) without a branch per axis.
+/// One level of the walk: the packed key of the node's child 0 (see
+/// [`crate::key::packed`]), the id of its next child, the children left.
 #[derive(Clone, Copy, Default)]
 struct Frame {
     base: u64,
     next: NodeId,
     remaining: u8,
-}
-
-/// Bit `i` of a child index spread to the 16-bit lane of axis `i`.
-const SPREAD: [u64; 8] = {
-    let mut t = [0u64; 8];
-    let mut pos = 0;
-    while pos < 8 {
-        t[pos] = (pos as u64 & 1) | ((pos as u64 & 2) << 15) | ((pos as u64 & 4) << 30);
-        pos += 1;
-    }
-    t
-};
-
-/// The same value in all three lanes.
-const fn lanes(v: u16) -> u64 {
-    (v as u64) * 0x0000_0001_0001_0001
-}
-
-/// The frame of a node at `depth` with packed key `key`: the key of its
-/// child 0 (`computeChildKey` subtracts the child offset, and one more at
-/// depth 15 where the offset is 0).
-#[inline(always)]
-fn frame(key: u64, depth: u8, next: NodeId, remaining: u8) -> Frame {
-    let offset = (KEY_CENTER >> (depth + 1)) as u16;
-    let base = key - lanes(offset) - lanes(u16::from(offset == 0));
-    Frame { base, next, remaining }
-}
-
-#[inline(always)]
-fn pack(k: Key) -> u64 {
-    u64::from(k.0[0]) | (u64::from(k.0[1]) << 16) | (u64::from(k.0[2]) << 32)
-}
-
-#[inline(always)]
-fn unpack(k: u64) -> Key {
-    Key([k as u16, (k >> 16) as u16, (k >> 32) as u16])
 }
 
 impl<'a> NodeIter<'a> {
@@ -166,7 +129,8 @@ impl<'a> NodeIter<'a> {
         self.root_pending = false;
         let mask = a.mask(ROOT);
         if mask != 0 {
-            self.stack.frames[0] = frame(pack(Key::ROOT), 0, a.first_child(ROOT), mask);
+            self.stack.frames[0] =
+                Frame { base: child0(pack(Key::ROOT), 0), next: a.first_child(ROOT), remaining: mask };
             self.stack.len = 1;
             if self.walk.leaves_only {
                 return None;
@@ -196,7 +160,7 @@ impl<'a> Walk<'a> {
             f.remaining &= f.remaining - 1;
             let id = f.next;
             f.next += 1;
-            let packed = f.base + (SPREAD[pos] << (15 - parent_depth));
+            let packed = packed::child(f.base, pos, parent_depth);
             let key = unpack(packed);
             let depth = parent_depth + 1;
             if self.bbx.is_some_and(|b| !b.overlaps(key, depth)) {
@@ -208,7 +172,7 @@ impl<'a> Walk<'a> {
                 if self.prefetch {
                     a.prefetch_grandchildren(id);
                 }
-                st.frames[st.len] = frame(packed, depth, a.first_child(id), mask);
+                st.frames[st.len] = Frame { base: child0(packed, depth), next: a.first_child(id), remaining: mask };
                 st.len += 1;
                 if self.leaves_only {
                     continue;
@@ -253,29 +217,8 @@ impl<'a> Iterator for NodeIter<'a> {
 
 #[cfg(test)]
 mod tests {
-    use super::*;
     use crate::geometry::Point3;
     use crate::tree::{InnerNodes, OccupancyTree};
-
-    /// The packed child step gives `computeChildKey`'s keys on random paths
-    /// from the root to depth 16.
-    #[test]
-    fn packed_child_step_equals_child_key() {
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        for _ in 0..2000 {
-            let mut key = Key::ROOT;
-            for depth in 0..TREE_DEPTH {
-                seed ^= seed << 13;
-                seed ^= seed >> 7;
-                seed ^= seed << 17;
-                let pos = (seed % 8) as usize;
-                let f = frame(pack(key), depth, 0, 0);
-                let child = key.child_key(pos, depth);
-                assert_eq!(unpack(f.base + (SPREAD[pos] << (15 - depth))), child, "{key} pos {pos} depth {depth}");
-                key = child;
-            }
-        }
-    }
 
     /// `fold` (used by `collect`, `count`, `for_each`, ...) continues from
     /// wherever `next` left off, for nodes and leaves alike.
