@@ -418,6 +418,29 @@ fn mapped_rows(args: &Args, om: &OracleTree, ol: &OccupancyTree, queries: &[Poin
         },
     );
     row("random search, batched", times, n, "q");
+    let t = Instant::now();
+    let index = mapped::MapSearchIndex::new(view);
+    println!(
+        "mapped search index: depth {}, {:.2} MB, built in {:.2} ms",
+        index.depth(),
+        index.bytes() as f64 / 1e6,
+        t.elapsed().as_secs_f64() * 1e3
+    );
+    let times = race(
+        args.reps,
+        "indexed search",
+        || om.bench_search(&q_arr, 0, &mut out),
+        || {
+            queries
+                .iter()
+                .filter_map(|&p| index.search(view.key(p).ok()?, 0))
+                .inspect(|f| {
+                    black_box(f.value);
+                })
+                .count()
+        },
+    );
+    row("random search, indexed", times, n, "q");
     let leaves = ol.num_leaves();
     let times = race(
         args.reps,

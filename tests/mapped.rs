@@ -291,6 +291,34 @@ fn check_all_backings(name: &str, tree: &OccupancyTree) {
     }
 }
 
+/// The mapped level-skip index answers as the view, in every layout, at
+/// every query depth (near the data and far from it).
+#[test]
+fn mapped_search_index_answers_like_the_view() {
+    let tree = simulated(SceneKind::Indoor, 3, 9, 0.1, &small_lidar());
+    let mut rng = SplitMix64(17);
+    let mut keys: Vec<Key> = tree.leaves(0).step_by(13).map(|l| l.key).collect();
+    keys.extend((0..2000).map(|_| {
+        let k = |r: &mut SplitMix64| 32768u16.wrapping_add(r.below(400) as u16).wrapping_sub(200);
+        Key::new(k(&mut rng), k(&mut rng), k(&mut rng))
+    }));
+    for (label, opts) in all_options() {
+        let map = MappedMap::new(mapped::to_bytes(&tree, opts).unwrap()).unwrap();
+        let view = map.view();
+        let index = mapped::MapSearchIndex::new(view);
+        assert!(index.depth() > 0 && index.bytes() > 0, "{label}");
+        for depth in [0, 16, 15, 12, index.depth(), 3] {
+            for &k in &keys {
+                assert_eq!(
+                    found_bits(index.search(k, depth)),
+                    found_bits(view.search(k, depth)),
+                    "{label} {k} {depth}"
+                );
+            }
+        }
+    }
+}
+
 #[test]
 fn simulated_indoor_maps_answer_like_the_tree() {
     let tree = simulated(SceneKind::Indoor, 3, 5, 0.1, &small_lidar());

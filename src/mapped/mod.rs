@@ -58,7 +58,7 @@ use crate::geometry::Point3;
 use crate::key::{Key, KeyError, KeySpace};
 use crate::ray::{CastError, CastOptions, CastOutcome};
 use crate::sensor::SensorModel;
-use crate::tree::{CountingTree, Found, KeyBox, OccupancyTree, PreorderBuilder};
+use crate::tree::{CountingTree, Found, KeyBox, LevelTables, OccupancyTree, PreorderBuilder};
 use format::Meta;
 use nav::{with_nav, AnyNav, Extras, MlNav, Nav, Node, PtrNav, RankNav};
 use query::RawIter;
@@ -449,6 +449,48 @@ fn preorder<N: Nav>(nav: N, extras: Extras<'_>, b: &mut PreorderBuilder) -> Resu
         }
     }
     Ok(())
+}
+
+/// A level-skip index over a mapped view (see [`crate::SearchIndex`]):
+/// hash tables of the nodes at a few depths, built by walking only the
+/// levels down to them, so a search probes once and walks the levels
+/// below. Opt-in for query-heavy work; opening stays O(1).
+pub struct MapSearchIndex<'a> {
+    view: MapView<'a>,
+    tables: LevelTables<Node>,
+}
+
+impl<'a> MapSearchIndex<'a> {
+    pub fn new(view: MapView<'a>) -> Self {
+        let tables = with_nav!(view.nav, |nav| {
+            LevelTables::build(nav.root(), view.node_count(), None, |n, out| {
+                let Some(mask) = nav.mask(n) else { return };
+                let mut ch = [Node::default(); 8];
+                let Some(k) = nav.children(n, mask, &mut ch) else { return };
+                let positions = (0..8).filter(|p| mask & (1 << p) != 0);
+                out.extend(positions.zip(ch[..k].iter().copied()));
+            })
+        });
+        MapSearchIndex { view, tables }
+    }
+
+    /// The depth of the deepest table (0: none).
+    pub fn depth(&self) -> u8 {
+        self.tables.depth()
+    }
+
+    /// Heap bytes of the tables.
+    pub fn bytes(&self) -> usize {
+        self.tables.bytes()
+    }
+
+    /// [`MapView::search`].
+    #[inline]
+    pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
+        let start = self.tables.start(key, query::normalize_depth(depth));
+        with_nav!(self.view.nav, |nav| query::search_node_from(nav, key, depth, start)
+            .map(|(f, n)| Found { extra: self.view.extras.get(n), ..f }))
+    }
 }
 
 impl OccupancyLookup for MapView<'_> {

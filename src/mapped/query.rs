@@ -52,11 +52,26 @@ pub(crate) fn normalize_depth(depth: u8) -> u8 {
 /// node found (its `extra` is left 0).
 #[inline(always)]
 pub(crate) fn search_node<N: Nav>(nav: N, key: Key, depth: u8) -> Option<(Found, Node)> {
+    search_node_from(nav, key, depth, None)
+}
+
+/// [`search_node`] starting at `start` (a node on the key's path and its
+/// depth, at most `depth`) instead of the root.
+#[inline(always)]
+pub(crate) fn search_node_from<N: Nav>(
+    nav: N,
+    key: Key,
+    depth: u8,
+    start: Option<(Node, u8)>,
+) -> Option<(Found, Node)> {
     let depth = normalize_depth(depth);
     let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
-    let mut node = nav.root()?;
+    let (mut node, from) = match start {
+        Some(s) => s,
+        None => (nav.root()?, 0),
+    };
     let mut mask = nav.mask(node)?;
-    for d in 0..depth {
+    for d in from..depth {
         let pos = key.child_index(d);
         if mask & (1 << pos) == 0 {
             if mask != 0 {

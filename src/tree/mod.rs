@@ -13,6 +13,7 @@ pub use arena::{ArenaUsage, NodeArena, NodeId};
 pub use counting::CountingTree;
 pub(crate) use cursor::PathSearch;
 pub use iter::{KeyBox, NodeItem, NodeIter};
+pub(crate) use search_index::LevelTables;
 pub use search_index::SearchIndex;
 
 use crate::geometry::Point3;

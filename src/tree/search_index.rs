@@ -15,9 +15,9 @@ use crate::key::{adjust_key_to_depth, Key, TREE_DEPTH};
 
 /// One hash slot: the key prefix plus one (0 = empty) and its node.
 #[derive(Clone, Copy, Default)]
-struct Slot {
+struct Slot<T> {
     tag: u64,
-    node: NodeId,
+    node: T,
 }
 
 /// Multiplier of the Fibonacci hash over prefixes.
@@ -38,23 +38,22 @@ const TABLE_STEP: u8 = 3;
 
 /// The nodes of one depth, hashed by key prefix (open addressing, linear
 /// probing, at most half full).
-struct Table {
+struct Table<T> {
     depth: u8,
     /// `slots.len() - 1`; the length is a power of two.
     slot_mask: usize,
     /// `64 - log2(slots.len())`.
     hash_shift: u32,
-    slots: Vec<Slot>,
+    slots: Vec<Slot<T>>,
 }
 
-impl Table {
-    fn new(a: &NodeArena, depth: u8) -> Table {
-        let mut found = Vec::new();
-        collect_at_depth(a, ROOT, 0, Key::ROOT, depth, &mut found);
-        let cap = (found.len() * 2).next_power_of_two().max(8);
+impl<T: Copy + Default> Table<T> {
+    fn new(depth: u8, nodes: &[(Key, T)]) -> Table<T> {
+        let cap = (nodes.len() * 2).next_power_of_two().max(8);
         let mut t = Table { depth, slot_mask: cap - 1, hash_shift: 64 - cap.trailing_zeros(), slots: Vec::new() };
         t.slots = vec![Slot::default(); cap];
-        for (prefix, node) in found {
+        for &(key, node) in nodes {
+            let prefix = prefix_at(key, depth);
             let mut h = t.home(prefix);
             while t.slots[h].tag != 0 {
                 h = (h + 1) & t.slot_mask;
@@ -71,7 +70,7 @@ impl Table {
 
     /// The node at this table's depth on the path of `key`.
     #[inline(always)]
-    fn lookup(&self, key: Key) -> Option<NodeId> {
+    fn lookup(&self, key: Key) -> Option<T> {
         let prefix = prefix_at(key, self.depth);
         let mut h = self.home(prefix);
         loop {
@@ -87,37 +86,54 @@ impl Table {
     }
 }
 
-/// A search accelerator over one tree; see the module documentation.
-pub struct SearchIndex<'t> {
-    tree: &'t OccupancyTree,
-    /// Deepest first; empty for an empty tree or an index at depth 0, and
-    /// then every query is an ordinary search.
-    tables: Vec<Table>,
+/// Hash tables of the nodes at depths `D`, `D - 3`, ... of any tree layout
+/// (`T` is the layout's node handle); shared by [`SearchIndex`] and the
+/// mapped view's index.
+pub(crate) struct LevelTables<T> {
+    /// Deepest first; empty when no depth qualifies.
+    tables: Vec<Table<T>>,
 }
 
-impl<'t> SearchIndex<'t> {
-    /// An index whose deepest table is at the deepest depth holding at most
-    /// one node per 32 of the tree and at most 8192 nodes.
-    pub fn new(tree: &'t OccupancyTree) -> Self {
-        let counts = nodes_per_depth(tree);
-        let total: usize = counts.iter().sum();
-        let budget = (total / NODES_PER_ENTRY).clamp(64, MAX_ENTRIES);
-        let depth = (1..TREE_DEPTH).rev().find(|&d| counts[d as usize] <= budget).unwrap_or(0);
-        Self::at_depth(tree, depth)
-    }
-
-    /// An index with tables at `depth`, `depth - 3`, ... down to depth 1
-    /// (none for depth 0; depths above 15 count as 15).
-    pub fn at_depth(tree: &'t OccupancyTree, depth: u8) -> Self {
-        let mut tables = Vec::new();
-        if let Some(a) = tree.arena() {
-            let mut d = depth.min(TREE_DEPTH - 1);
-            while d > 0 {
-                tables.push(Table::new(a, d));
-                d = d.saturating_sub(TABLE_STEP);
+impl<T: Copy + Default> LevelTables<T> {
+    /// Tables over the tree below `root`, whose children `children` lists
+    /// (child index, child). `depth` `None` chooses the deepest depth
+    /// holding at most one node per 32 of `total_nodes` and at most 8192;
+    /// `Some(d)` builds at `d` (0: no tables; above 15 counts as 15). The
+    /// walk visits only the levels down to that depth.
+    pub fn build(
+        root: Option<T>,
+        total_nodes: u64,
+        depth: Option<u8>,
+        mut children: impl FnMut(T, &mut Vec<(usize, T)>),
+    ) -> Self {
+        let Some(root) = root else { return LevelTables { tables: Vec::new() } };
+        let budget = usize::try_from(total_nodes / NODES_PER_ENTRY as u64).unwrap_or(usize::MAX).clamp(64, MAX_ENTRIES);
+        let target = depth.map_or(TREE_DEPTH - 1, |d| d.min(TREE_DEPTH - 1));
+        // levels 0..=deepest, breadth first, with their centre keys
+        let mut levels: Vec<Vec<(Key, T)>> = vec![vec![(Key::ROOT, root)]];
+        let mut kids = Vec::with_capacity(8);
+        for d in 0..target {
+            let mut next = Vec::new();
+            for &(key, n) in &levels[d as usize] {
+                kids.clear();
+                children(n, &mut kids);
+                next.extend(kids.iter().map(|&(pos, c)| (key.child_key(pos, d), c)));
             }
+            if next.is_empty() || (depth.is_none() && next.len() > budget) {
+                break;
+            }
+            levels.push(next);
         }
-        SearchIndex { tree, tables }
+        let mut tables = Vec::new();
+        let mut d = (levels.len() - 1) as u8;
+        if depth == Some(0) {
+            d = 0;
+        }
+        while d > 0 {
+            tables.push(Table::new(d, &levels[d as usize]));
+            d = d.saturating_sub(TABLE_STEP);
+        }
+        LevelTables { tables }
     }
 
     /// The depth of the deepest table (0: none).
@@ -127,21 +143,67 @@ impl<'t> SearchIndex<'t> {
 
     /// Heap bytes of the tables.
     pub fn bytes(&self) -> usize {
-        self.tables.iter().map(|t| t.slots.capacity() * std::mem::size_of::<Slot>()).sum()
+        self.tables.iter().map(|t| t.slots.capacity() * std::mem::size_of::<Slot<T>>()).sum()
     }
 
     /// The deepest indexed node on the path of `key` at or above `depth`,
-    /// with its depth; the root when no table answers.
+    /// with its depth; `None` when no table answers (start at the root).
     #[inline(always)]
-    fn start(&self, key: Key, depth: u8) -> (NodeId, u8) {
+    pub fn start(&self, key: Key, depth: u8) -> Option<(T, u8)> {
         for t in &self.tables {
             if t.depth <= depth {
                 if let Some(n) = t.lookup(key) {
-                    return (n, t.depth);
+                    return Some((n, t.depth));
                 }
             }
         }
-        (ROOT, 0)
+        None
+    }
+}
+
+/// A search accelerator over one tree; see the module documentation.
+pub struct SearchIndex<'t> {
+    tree: &'t OccupancyTree,
+    tables: LevelTables<NodeId>,
+}
+
+impl<'t> SearchIndex<'t> {
+    /// An index whose deepest table is at the deepest depth holding at most
+    /// one node per 32 of the tree and at most 8192 nodes.
+    pub fn new(tree: &'t OccupancyTree) -> Self {
+        Self::build(tree, None)
+    }
+
+    /// An index with tables at `depth`, `depth - 3`, ... down to depth 1
+    /// (none for depth 0; depths above 15 count as 15; a depth below which
+    /// the tree has no nodes, the deepest level it has).
+    pub fn at_depth(tree: &'t OccupancyTree, depth: u8) -> Self {
+        Self::build(tree, Some(depth))
+    }
+
+    fn build(tree: &'t OccupancyTree, depth: Option<u8>) -> Self {
+        let a = tree.arena();
+        let tables = LevelTables::build(a.map(|_| ROOT), tree.size() as u64, depth, |n, out| {
+            if let Some(a) = a {
+                out.extend(a.children(n));
+            }
+        });
+        SearchIndex { tree, tables }
+    }
+
+    /// The depth of the deepest table (0: none).
+    pub fn depth(&self) -> u8 {
+        self.tables.depth()
+    }
+
+    /// Heap bytes of the tables.
+    pub fn bytes(&self) -> usize {
+        self.tables.bytes()
+    }
+
+    #[inline(always)]
+    fn start(&self, key: Key, depth: u8) -> (NodeId, u8) {
+        self.tables.start(key, depth).unwrap_or((ROOT, 0))
     }
 
     /// `tree.search(key, depth)`.
@@ -218,15 +280,6 @@ fn found(a: &NodeArena, node: NodeId, depth: u8, is_leaf: bool) -> Found {
     Found { value: a.value(node), depth, is_leaf, extra: a.extra(node) }
 }
 
-/// Number of nodes at each depth `0..=16`.
-fn nodes_per_depth(tree: &OccupancyTree) -> [usize; TREE_DEPTH as usize + 1] {
-    let mut counts = [0; TREE_DEPTH as usize + 1];
-    for n in tree.nodes(0) {
-        counts[n.depth as usize] += 1;
-    }
-    counts
-}
-
 /// The top `depth` bits of each coordinate of `key`, packed in 16-bit
 /// fields: the identity of the key's node at `depth`.
 #[inline(always)]
@@ -234,18 +287,6 @@ fn prefix_at(key: Key, depth: u8) -> u64 {
     let shift = TREE_DEPTH - depth;
     let [x, y, z] = key.0.map(|k| u64::from(k >> shift));
     x | (y << 16) | (z << 32)
-}
-
-/// Pushes `(prefix_at(key, depth), id)` of every node at `depth` below `n`,
-/// the node at depth `d` on the path of `key`.
-fn collect_at_depth(a: &NodeArena, n: NodeId, d: u8, key: Key, depth: u8, out: &mut Vec<(u64, NodeId)>) {
-    if d == depth {
-        out.push((prefix_at(key, depth), n));
-        return;
-    }
-    for (pos, c) in a.children(n) {
-        collect_at_depth(a, c, d + 1, key.child_key(pos, d), depth, out);
-    }
 }
 
 #[cfg(test)]
