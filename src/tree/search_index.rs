@@ -126,9 +126,6 @@ impl<T: Copy + Default> LevelTables<T> {
         }
         let mut tables = Vec::new();
         let mut d = (levels.len() - 1) as u8;
-        if depth == Some(0) {
-            d = 0;
-        }
         while d > 0 {
             tables.push(Table::new(d, &levels[d as usize]));
             d = d.saturating_sub(TABLE_STEP);
