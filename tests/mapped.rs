@@ -506,6 +506,14 @@ fn check_counting_round_trip(f: &mut Failures, what: &str, tree: &CountingTree, 
         f.check(view.count(Key::new(1, 2, 3), 0) == tree.count(Key::new(1, 2, 3), 0), || format!("{what}: far key"));
         f.check(matches!(view.to_tree(), Err(OlmError::Kind { .. })), || format!("{what}: to_tree accepted counts"));
         f.check(view.color(Key::ROOT, 0).is_none() && view.stamp(Key::ROOT, 0).is_none(), || what.to_string());
+        // counts are no log-odds: rays are refused, not cast through values of 0
+        let (o, d) = (Point3::new(0.0, 0.0, 0.0), Point3::new(1.0, 0.2, 0.1));
+        let rays = [
+            view.cast_ray(o, d, CastOptions::default()),
+            mapped::cast_ray(&view, o, d, CastOptions::default()),
+            mapped::cast_ray(&map, o, d, CastOptions::default()),
+        ];
+        f.check(rays.iter().all(|r| matches!(r, Err(CastError::NoOccupancy))), || format!("{what}: rays {rays:?}"));
     }
     let ml = mapped::counting_to_bytes(tree, WriteOptions::max_likelihood());
     f.check(ml.is_err(), || format!("{what}: a counting tree written as maximum likelihood"));
