@@ -1083,3 +1083,45 @@ fn write_fuzz_seeds() {
         }
     }
 }
+
+/// Damage to a counting map's sections: its counts (values section) cut,
+/// of the wrong length or missing are refused on opening; a changed count
+/// is caught by `verify` (checksum), and queries on it never panic.
+#[test]
+fn counting_section_damage_is_caught() {
+    let good = counting_sample_bytes(WriteOptions::default());
+    let err = |b: &[u8]| MappedMap::new(b).unwrap_err();
+    let header = MappedMap::new(&good[..]).unwrap().header().clone();
+    let at = header.sections.iter().position(|s| s.kind == format::SectionKind::Values as u16).unwrap();
+    let (entry, counts) = (96 + 24 * at, header.sections[at]);
+    // truncated: the file length no longer matches; with the header fixed, the section ends past the file
+    assert!(matches!(err(&good[..good.len() - 4]), OlmError::FileLength { .. }));
+    let mut b = good[..good.len() - 4].to_vec();
+    let len = b.len() as u64;
+    b[80..88].copy_from_slice(&len.to_le_bytes());
+    fix_header_crc(&mut b);
+    assert!(matches!(err(&b), OlmError::Section { kind: 2, .. }), "{:?}", err(&b));
+    // wrong length
+    let mut b = good.clone();
+    b[entry + 16..entry + 24].copy_from_slice(&(counts.length - 4).to_le_bytes());
+    fix_header_crc(&mut b);
+    assert!(matches!(err(&b), OlmError::Section { kind: 2, ref reason } if reason.contains("bytes")), "{:?}", err(&b));
+    // missing: the entry renamed to an optional unknown kind
+    let mut b = good.clone();
+    b[entry..entry + 4].copy_from_slice(&[0x40, 0, 1, 0]);
+    fix_header_crc(&mut b);
+    assert!(
+        matches!(err(&b), OlmError::Section { kind: 2, ref reason } if reason.contains("missing")),
+        "{:?}",
+        err(&b)
+    );
+    // a changed count: only verify sees it; queries still answer without panicking
+    let mut b = good.clone();
+    b[counts.offset as usize] ^= 0x10;
+    let m = MappedMap::new(&b[..]).unwrap();
+    assert!(matches!(m.verify(), Err(OlmError::SectionChecksum { kind: 2, .. })));
+    assert!(m.view().to_counting_tree().is_err());
+    let root_count = |m: &MappedMap<&[u8]>| m.view().nodes(0).next().map(|n| n.extra);
+    let before = root_count(&MappedMap::new(&good[..]).unwrap());
+    assert_eq!(root_count(&m), before.map(|c| c ^ 0x10));
+}
