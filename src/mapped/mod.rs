@@ -379,7 +379,7 @@ impl<'a> MapView<'a> {
     /// OctoMap's `castRay`, as [`OccupancyTree::cast_ray`]. A counting map
     /// has no occupancy: [`CastError::NoOccupancy`].
     pub fn cast_ray(&self, origin: Point3, direction: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
-        if self.meta.header.kind == TreeKind::CountingOcTree {
+        if !self.has_occupancy() {
             return Err(CastError::NoOccupancy);
         }
         let (keys, sensor) = (&self.meta.keys, &self.meta.header.sensor);
