@@ -488,6 +488,9 @@ pub enum CastError {
     Origin(#[from] KeyError),
     #[error("ray direction is the zero vector")]
     ZeroDirection,
+    /// The map holds hit counts (`CountingOcTree`), not occupancy.
+    #[error("ray casting needs occupancy, and this map holds hit counts (CountingOcTree)")]
+    NoOccupancy,
 }
 
 /// Options of [`OccupancyTree::cast_ray`].

@@ -685,7 +685,7 @@ fn apply(pair: &mut Pair, op: &Op) -> Result<bool, (&'static str, String)> {
             };
             let a = match pair.ours.cast_ray(pt(*origin), pt(*dir), opts) {
                 Ok(o) => (o.hit(), o.end().to_array()),
-                Err(CastError::Origin(_) | CastError::ZeroDirection) => (false, NAN3),
+                Err(CastError::Origin(_) | CastError::ZeroDirection | CastError::NoOccupancy) => (false, NAN3),
             };
             if a.0 != b.0 || !same_point(a.1, b.1) {
                 return Err((

@@ -110,7 +110,9 @@ fn castray_csv(tree: &OccupancyTree, expected: &str) -> String {
         let opts = CastOptions { ignore_unknown, max_range: Some(max_range) };
         let (ret, end) = match tree.cast_ray(origin, dir, opts) {
             Ok(o) => (o.hit(), o.end()),
-            Err(CastError::Origin(_) | CastError::ZeroDirection) => (false, Point3::new(f32::NAN, f32::NAN, f32::NAN)),
+            Err(CastError::Origin(_) | CastError::ZeroDirection | CastError::NoOccupancy) => {
+                (false, Point3::new(f32::NAN, f32::NAN, f32::NAN))
+            }
         };
         writeln!(
             s,

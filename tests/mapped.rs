@@ -506,6 +506,14 @@ fn check_counting_round_trip(f: &mut Failures, what: &str, tree: &CountingTree, 
         f.check(view.count(Key::new(1, 2, 3), 0) == tree.count(Key::new(1, 2, 3), 0), || format!("{what}: far key"));
         f.check(matches!(view.to_tree(), Err(OlmError::Kind { .. })), || format!("{what}: to_tree accepted counts"));
         f.check(view.color(Key::ROOT, 0).is_none() && view.stamp(Key::ROOT, 0).is_none(), || what.to_string());
+        // counts are no log-odds: rays are refused, not cast through values of 0
+        let (o, d) = (Point3::new(0.0, 0.0, 0.0), Point3::new(1.0, 0.2, 0.1));
+        let rays = [
+            view.cast_ray(o, d, CastOptions::default()),
+            mapped::cast_ray(&view, o, d, CastOptions::default()),
+            mapped::cast_ray(&map, o, d, CastOptions::default()),
+        ];
+        f.check(rays.iter().all(|r| matches!(r, Err(CastError::NoOccupancy))), || format!("{what}: rays {rays:?}"));
     }
     let ml = mapped::counting_to_bytes(tree, WriteOptions::max_likelihood());
     f.check(ml.is_err(), || format!("{what}: a counting tree written as maximum likelihood"));
@@ -1074,4 +1082,46 @@ fn write_fuzz_seeds() {
             std::fs::write(dir.join(file), b).unwrap();
         }
     }
+}
+
+/// Damage to a counting map's sections: its counts (values section) cut,
+/// of the wrong length or missing are refused on opening; a changed count
+/// is caught by `verify` (checksum), and queries on it never panic.
+#[test]
+fn counting_section_damage_is_caught() {
+    let good = counting_sample_bytes(WriteOptions::default());
+    let err = |b: &[u8]| MappedMap::new(b).unwrap_err();
+    let header = MappedMap::new(&good[..]).unwrap().header().clone();
+    let at = header.sections.iter().position(|s| s.kind == format::SectionKind::Values as u16).unwrap();
+    let (entry, counts) = (96 + 24 * at, header.sections[at]);
+    // truncated: the file length no longer matches; with the header fixed, the section ends past the file
+    assert!(matches!(err(&good[..good.len() - 4]), OlmError::FileLength { .. }));
+    let mut b = good[..good.len() - 4].to_vec();
+    let len = b.len() as u64;
+    b[80..88].copy_from_slice(&len.to_le_bytes());
+    fix_header_crc(&mut b);
+    assert!(matches!(err(&b), OlmError::Section { kind: 2, .. }), "{:?}", err(&b));
+    // wrong length
+    let mut b = good.clone();
+    b[entry + 16..entry + 24].copy_from_slice(&(counts.length - 4).to_le_bytes());
+    fix_header_crc(&mut b);
+    assert!(matches!(err(&b), OlmError::Section { kind: 2, ref reason } if reason.contains("bytes")), "{:?}", err(&b));
+    // missing: the entry renamed to an optional unknown kind
+    let mut b = good.clone();
+    b[entry..entry + 4].copy_from_slice(&[0x40, 0, 1, 0]);
+    fix_header_crc(&mut b);
+    assert!(
+        matches!(err(&b), OlmError::Section { kind: 2, ref reason } if reason.contains("missing")),
+        "{:?}",
+        err(&b)
+    );
+    // a changed count: only verify sees it; queries still answer without panicking
+    let mut b = good.clone();
+    b[counts.offset as usize] ^= 0x10;
+    let m = MappedMap::new(&b[..]).unwrap();
+    assert!(matches!(m.verify(), Err(OlmError::SectionChecksum { kind: 2, .. })));
+    assert!(m.view().to_counting_tree().is_err());
+    let root_count = |m: &MappedMap<&[u8]>| m.view().nodes(0).next().map(|n| n.extra);
+    let before = root_count(&MappedMap::new(&good[..]).unwrap());
+    assert_eq!(root_count(&m), before.map(|c| c ^ 0x10));
 }

@@ -101,6 +101,7 @@ pub fn check(data: &[u8]) -> (bool, bool) {
     }
     if view.kind() == mapped::TreeKind::CountingOcTree {
         assert!(tree.is_err(), "to_tree accepted a counting map");
+        assert!(rays.iter().all(|r| matches!(r, Err(octolinear::ray::CastError::NoOccupancy))), "{rays:?}");
         let counting = counting.expect("a verified counting file converts to a counting tree");
         assert_eq!(counts, keys.iter().map(|&k| counting.count(k, 0)).collect::<Vec<_>>());
         let node = |key, depth, extra| (key, depth, extra);

@@ -376,8 +376,12 @@ impl<'a> MapView<'a> {
         self.iter(max_depth, true, Some(bbx))
     }
 
-    /// OctoMap's `castRay`, as [`OccupancyTree::cast_ray`].
+    /// OctoMap's `castRay`, as [`OccupancyTree::cast_ray`]. A counting map
+    /// has no occupancy: [`CastError::NoOccupancy`].
     pub fn cast_ray(&self, origin: Point3, direction: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
+        if !self.has_occupancy() {
+            return Err(CastError::NoOccupancy);
+        }
         let (keys, sensor) = (&self.meta.keys, &self.meta.header.sensor);
         with_nav!(self.nav, |nav| {
             let mut path = query::PathSearch::new(nav);
@@ -506,6 +510,10 @@ impl OccupancyLookup for MapView<'_> {
     fn search(&self, key: Key, depth: u8) -> Option<Found> {
         MapView::search(self, key, depth)
     }
+
+    fn has_occupancy(&self) -> bool {
+        self.meta.header.kind != TreeKind::CountingOcTree
+    }
 }
 
 impl<D: AsRef<[u8]>> OccupancyLookup for MappedMap<D> {
@@ -520,6 +528,10 @@ impl<D: AsRef<[u8]>> OccupancyLookup for MappedMap<D> {
     #[inline]
     fn search(&self, key: Key, depth: u8) -> Option<Found> {
         self.view().search(key, depth)
+    }
+
+    fn has_occupancy(&self) -> bool {
+        self.view().has_occupancy()
     }
 }
 

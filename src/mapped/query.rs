@@ -22,6 +22,11 @@ pub trait OccupancyLookup {
     fn sensor(&self) -> &SensorModel;
     /// OctoMap's `search(key, depth)`; depth 0 means 16.
     fn search(&self, key: Key, depth: u8) -> Option<Found>;
+    /// False for a counting map: its values are not log-odds, so ray
+    /// casting refuses it rather than answer from them.
+    fn has_occupancy(&self) -> bool {
+        true
+    }
 }
 
 impl OccupancyLookup for OccupancyTree {
@@ -326,6 +331,9 @@ pub fn cast_ray<M: OccupancyLookup + ?Sized>(
     direction: Point3,
     opts: CastOptions,
 ) -> Result<CastOutcome, CastError> {
+    if !map.has_occupancy() {
+        return Err(CastError::NoOccupancy);
+    }
     crate::ray::cast_ray_with(map.key_space(), map.sensor(), |k| map.search(k, 0), origin, direction, opts)
 }
 
