@@ -64,6 +64,12 @@ impl NodeArena {
         self.values.len()
     }
 
+    /// Slots on the free lists (0 after compaction or when read from a file).
+    #[inline]
+    pub fn free_slot_count(&self) -> usize {
+        self.free_slots
+    }
+
     #[inline(always)]
     pub fn has_extras(&self) -> bool {
         self.default_extra.is_some()

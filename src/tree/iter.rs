@@ -77,9 +77,10 @@ struct Walk<'a> {
     max_depth: u8,
     leaves_only: bool,
     bbx: Option<KeyBox>,
-    /// Prefetch child groups: only for arenas that outgrow the last-level
-    /// cache; below that the prefetches cost more than they save (a compacted
-    /// or small tree streams through the hardware prefetchers).
+    /// Prefetch child groups: only in large arenas whose groups lie
+    /// scattered (free runs left by moved groups; a compacted tree or one
+    /// read from a file has none). In small or compacted trees the hardware
+    /// prefetchers keep up, and the prefetches cost more than they save.
     prefetch: bool,
 }
 
@@ -91,8 +92,8 @@ struct Stack {
     len: usize,
 }
 
-/// Arena slots above which iteration prefetches (about 36 MB of nodes).
-const PREFETCH_MIN_SLOTS: usize = 4 << 20;
+/// Arena slots above which a scattered arena is prefetched (about 4.5 MB of nodes).
+const PREFETCH_MIN_SLOTS: usize = 512 << 10;
 
 /// One level of the walk: the packed key of the node's child 0 (see
 /// [`crate::key::packed`]), the id of its next child, the children left.
@@ -116,7 +117,7 @@ impl<'a> NodeIter<'a> {
         bbx: Option<KeyBox>,
     ) -> Self {
         let max_depth = if max_depth == 0 || max_depth > TREE_DEPTH { TREE_DEPTH } else { max_depth };
-        let prefetch = arena.is_some_and(|a| a.slot_count() > PREFETCH_MIN_SLOTS);
+        let prefetch = arena.is_some_and(|a| a.slot_count() > PREFETCH_MIN_SLOTS && a.free_slot_count() > 0);
         NodeIter {
             walk: Walk { arena, keys, max_depth, leaves_only, bbx, prefetch },
             stack: Stack { frames: [Frame::default(); TREE_DEPTH as usize], len: 0 },
