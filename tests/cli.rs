@@ -1299,6 +1299,16 @@ fn olm_maps_convert_verify_and_answer_queries_like_the_source() {
     }
     assert_eq!(ok(&["query", f.p("a.olm"), "--points", points]), from_ot);
     assert!(from_ot.contains(",occupied,") && from_ot.contains(",free,") && from_ot.contains(",unknown,"));
+    // --ml: the maximum-likelihood variant, which answers as the .bt does
+    ok(&["convert", f.p("a.bt"), f.p("ml.olm"), "--ml"]);
+    assert!(ok(&["verify", f.p("ml.olm")]).contains(": ok"));
+    let (full, ml) =
+        (std::fs::metadata(f.path("a.olm")).unwrap().len(), std::fs::metadata(f.path("ml.olm")).unwrap().len());
+    assert!(ml * 3 < full, "ML .olm {ml} bytes vs full {full}");
+    assert_eq!(ok(&["query", f.p("ml.olm"), "--points", points]), ok(&["query", f.p("a.bt"), "--points", points]));
+    ok(&["convert", f.p("ml.olm"), f.p("ml.bt")]);
+    assert_eq!(std::fs::read(f.path("ml.bt")).unwrap(), std::fs::read(f.path("a.bt")).unwrap());
+    fail(&["convert", f.p("a.ot"), f.p("x.bt"), "--ml"], "--ml applies to .olm output");
     let bytes = std::fs::read(f.path("a.olm")).unwrap();
     let truncated = f.write("cut.olm", &bytes[..bytes.len() / 2]);
     fail(&["verify", truncated], "not a valid .olm map");
@@ -1325,6 +1335,7 @@ fn counting_trees_convert_between_ot_and_olm_and_answer_counts() {
     ok(&["convert", f.p("c.olm"), f.p("c2.ot")]);
     assert_eq!(std::fs::read(f.path("c2.ot")).unwrap(), bytes, ".ot -> .olm -> .ot changed the bytes");
     fail(&["convert", src, f.p("c.bt")], "no .bt form");
+    fail(&["convert", src, f.p("c.olm"), "--ml"], "no maximum-likelihood form");
     fail(&["info", src], "counting tree holds no occupancy");
     // queries: each point's count, as CountingOcTree::search gives it
     let mut pts = String::new();

@@ -88,17 +88,31 @@ pub fn run(a: Args) -> Result<()> {
 ///
 /// Colour and stamped trees keep their colours and stamps in .ot and .olm;
 /// .bt holds occupancy only. Counting trees convert between .ot and .olm.
+/// An .olm output holds every node's log-odds unless --ml asks for the
+/// maximum-likelihood variant (what .bt stores, several times smaller).
 ///
 /// Example: octolinear convert map.ot map.bt
 #[derive(clap::Args)]
 pub struct ConvertArgs {
     input: PathBuf,
     output: PathBuf,
+    /// Write the maximum-likelihood variant of .olm (occupancy maps only).
+    #[arg(long)]
+    ml: bool,
 }
 
 pub fn convert(a: ConvertArgs) -> Result<()> {
+    if a.ml && MapFormat::of(&a.output)? != MapFormat::Olm {
+        bail!("--ml applies to .olm output, not {}", a.output.display());
+    }
     match load_any(&a.input)? {
+        AnyMap::Occupancy(m) if a.ml => {
+            let opts = octolinear::mapped::WriteOptions::max_likelihood();
+            octolinear::mapped::write_file_with(&m.tree, &a.output, opts)
+                .with_context(|| format!("cannot write {}", a.output.display()))
+        }
         AnyMap::Occupancy(m) => save_map(&m.tree, &a.output),
+        AnyMap::Counting(_) if a.ml => bail!("{}: a counting tree has no maximum-likelihood form", a.input.display()),
         AnyMap::Counting(t) => save_counting(&t, &a.output),
     }
 }
