@@ -270,14 +270,15 @@ impl<'a, N: Nav> RawIter<'a, N> {
             self.nav.skip_seq(n, &mut self.seq[depth as usize]);
         }
         if !is_leaf {
-            let mut children = [Node::default(); 8];
-            let slot = &mut self.seq[depth as usize];
-            // a layout that cannot list all the children (corrupted bytes)
-            // leaves the node without descendants
-            let k = self.nav.children_seq(n, mask, slot, &mut children);
+            // the children go straight into the frame; a layout that cannot
+            // list all of them (corrupted bytes) leaves the node without
+            // descendants
+            let frame = &mut self.frames[depth as usize];
+            let k = self.nav.children_seq(n, mask, &mut self.seq[depth as usize], &mut frame.children);
             if k == Some(mask.count_ones() as usize) {
-                let child0 = packed::child0(packed, depth);
-                self.frames[depth as usize] = Frame { child0, children, next: 0, remaining: mask };
+                frame.child0 = packed::child0(packed, depth);
+                frame.next = 0;
+                frame.remaining = mask;
                 self.len = depth as usize + 1;
             }
             if self.leaves_only {
