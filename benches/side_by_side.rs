@@ -11,7 +11,7 @@ use common::*;
 use octolinear::formats::{bt, ot};
 use octolinear::mapped;
 use octolinear::simulate::SceneKind;
-use octolinear::{CastOptions, OccupancyTree, Point3, SearchIndex};
+use octolinear::{CastOptions, Found, OccupancyTree, Point3, SearchIndex};
 use octolinear_oracle::{OracleTree, ScanBatch};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -373,6 +373,33 @@ fn race<T: PartialEq + std::fmt::Debug>(
     (median(a), median(b))
 }
 
+/// OctoMap's `search(point3d)` against `search` on our side, one query
+/// at a time over the same points; both read every value found.
+fn race_search(
+    args: &Args,
+    om: &OracleTree,
+    queries: &[Point3],
+    what: &str,
+    search: impl Fn(Point3) -> Option<Found>,
+) -> (Stat, Stat) {
+    let q_arr = to_arrays(queries);
+    let mut out = vec![0f32; queries.len()];
+    race(
+        args.reps,
+        what,
+        || om.bench_search(&q_arr, 0, &mut out),
+        || {
+            queries
+                .iter()
+                .filter_map(|&p| search(p))
+                .inspect(|f| {
+                    black_box(f.value);
+                })
+                .count()
+        },
+    )
+}
+
 /// The map written to `.olm` and queried in place (from a `Vec`; an mmap'd
 /// file runs the same code) against OctoMap's in-memory tree.
 fn mapped_rows(args: &Args, om: &OracleTree, ol: &OccupancyTree, queries: &[Point3], scans: &[Scan]) {
@@ -384,25 +411,11 @@ fn mapped_rows(args: &Args, om: &OracleTree, ol: &OccupancyTree, queries: &[Poin
     println!();
     header();
     let q_arr = to_arrays(queries);
-    let mut out = vec![0f32; queries.len()];
     let row = |job: &str, (octomap, octolinear): (Stat, Stat), work: usize, unit| {
         Row { job: format!("mapped: {job}"), octomap, octolinear, work: work as f64, unit }.print()
     };
     let n = queries.len();
-    let times = race(
-        args.reps,
-        "search",
-        || om.bench_search(&q_arr, 0, &mut out),
-        || {
-            queries
-                .iter()
-                .filter_map(|&p| view.search_point(p, 0).ok().flatten())
-                .inspect(|f| {
-                    black_box(f.value);
-                })
-                .count()
-        },
-    );
+    let times = race_search(args, om, queries, "search", |p| view.search_point(p, 0).ok().flatten());
     row("random search", times, n, "q");
     let mut out = vec![0f32; queries.len()];
     let (mut keys, mut found) = (Vec::new(), Vec::new());
@@ -426,20 +439,7 @@ fn mapped_rows(args: &Args, om: &OracleTree, ol: &OccupancyTree, queries: &[Poin
         index.bytes() as f64 / 1e6,
         t.elapsed().as_secs_f64() * 1e3
     );
-    let times = race(
-        args.reps,
-        "indexed search",
-        || om.bench_search(&q_arr, 0, &mut out),
-        || {
-            queries
-                .iter()
-                .filter_map(|&p| index.search(view.key(p).ok()?, 0))
-                .inspect(|f| {
-                    black_box(f.value);
-                })
-                .count()
-        },
-    );
+    let times = race_search(args, om, queries, "indexed search", |p| index.search(view.key(p).ok()?, 0));
     row("random search, indexed", times, n, "q");
     let leaves = ol.num_leaves();
     let times = race(
@@ -482,20 +482,7 @@ fn indexed_rows(args: &Args, om: &OracleTree, ol: &OccupancyTree, queries: &[Poi
     let row = |job: &str, (octomap, octolinear): (Stat, Stat)| {
         Row { job: job.to_string(), octomap, octolinear, work: queries.len() as f64, unit: "q" }.print()
     };
-    let times = race(
-        args.reps,
-        "indexed search",
-        || om.bench_search(&q_arr, 0, &mut out),
-        || {
-            queries
-                .iter()
-                .filter_map(|&p| index.search(ol.key(p).ok()?, 0))
-                .inspect(|f| {
-                    black_box(f.value);
-                })
-                .count()
-        },
-    );
+    let times = race_search(args, om, queries, "indexed search", |p| index.search(ol.key(p).ok()?, 0));
     row("random search, indexed", times);
     let mut found = Vec::with_capacity(keys.len());
     let times = race(
@@ -514,25 +501,11 @@ fn indexed_rows(args: &Args, om: &OracleTree, ol: &OccupancyTree, queries: &[Poi
 /// iteration on the same tree in both libraries.
 fn search_and_iterate(args: &Args, om: &OracleTree, ol: &OccupancyTree, queries: &[Point3], suffix: &str) {
     let q_arr = to_arrays(queries);
-    let mut out = vec![0f32; queries.len()];
     let row = |job: &str, (octomap, octolinear): (Stat, Stat), work: usize, unit| {
         Row { job: format!("{job}{suffix}"), octomap, octolinear, work: work as f64, unit }.print()
     };
     // random search (half leaf centres, half uniform in the bounds)
-    let times = race(
-        args.reps,
-        "search",
-        || om.bench_search(&q_arr, 0, &mut out),
-        || {
-            queries
-                .iter()
-                .filter_map(|&p| ol.search_point(p, 0).ok().flatten())
-                .inspect(|f| {
-                    black_box(f.value);
-                })
-                .count()
-        },
-    );
+    let times = race_search(args, om, queries, "search", |p| ol.search_point(p, 0).ok().flatten());
     row("random search", times, queries.len(), "q");
     // the same queries through search_many (eight descents in lockstep)
     let mut out = vec![0f32; queries.len()];
