@@ -44,6 +44,15 @@ pub(crate) trait Nav: Copy {
     /// Tells the sequence that a childless node `n` was passed.
     #[inline]
     fn skip_seq(&self, _n: Node, _slot: &mut (u32, u32)) {}
+
+    /// How an iteration holds a node's children: the first index where
+    /// they are consecutive records, the listed nodes otherwise.
+    type Group: Copy + Default;
+    /// [`Nav::children_seq`] as a group of exactly `popcount(mask)`
+    /// children; `None` when the layout cannot give them all.
+    fn group_seq(&self, n: Node, mask: u8, slot: &mut (u32, u32)) -> Option<Self::Group>;
+    /// Child `j` (in child order) of a group.
+    fn member(&self, g: &Self::Group, j: usize) -> Node;
 }
 
 #[inline(always)]
@@ -180,6 +189,21 @@ impl Nav for RankNav<'_> {
             slot.0 = slot.0.wrapping_add(1);
         }
     }
+
+    type Group = u32;
+
+    #[inline(always)]
+    fn group_seq(&self, n: Node, mask: u8, slot: &mut (u32, u32)) -> Option<u32> {
+        let k = mask.count_ones();
+        let first = if slot.0 == n.idx && n.idx != 0 { slot.1 } else { self.first_child(n)? };
+        *slot = (n.idx.wrapping_add(1), first.wrapping_add(k));
+        (first > n.idx && first.checked_add(k)? <= self.n).then_some(first)
+    }
+
+    #[inline(always)]
+    fn member(&self, first: &u32, j: usize) -> Node {
+        Node { idx: first + j as u32, label: 0 }
+    }
 }
 
 /// Full variant, depth-first group order, first-child pointers.
@@ -240,6 +264,19 @@ impl Nav for PtrNav<'_> {
 
     fn node_budget(&self) -> u64 {
         u64::from(self.n)
+    }
+
+    type Group = u32;
+
+    #[inline(always)]
+    fn group_seq(&self, n: Node, mask: u8, _slot: &mut (u32, u32)) -> Option<u32> {
+        let first = self.first_child(n)?;
+        (first.checked_add(mask.count_ones())? <= self.n).then_some(first)
+    }
+
+    #[inline(always)]
+    fn member(&self, first: &u32, j: usize) -> Node {
+        Node { idx: first + j as u32, label: 0 }
     }
 }
 
@@ -355,6 +392,20 @@ impl Nav for MlNav<'_> {
 
     fn node_budget(&self) -> u64 {
         u64::from(self.nodes)
+    }
+
+    type Group = [Node; 8];
+
+    #[inline]
+    fn group_seq(&self, n: Node, mask: u8, slot: &mut (u32, u32)) -> Option<[Node; 8]> {
+        let mut out = [Node::default(); 8];
+        let k = self.children_seq(n, mask, slot, &mut out)?;
+        (k == mask.count_ones() as usize).then_some(out)
+    }
+
+    #[inline(always)]
+    fn member(&self, g: &[Node; 8], j: usize) -> Node {
+        g[j]
     }
 
     #[inline]

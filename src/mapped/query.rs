@@ -211,7 +211,7 @@ pub(crate) struct RawIter<'a, N: Nav> {
     nav: N,
     extras: Extras<'a>,
     keys: &'a KeySpace,
-    frames: [Frame; TREE_DEPTH as usize],
+    frames: [Frame<N::Group>; TREE_DEPTH as usize],
     len: usize,
     root_pending: bool,
     max_depth: u8,
@@ -223,9 +223,9 @@ pub(crate) struct RawIter<'a, N: Nav> {
 }
 
 #[derive(Clone, Copy, Default)]
-struct Frame {
+struct Frame<G> {
     child0: u64,
-    children: [Node; 8],
+    children: G,
     next: u8,
     remaining: u8,
 }
@@ -270,15 +270,11 @@ impl<'a, N: Nav> RawIter<'a, N> {
             self.nav.skip_seq(n, &mut self.seq[depth as usize]);
         }
         if !is_leaf {
-            // the children go straight into the frame; a layout that cannot
-            // list all of them (corrupted bytes) leaves the node without
-            // descendants
-            let frame = &mut self.frames[depth as usize];
-            let k = self.nav.children_seq(n, mask, &mut self.seq[depth as usize], &mut frame.children);
-            if k == Some(mask.count_ones() as usize) {
-                frame.child0 = packed::child0(packed, depth);
-                frame.next = 0;
-                frame.remaining = mask;
+            // a layout that cannot give all the children (corrupted bytes)
+            // leaves the node without descendants
+            if let Some(children) = self.nav.group_seq(n, mask, &mut self.seq[depth as usize]) {
+                let child0 = packed::child0(packed, depth);
+                self.frames[depth as usize] = Frame { child0, children, next: 0, remaining: mask };
                 self.len = depth as usize + 1;
             }
             if self.leaves_only {
@@ -307,7 +303,7 @@ impl<'a, N: Nav> RawIter<'a, N> {
             }
             let pos = f.remaining.trailing_zeros() as usize;
             f.remaining &= f.remaining - 1;
-            let n = f.children[usize::from(f.next)];
+            let n = self.nav.member(&f.children, usize::from(f.next));
             f.next += 1;
             let child = packed::child(f.child0, pos, depth as u8);
             let depth = depth as u8 + 1;
