@@ -10,8 +10,8 @@
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, BT_FIRST_LINE};
 use super::TreeFileError;
 use crate::sensor::SensorModel;
-use crate::tree::prefetch;
 use crate::tree::{default_extra, LabelFill, NodeKind, OccupancyTree};
+use crate::tree::{in_leaf_pool, NodeId, Parts};
 use std::io::{self, BufRead, Write};
 
 /// Reads a `.bt` file into a tree with the default sensor model.
@@ -152,8 +152,7 @@ pub(crate) fn write_ml_data(tree: &OccupancyTree, out: &mut Vec<u8>) -> usize {
     let Some(arena) = tree.arena() else {
         return tree.size();
     };
-    let (values, masks, first_child, extras) = arena.parts();
-    let ml = MlView::new(values, masks, first_child, extras, tree.sensor());
+    let ml = MlView::new(arena.parts(), tree.sensor());
     let stamped = tree.kind() == NodeKind::Stamped;
     let emit = |lowest: usize, out: &mut Vec<u8>, counts: &mut [usize; 16]| {
         if stamped {
@@ -162,7 +161,7 @@ pub(crate) fn write_ml_data(tree: &OccupancyTree, out: &mut Vec<u8>) -> usize {
             ml.emit::<false>(0, 0, lowest, out, counts);
         }
     };
-    out.reserve(2 * (masks.len() / 8 + 1));
+    out.reserve(2 * (arena.parts().masks.len() / 8 + 1));
     let start = out.len();
     let mut counts = [0usize; 16];
     emit(1, out, &mut counts);
@@ -187,10 +186,7 @@ pub(crate) fn write_ml_data(tree: &OccupancyTree, out: &mut Vec<u8>) -> usize {
 /// within a class, when a bound is NaN; they do across classes when the
 /// bounds are equal).
 struct MlView<'a> {
-    values: &'a [f32],
-    masks: &'a [u8],
-    first_child: &'a [u32],
-    extras: &'a [u32],
+    arena: Parts<'a>,
     threshold: f32,
     /// The label of a leaf of each class: 2 when its value is occupied, else 1.
     label: [u16; 2],
@@ -199,11 +195,11 @@ struct MlView<'a> {
 }
 
 impl<'a> MlView<'a> {
-    fn new(values: &'a [f32], masks: &'a [u8], first_child: &'a [u32], extras: &'a [u32], s: &SensorModel) -> Self {
+    fn new(arena: Parts<'a>, s: &SensorModel) -> Self {
         let value = [s.clamping_min, s.clamping_max];
         let label = value.map(|v| if s.is_occupied(v) { 2 } else { 1 });
         let equal = [0, 1].map(|a| [0, 1].map(|b| value[a] == value[b]));
-        MlView { values, masks, first_child, extras, threshold: s.occupancy_threshold, label, equal }
+        MlView { arena, threshold: s.occupancy_threshold, label, equal }
     }
 
     /// Appends the record of inner node `n` at `depth` and those of its
@@ -213,7 +209,7 @@ impl<'a> MlView<'a> {
     /// then drops what was appended and labels `n` a leaf of that class.
     fn emit<const STAMPED: bool>(
         &self,
-        n: usize,
+        n: NodeId,
         depth: usize,
         lowest: usize,
         out: &mut Vec<u8>,
@@ -221,19 +217,16 @@ impl<'a> MlView<'a> {
     ) -> Option<(u8, u32)> {
         let at = out.len();
         out.extend_from_slice(&[0, 0]);
-        let mask = self.masks[n];
-        let first = self.first_child[n] as usize;
-        let group = first..first + mask.count_ones() as usize;
+        let a = self.arena;
+        let mask = a.mask(n);
+        let first = a.first_child[n as usize];
+        let group = first..first + mask.count_ones();
         // ask for the child groups of the inner children now, all at once,
         // rather than one after the other as the recursion reaches them
-        for g in group.clone() {
-            if self.masks[g] != 0 {
-                let fc = self.first_child[g] as usize;
-                prefetch(self.masks, fc);
-                prefetch(self.values, fc);
-                prefetch(self.first_child, fc);
-                if STAMPED {
-                    prefetch(self.extras, fc);
+        if !in_leaf_pool(first) {
+            for g in group.clone() {
+                if a.masks[g as usize] != 0 {
+                    a.prefetch_group(a.first_child[g as usize]);
                 }
             }
         }
@@ -247,8 +240,8 @@ impl<'a> MlView<'a> {
         for c in group {
             let pos = rest.trailing_zeros();
             rest &= rest - 1;
-            let (class, stamp) = if self.masks[c] == 0 {
-                (u8::from(self.values[c] >= self.threshold), if STAMPED { self.extras[c] } else { 0 })
+            let (class, stamp) = if a.mask(c) == 0 {
+                (u8::from(a.value(c) >= self.threshold), if STAMPED { a.extra(c) } else { 0 })
             } else {
                 let before = out.len();
                 match self.emit::<STAMPED>(c, depth + 1, lowest, out, counts) {
@@ -303,33 +296,26 @@ pub(crate) fn write_data(tree: &OccupancyTree, mut w: impl Write) -> io::Result<
     let Some(arena) = tree.arena() else {
         return Ok(());
     };
-    let (values, masks, first_child, _) = arena.parts();
-    let mut out = Vec::with_capacity(2 * (masks.len() / 8 + 1));
-    write_const_node(masks, first_child, values, tree.sensor(), 0, &mut out);
+    let parts = arena.parts();
+    let mut out = Vec::with_capacity(2 * (parts.masks.len() / 8 + 1));
+    write_const_node(parts, tree.sensor(), 0, &mut out);
     w.write_all(&out)
 }
 
 /// Appends the record of node `n` (which has children) and those of its
 /// subtree: children with children are labelled 3, leaves 2 when occupied,
 /// else 1.
-fn write_const_node(
-    masks: &[u8],
-    first_child: &[u32],
-    values: &[f32],
-    sensor: &SensorModel,
-    n: usize,
-    out: &mut Vec<u8>,
-) {
-    let mask = masks[n];
-    let first = first_child[n] as usize;
-    let group = first..first + mask.count_ones() as usize;
+fn write_const_node(a: Parts<'_>, sensor: &SensorModel, n: NodeId, out: &mut Vec<u8>) {
+    let mask = a.mask(n);
+    let first = a.first_child[n as usize];
+    let group = first..first + mask.count_ones();
+    let inner_group = !in_leaf_pool(first);
     // ask for the inner children's groups before the recursion needs them
-    for c in group.clone() {
-        if masks[c] != 0 {
-            let fc = first_child[c] as usize;
-            prefetch(masks, fc);
-            prefetch(values, fc);
-            prefetch(first_child, fc);
+    if inner_group {
+        for c in group.clone() {
+            if a.masks[c as usize] != 0 {
+                a.prefetch_group(a.first_child[c as usize]);
+            }
         }
     }
     let mut labels = 0u16;
@@ -337,9 +323,9 @@ fn write_const_node(
     for c in group.clone() {
         let pos = rest.trailing_zeros();
         rest &= rest - 1;
-        let label = if masks[c] != 0 {
+        let label = if a.mask(c) != 0 {
             3
-        } else if sensor.is_occupied(values[c]) {
+        } else if sensor.is_occupied(a.value(c)) {
             2
         } else {
             1
@@ -347,9 +333,11 @@ fn write_const_node(
         labels |= label << (2 * pos);
     }
     out.extend_from_slice(&labels.to_le_bytes());
-    for c in group {
-        if masks[c] != 0 {
-            write_const_node(masks, first_child, values, sensor, c, out);
+    if inner_group {
+        for c in group {
+            if a.masks[c as usize] != 0 {
+                write_const_node(a, sensor, c, out);
+            }
         }
     }
 }

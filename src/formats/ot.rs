@@ -11,7 +11,7 @@
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, OT_FIRST_LINE};
 use super::TreeFileError;
 use crate::sensor::SensorModel;
-use crate::tree::prefetch;
+use crate::tree::{in_leaf_pool, leaf_index, NodeId, Parts};
 use crate::tree::{CountingTree, NodeKind, NodeRef, OccupancyTree, PreorderBuilder};
 use std::io::{self, BufRead, Write};
 
@@ -230,16 +230,14 @@ pub fn write(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
 /// Writes the node stream alone, without header (`writeData`).
 pub(crate) fn write_data(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
     let Some(root) = tree.root() else { return Ok(()) };
-    let (arena, _) = root.arena_id();
-    let (values, _, _, extras) = arena.parts();
     if TreeKind::of(tree.kind()) == TreeKind::ColorOcTree {
-        write_nodes(root, &mut w, |n| {
-            let [v0, v1, v2, v3] = values[n].to_le_bytes();
-            let [r, g, b, _] = extras[n].to_le_bytes();
+        write_nodes(root, &mut w, |value, extra| {
+            let [v0, v1, v2, v3] = value.to_le_bytes();
+            let [r, g, b, _] = extra.to_le_bytes();
             [v0, v1, v2, v3, r, g, b]
         })
     } else {
-        write_nodes(root, &mut w, |n| values[n].to_le_bytes())
+        write_nodes(root, &mut w, |value, _| value.to_le_bytes())
     }
 }
 
@@ -252,22 +250,19 @@ pub fn write_counting(tree: &CountingTree, mut w: impl Write) -> io::Result<()> 
 /// A counting tree's node stream alone, without header.
 pub(crate) fn write_counting_data(tree: &CountingTree, mut w: impl Write) -> io::Result<()> {
     let Some(root) = tree.root() else { return Ok(()) };
-    let (arena, _) = root.arena_id();
-    let (_, _, _, extras) = arena.parts();
-    write_nodes(root, &mut w, |n| extras[n].to_le_bytes())
+    write_nodes(root, &mut w, |_, count| count.to_le_bytes())
 }
 
-/// The pre-order node stream below `root`: each node's payload, then its
-/// child-existence byte.
+/// The pre-order node stream below `root`: each node's payload (made from
+/// its value and extra), then its child-existence byte.
 fn write_nodes<const P: usize>(
     root: NodeRef<'_>,
     w: &mut impl Write,
-    payload: impl Fn(usize) -> [u8; P],
+    payload: impl Fn(f32, u32) -> [u8; P],
 ) -> io::Result<()> {
     let (arena, id) = root.arena_id();
-    let (values, masks, first_child, extras) = arena.parts();
-    let mut out = NodeStream { masks, first_child, values, extras, payload, out: Vec::with_capacity(FLUSH_AT + 64), w };
-    out.node(id as usize)?;
+    let mut out = NodeStream { arena: arena.parts(), payload, out: Vec::with_capacity(FLUSH_AT + 64), w };
+    out.node(id)?;
     out.w.write_all(&out.out)
 }
 
@@ -275,43 +270,53 @@ fn write_nodes<const P: usize>(
 const FLUSH_AT: usize = 1 << 16;
 
 struct NodeStream<'a, F, W> {
-    masks: &'a [u8],
-    first_child: &'a [u32],
-    /// What payloads are made of (only prefetched here).
-    values: &'a [f32],
-    extras: &'a [u32],
+    arena: Parts<'a>,
     payload: F,
     out: Vec<u8>,
     w: W,
 }
 
-impl<const P: usize, F: Fn(usize) -> [u8; P], W: Write> NodeStream<'_, F, W> {
+impl<const P: usize, F: Fn(f32, u32) -> [u8; P], W: Write> NodeStream<'_, F, W> {
+    /// A childless node's record.
+    #[inline(always)]
+    fn leaf(&mut self, value: f32, extra: u32) {
+        self.out.extend_from_slice(&(self.payload)(value, extra));
+        self.out.push(0);
+    }
+
     /// Node `n` and its subtree.
-    fn node(&mut self, n: usize) -> io::Result<()> {
-        let mask = self.masks[n];
-        self.out.extend_from_slice(&(self.payload)(n));
+    fn node(&mut self, n: NodeId) -> io::Result<()> {
+        let a = self.arena;
+        let mask = a.mask(n);
+        self.out.extend_from_slice(&(self.payload)(a.value(n), a.extra(n)));
         self.out.push(mask);
         if mask == 0 {
             return Ok(());
         }
-        let first = self.first_child[n] as usize;
-        let group = first..first + mask.count_ones() as usize;
-        // ask for the inner children's groups before the recursion needs them
-        for c in group.clone() {
-            if self.masks[c] != 0 {
-                let fc = self.first_child[c] as usize;
-                prefetch(self.masks, fc);
-                prefetch(self.first_child, fc);
-                prefetch(self.values, fc);
-                prefetch(self.extras, fc);
+        let first = a.first_child[n as usize];
+        let k = mask.count_ones() as usize;
+        if in_leaf_pool(first) {
+            // the voxels of a depth-15 node: leaves, values side by side
+            let i = leaf_index(first);
+            let values = &a.leaf_values[i..i + k];
+            match a.leaf_extras.get(i..i + k) {
+                Some(extras) => values.iter().zip(extras).for_each(|(&v, &e)| self.leaf(v, e)),
+                None => values.iter().for_each(|&v| self.leaf(v, 0)),
             }
-        }
-        for c in group {
-            if self.masks[c] == 0 {
-                self.out.extend_from_slice(&(self.payload)(c));
-                self.out.push(0);
-            } else {
-                self.node(c)?;
+        } else {
+            let group = first as usize..first as usize + k;
+            // ask for the inner children's groups before the recursion needs them
+            for c in group.clone() {
+                if a.masks[c] != 0 {
+                    a.prefetch_group(a.first_child[c]);
+                }
+            }
+            for c in group {
+                if a.masks[c] == 0 {
+                    self.leaf(a.values[c], a.extras.get(c).copied().unwrap_or(0));
+                } else {
+                    self.node(c as NodeId)?;
+                }
             }
         }
         if self.out.len() >= FLUSH_AT {

@@ -1,38 +1,103 @@
-//! The node arena: nine bytes per node, no pointers, no per-node allocation.
+//! The node arena: no pointers, no per-node allocation; nine bytes per node
+//! above depth 16 and four per voxel.
 //!
-//! Nodes live in three parallel arrays indexed by a `u32` node id: the
-//! value (`f32` log-odds), a child mask (bit `i` set when child `i`
-//! exists) and the id of the first child. The existing children of a node
-//! form one contiguous *group* of exactly `popcount(mask)` slots, in child
-//! order, so child `i` sits at `first_child + popcount(mask & ((1 << i) - 1))`.
-//! A group that grows or shrinks moves to a slot run of the new size; the
-//! old run goes on a free list of its size and is reused. Nodes therefore
+//! Nodes are addressed by a `u32` node id and live in two pools. The
+//! *inner pool* holds the nodes above depth 16 in three parallel arrays: the
+//! value (`f32` log-odds), a child mask (bit `i` set when child `i` exists)
+//! and the id of the first child. Depth-16 nodes (voxels) can never have
+//! children, and they are most of a map (69–80% of the nodes of every bench
+//! map), so the *leaf pool* holds only their values; their ids carry
+//! [`LEAF_POOL`]. The children of a depth-15 node lie in the leaf pool, all
+//! other children in the inner pool; callers that create children say the
+//! parent's depth.
+//!
+//! The existing children of a node form one contiguous *group* of exactly
+//! `popcount(mask)` slots, in child order, so child `i` sits at
+//! `first_child + popcount(mask & ((1 << i) - 1))`. A group that grows or
+//! shrinks moves to a slot run of the new size in its pool; the old run
+//! goes on that pool's free list of its size and is reused. Nodes therefore
 //! move when their siblings change: node ids are valid only until the next
-//! structural change. [`NodeArena::compacted`] re-lays every group in
+//! structural change. [`NodeArena::compact_in_place`] re-lays both pools in
 //! depth-first (Morton) order with no free runs left.
 //!
 //! Trees whose nodes carry more than log-odds (colour, time stamp, count)
-//! add a fourth array of `u32` *extras*; plain trees leave it empty and pay
-//! nothing for it.
+//! add a `u32` *extra* per node in each pool; plain trees leave those arrays
+//! empty and pay nothing for them.
+
+use bitvec::vec::BitVec;
+
+use crate::key::TREE_DEPTH;
 
 /// Id of a node in the arena.
 pub type NodeId = u32;
 
+/// Set in the ids of leaf-pool nodes (the voxels at depth 16).
+pub const LEAF_POOL: NodeId = 1 << 31;
+
 /// Sentinel for "no first child" (leaves).
 const NO_CHILD: NodeId = 0;
 
+/// Does `n` lie in the leaf pool?
+#[inline(always)]
+pub fn in_leaf_pool(n: NodeId) -> bool {
+    n & LEAF_POOL != 0
+}
+
+/// Index of leaf-pool node `n` in the leaf arrays.
+#[inline(always)]
+pub(crate) fn leaf_index(n: NodeId) -> usize {
+    (n & !LEAF_POOL) as usize
+}
+
+/// Do the children of a node at `depth` go to the leaf pool?
+#[inline(always)]
+fn leaf_group(depth: u8) -> bool {
+    depth + 1 == TREE_DEPTH
+}
+
 #[derive(Clone, Debug, Default)]
 pub struct NodeArena {
+    // the inner pool
     values: Vec<f32>,
     masks: Vec<u8>,
     first_child: Vec<NodeId>,
     /// Per-node payload beyond the value; empty unless enabled.
     extras: Vec<u32>,
+    free: FreeRuns,
+    // the leaf pool
+    leaf_values: Vec<f32>,
+    leaf_extras: Vec<u32>,
+    leaf_free: FreeRuns,
     /// The extra of a newly created node; `None` when extras are off.
     default_extra: Option<u32>,
-    /// Free slot runs by length (index 1..=8).
-    free: [Vec<NodeId>; 9],
-    free_slots: usize,
+}
+
+/// The free slot runs of one pool, by length (index 1..=8), as ids.
+#[derive(Clone, Debug, Default)]
+struct FreeRuns {
+    runs: [Vec<NodeId>; 9],
+    slots: usize,
+}
+
+impl FreeRuns {
+    #[inline]
+    fn pop(&mut self, len: usize) -> Option<NodeId> {
+        let start = self.runs[len].pop()?;
+        self.slots -= len;
+        Some(start)
+    }
+
+    #[inline]
+    fn push(&mut self, start: NodeId, len: usize) {
+        if len > 0 {
+            self.runs[len].push(start);
+            self.slots += len;
+        }
+    }
+
+    fn bytes(&self) -> usize {
+        self.runs.iter().map(|r| r.capacity() * std::mem::size_of::<NodeId>()).sum()
+    }
 }
 
 /// Arena statistics: slots in use and held, and the bytes really reserved.
@@ -41,6 +106,63 @@ pub struct ArenaUsage {
     pub live_slots: usize,
     pub free_slots: usize,
     pub bytes_reserved: usize,
+}
+
+/// The arrays of both pools, for read-only passes over the whole tree.
+/// Inner-pool ids index the first four, leaf-pool ids (less [`LEAF_POOL`])
+/// the last two; the extras are empty when extras are off.
+#[derive(Clone, Copy)]
+pub(crate) struct Parts<'a> {
+    pub values: &'a [f32],
+    pub masks: &'a [u8],
+    pub first_child: &'a [NodeId],
+    pub extras: &'a [u32],
+    pub leaf_values: &'a [f32],
+    pub leaf_extras: &'a [u32],
+}
+
+impl Parts<'_> {
+    /// The value of any node.
+    #[inline(always)]
+    pub fn value(&self, n: NodeId) -> f32 {
+        if in_leaf_pool(n) {
+            self.leaf_values[leaf_index(n)]
+        } else {
+            self.values[n as usize]
+        }
+    }
+
+    /// The extra of any node (0 when extras are off).
+    #[inline(always)]
+    pub fn extra(&self, n: NodeId) -> u32 {
+        let e = if in_leaf_pool(n) { self.leaf_extras.get(leaf_index(n)) } else { self.extras.get(n as usize) };
+        e.copied().unwrap_or(0)
+    }
+
+    /// The child mask of any node (0 in the leaf pool).
+    #[inline(always)]
+    pub fn mask(&self, n: NodeId) -> u8 {
+        if in_leaf_pool(n) {
+            0
+        } else {
+            self.masks[n as usize]
+        }
+    }
+
+    /// Asks for the cache lines of the group starting at `first`.
+    #[inline(always)]
+    pub fn prefetch_group(&self, first: NodeId) {
+        if in_leaf_pool(first) {
+            prefetch(self.leaf_values, leaf_index(first));
+            prefetch(self.leaf_extras, leaf_index(first));
+        } else {
+            let i = first as usize;
+            prefetch(self.masks, i);
+            prefetch(self.values, i);
+            prefetch(self.first_child, i);
+            prefetch(self.extras, i);
+        }
+    }
 }
 
 impl NodeArena {
@@ -58,16 +180,16 @@ impl NodeArena {
         a
     }
 
-    /// Slots held (live and free).
+    /// Slots held in both pools (live and free).
     #[inline]
     pub fn slot_count(&self) -> usize {
-        self.values.len()
+        self.values.len() + self.leaf_values.len()
     }
 
     /// Slots on the free lists (0 after compaction or when read from a file).
     #[inline]
     pub fn free_slot_count(&self) -> usize {
-        self.free_slots
+        self.free.slots + self.leaf_free.slots
     }
 
     #[inline(always)]
@@ -78,39 +200,49 @@ impl NodeArena {
     /// The extra of `n` (0 when extras are off).
     #[inline(always)]
     pub fn extra(&self, n: NodeId) -> u32 {
-        self.extras.get(n as usize).copied().unwrap_or(0)
+        self.parts().extra(n)
     }
 
     #[inline(always)]
     pub fn set_extra(&mut self, n: NodeId, v: u32) {
-        if let Some(e) = self.extras.get_mut(n as usize) {
+        let e = if in_leaf_pool(n) { self.leaf_extras.get_mut(leaf_index(n)) } else { self.extras.get_mut(n as usize) };
+        if let Some(e) = e {
             *e = v;
         }
     }
 
     #[inline(always)]
     pub fn value(&self, n: NodeId) -> f32 {
-        self.values[n as usize]
+        self.parts().value(n)
     }
 
     #[inline(always)]
     pub fn set_value(&mut self, n: NodeId, v: f32) {
-        self.values[n as usize] = v;
+        if in_leaf_pool(n) {
+            self.leaf_values[leaf_index(n)] = v;
+        } else {
+            self.values[n as usize] = v;
+        }
     }
 
     #[inline(always)]
     pub fn mask(&self, n: NodeId) -> u8 {
-        self.masks[n as usize]
+        self.parts().mask(n)
     }
 
     #[inline(always)]
     pub fn has_children(&self, n: NodeId) -> bool {
-        self.masks[n as usize] != 0
+        self.mask(n) != 0
     }
 
+    /// The first child's id; meaningless for nodes without children.
     #[inline(always)]
     pub fn first_child(&self, n: NodeId) -> NodeId {
-        self.first_child[n as usize]
+        if in_leaf_pool(n) {
+            NO_CHILD
+        } else {
+            self.first_child[n as usize]
+        }
     }
 
     /// Prefetches the child groups of `n`'s inner children: a depth-first
@@ -118,14 +250,16 @@ impl NodeArena {
     /// scattered, so asking for all of them at once overlaps the misses.
     #[inline(always)]
     pub fn prefetch_grandchildren(&self, n: NodeId) {
-        let first = self.first_child[n as usize] as usize;
+        let first = self.first_child(n);
+        if in_leaf_pool(first) {
+            return;
+        }
+        let first = first as usize;
         let k = self.masks[n as usize].count_ones() as usize;
+        let parts = self.parts();
         for c in first..first + k {
             if self.masks[c] != 0 {
-                let fc = self.first_child[c] as usize;
-                prefetch(&self.masks, fc);
-                prefetch(&self.values, fc);
-                prefetch(&self.first_child, fc);
+                parts.prefetch_group(self.first_child[c]);
             }
         }
     }
@@ -133,7 +267,7 @@ impl NodeArena {
     /// Id of child `pos` of `n`, if it exists.
     #[inline(always)]
     pub fn child(&self, n: NodeId, pos: usize) -> Option<NodeId> {
-        let m = self.masks[n as usize];
+        let m = self.mask(n);
         if m & (1 << pos) == 0 {
             None
         } else {
@@ -144,8 +278,8 @@ impl NodeArena {
     /// Children of `n` as `(child index, id)` in child order.
     #[inline]
     pub fn children(&self, n: NodeId) -> impl Iterator<Item = (usize, NodeId)> {
-        let m = self.masks[n as usize];
-        let first = self.first_child[n as usize];
+        let m = self.mask(n);
+        let first = self.first_child(n);
         (0..8usize).filter(move |&i| m & (1 << i) != 0).scan(first, |next, i| {
             let id = *next;
             *next += 1;
@@ -153,7 +287,7 @@ impl NodeArena {
         })
     }
 
-    /// Appends `len` default slots; returns the first id.
+    /// Appends `len` default slots to the inner pool; returns the first id.
     #[inline]
     fn push_run(&mut self, len: usize) -> NodeId {
         let start = self.values.len();
@@ -180,7 +314,7 @@ impl NodeArena {
     #[inline(never)]
     fn push_run_growing(&mut self, len: usize) -> NodeId {
         let start = self.values.len();
-        assert!(start + len <= u32::MAX as usize - 2, "node arena exceeds 2^32 slots");
+        assert!(start + len < LEAF_POOL as usize, "node arena exceeds 2^31 inner slots");
         // grow by a quarter rather than doubling: large reallocations are
         // remapped in place by the allocator, and peak memory stays low; keep
         // room for eight more slots, which the fast path appends
@@ -202,54 +336,110 @@ impl NodeArena {
         start as NodeId
     }
 
-    fn alloc_run(&mut self, len: usize) -> NodeId {
-        match self.free[len].pop() {
-            Some(start) => {
-                self.free_slots -= len;
-                start
+    /// Appends `len` (at most 8) default slots to the leaf pool; returns the
+    /// first id.
+    #[inline]
+    fn push_leaf_run(&mut self, len: usize) -> NodeId {
+        let start = self.leaf_values.len();
+        if start + len > self.leaf_values.capacity() {
+            self.grow_leaves(len);
+        }
+        self.leaf_values.extend_from_slice(&[0.0; 8][..len]);
+        if let Some(e) = self.default_extra {
+            self.leaf_extras.extend_from_slice(&[e; 8][..len]);
+        }
+        LEAF_POOL | start as NodeId
+    }
+
+    /// Makes room for `len` more leaf slots, growing by a quarter.
+    #[cold]
+    #[inline(never)]
+    fn grow_leaves(&mut self, len: usize) {
+        let start = self.leaf_values.len();
+        assert!(start + len < LEAF_POOL as usize, "node arena exceeds 2^31 leaf slots");
+        let more = len.max(start / 4).max(1024);
+        self.leaf_values.reserve_exact(more);
+        if self.default_extra.is_some() {
+            self.leaf_extras.reserve_exact(more);
+        }
+    }
+
+    /// A run of `len` slots in the leaf pool (`leaf`) or the inner pool.
+    #[inline]
+    fn alloc_run(&mut self, len: usize, leaf: bool) -> NodeId {
+        if leaf {
+            match self.leaf_free.pop(len) {
+                Some(start) => start,
+                None => self.push_leaf_run(len),
             }
-            None => self.push_run(len),
+        } else {
+            match self.free.pop(len) {
+                Some(start) => start,
+                None => self.push_run(len),
+            }
         }
     }
 
+    #[inline]
     fn free_run(&mut self, start: NodeId, len: usize) {
-        if len > 0 {
-            self.free[len].push(start);
-            self.free_slots += len;
+        if in_leaf_pool(start) {
+            self.leaf_free.push(start, len);
+        } else {
+            self.free.push(start, len);
         }
     }
 
+    /// Copies a slot to another of the same pool.
     #[inline(always)]
     fn copy_slot(&mut self, from: NodeId, to: NodeId) {
-        let (f, t) = (from as usize, to as usize);
-        self.values[t] = self.values[f];
-        self.masks[t] = self.masks[f];
-        self.first_child[t] = self.first_child[f];
-        if self.default_extra.is_some() {
-            self.extras[t] = self.extras[f];
+        let extras = self.default_extra.is_some();
+        if in_leaf_pool(from) {
+            let (f, t) = (leaf_index(from), leaf_index(to));
+            self.leaf_values[t] = self.leaf_values[f];
+            if extras {
+                self.leaf_extras[t] = self.leaf_extras[f];
+            }
+        } else {
+            let (f, t) = (from as usize, to as usize);
+            self.values[t] = self.values[f];
+            self.masks[t] = self.masks[f];
+            self.first_child[t] = self.first_child[f];
+            if extras {
+                self.extras[t] = self.extras[f];
+            }
         }
     }
 
     /// Makes slot `id` a fresh leaf holding `value` and `extra`.
     #[inline(always)]
     fn init_slot(&mut self, id: NodeId, value: f32, extra: Option<u32>) {
-        let i = id as usize;
-        self.values[i] = value;
-        self.masks[i] = 0;
-        self.first_child[i] = NO_CHILD;
-        if let Some(e) = extra {
-            self.extras[i] = e;
+        if in_leaf_pool(id) {
+            let i = leaf_index(id);
+            self.leaf_values[i] = value;
+            if let Some(e) = extra {
+                self.leaf_extras[i] = e;
+            }
+        } else {
+            let i = id as usize;
+            self.values[i] = value;
+            self.masks[i] = 0;
+            self.first_child[i] = NO_CHILD;
+            if let Some(e) = extra {
+                self.extras[i] = e;
+            }
         }
     }
 
-    /// Adds child `pos` (which must not exist) as a leaf with `value`;
-    /// returns its id. Moves the other children of `n`.
-    pub fn insert_child(&mut self, n: NodeId, pos: usize, value: f32) -> NodeId {
+    /// Adds child `pos` (which must not exist) of `n`, which lies at
+    /// `depth`, as a leaf with `value`; returns its id. Moves the other
+    /// children of `n`.
+    pub fn insert_child(&mut self, n: NodeId, pos: usize, value: f32, depth: u8) -> NodeId {
         let m = self.masks[n as usize];
         debug_assert_eq!(m & (1 << pos), 0);
         let old_len = m.count_ones() as usize;
         let old = self.first_child[n as usize];
-        let new = self.alloc_run(old_len + 1);
+        let new = self.alloc_run(old_len + 1, leaf_group(depth));
+        debug_assert!(old_len == 0 || in_leaf_pool(old) == in_leaf_pool(new), "depth {depth} is not n's");
         let rank = (m & ((1u8 << pos) - 1)).count_ones();
         for i in 0..rank {
             self.copy_slot(old + i, new + i);
@@ -265,55 +455,39 @@ impl NodeArena {
         id
     }
 
-    /// Gives a leaf `n` the children in `mask`, each a new leaf holding
-    /// `value`; returns the id of the first.
-    pub fn add_children(&mut self, n: NodeId, mask: u8, value: f32) -> NodeId {
-        self.add_children_with(n, mask, value, self.default_extra)
+    /// Gives a leaf `n` at `depth` the children in `mask`, each a new leaf
+    /// holding `value`; returns the id of the first.
+    pub fn add_children(&mut self, n: NodeId, mask: u8, value: f32, depth: u8) -> NodeId {
+        self.add_children_with(n, mask, value, self.default_extra, depth)
     }
 
-    fn add_children_with(&mut self, n: NodeId, mask: u8, value: f32, extra: Option<u32>) -> NodeId {
+    fn add_children_with(&mut self, n: NodeId, mask: u8, value: f32, extra: Option<u32>, depth: u8) -> NodeId {
         debug_assert_eq!(self.masks[n as usize], 0);
         let len = mask.count_ones();
-        let new = if len == 0 {
-            NO_CHILD
-        } else if let Some(start) = self.free[len as usize].pop() {
-            self.free_slots -= len as usize;
-            for i in 0..len {
-                self.init_slot(start + i, value, extra);
-            }
-            start
-        } else {
-            let start = self.push_run(len as usize);
-            // fresh slots hold the defaults; only the value and extra differ
-            for i in 0..len {
-                self.values[(start + i) as usize] = value;
-            }
-            if let Some(e) = extra {
-                for i in 0..len {
-                    self.extras[(start + i) as usize] = e;
-                }
-            }
-            start
-        };
+        let new = if len == 0 { NO_CHILD } else { self.alloc_run(len as usize, leaf_group(depth)) };
+        for i in 0..len {
+            self.init_slot(new + i, value, extra);
+        }
         self.masks[n as usize] = mask;
         self.first_child[n as usize] = new;
         new
     }
 
-    /// Adds the children in `add` (none of which exists yet) to `n` as
-    /// leaves holding `value`, moving its group once; returns the first id.
-    pub fn add_missing_children(&mut self, n: NodeId, add: u8, value: f32) -> NodeId {
+    /// Adds the children in `add` (none of which exists yet) to `n`, which
+    /// lies at `depth`, as leaves holding `value`, moving its group once;
+    /// returns the first id.
+    pub fn add_missing_children(&mut self, n: NodeId, add: u8, value: f32, depth: u8) -> NodeId {
         let m = self.masks[n as usize];
         debug_assert_eq!(m & add, 0);
         if m == 0 {
-            return self.add_children(n, add, value);
+            return self.add_children(n, add, value, depth);
         }
         if add == 0 {
             return self.first_child[n as usize];
         }
         let old = self.first_child[n as usize];
         let new_mask = m | add;
-        let new = self.alloc_run(new_mask.count_ones() as usize);
+        let new = self.alloc_run(new_mask.count_ones() as usize, leaf_group(depth));
         let (mut from, mut to) = (old, new);
         for i in 0..8 {
             if m & (1 << i) != 0 {
@@ -331,11 +505,11 @@ impl NodeArena {
         new
     }
 
-    /// Expands a leaf `n`: eight children holding its value and extra
-    /// (OctoMap's `expandNode` copies the node's data).
-    pub fn expand_node(&mut self, n: NodeId) {
+    /// Expands a leaf `n` at `depth`: eight children holding its value and
+    /// extra (OctoMap's `expandNode` copies the node's data).
+    pub fn expand_node(&mut self, n: NodeId, depth: u8) {
         let extra = self.default_extra.map(|_| self.extra(n));
-        self.add_children_with(n, 0xff, self.value(n), extra);
+        self.add_children_with(n, 0xff, self.value(n), extra, depth);
     }
 
     /// Removes child `pos` of `n` and its whole subtree; returns the number
@@ -351,7 +525,7 @@ impl NodeArena {
             self.masks[n as usize] = 0;
             self.first_child[n as usize] = NO_CHILD;
         } else {
-            let new = self.alloc_run(old_len - 1);
+            let new = self.alloc_run(old_len - 1, in_leaf_pool(old));
             for i in 0..rank {
                 self.copy_slot(old + i, new + i);
             }
@@ -376,55 +550,50 @@ impl NodeArena {
 
     /// Frees every descendant run below `n` (not `n` itself).
     fn free_subtree_children(&mut self, n: NodeId) -> usize {
-        let m = self.masks[n as usize];
+        let m = self.mask(n);
         if m == 0 {
             return 0;
         }
         let len = m.count_ones() as usize;
         let first = self.first_child[n as usize];
         let mut freed = len;
-        for i in 0..len as u32 {
-            freed += self.free_subtree_children(first + i);
+        if !in_leaf_pool(first) {
+            for i in 0..len as u32 {
+                freed += self.free_subtree_children(first + i);
+            }
         }
         self.free_run(first, len);
         freed
     }
 
     #[cfg(test)]
-    /// A copy laid out in depth-first order: the root first, each node's
+    /// A copy laid out in depth-first order, built by copying: each node's
     /// child group allocated as the node is visited, exactly sized.
     pub fn compacted(&self, root: NodeId) -> NodeArena {
         let mut out = NodeArena { default_extra: self.default_extra, ..Default::default() };
-        let total = self.values.len() - self.free_slots;
-        out.values.reserve_exact(total);
-        if self.default_extra.is_some() {
-            out.extras.reserve_exact(total);
-        }
-        out.masks.reserve_exact(total);
-        out.first_child.reserve_exact(total);
         out.push_run(1);
         out.values[0] = self.values[root as usize];
         out.set_extra(0, self.extra(root));
         // (old id, new id) pairs whose child groups still need copying
         let mut stack = vec![(root, 0 as NodeId)];
         while let Some((old, new)) = stack.pop() {
-            let m = self.masks[old as usize];
-            out.masks[new as usize] = m;
+            let m = self.mask(old);
             if m == 0 {
                 continue;
             }
-            let len = m.count_ones() as usize;
+            let len = m.count_ones();
             let first_old = self.first_child[old as usize];
-            let first_new = out.push_run(len);
+            let first_new =
+                if in_leaf_pool(first_old) { out.push_leaf_run(len as usize) } else { out.push_run(len as usize) };
+            out.masks[new as usize] = m;
             out.first_child[new as usize] = first_new;
-            for i in 0..len as u32 {
-                out.values[(first_new + i) as usize] = self.values[(first_old + i) as usize];
+            for i in 0..len {
+                out.set_value(first_new + i, self.value(first_old + i));
                 out.set_extra(first_new + i, self.extra(first_old + i));
             }
-            for i in (0..len as u32).rev() {
-                stack.push((first_old + i, first_new + i));
-            }
+            stack.extend((0..len).rev().map(|i| (first_old + i, first_new + i)));
         }
+        out.shrink_to_fit();
         out
     }
 
@@ -434,108 +603,124 @@ impl NodeArena {
         self.masks.shrink_to_fit();
         self.first_child.shrink_to_fit();
         self.extras.shrink_to_fit();
+        self.leaf_values.shrink_to_fit();
+        self.leaf_extras.shrink_to_fit();
     }
 
-    /// Re-lays the arena in place in the order [`Self::compacted`] gives,
-    /// needing 4 bytes per slot of scratch space instead of a full copy.
+    /// Re-lays both pools in place in depth-first order: the root first,
+    /// each node's child group placed as the node is visited, no free runs
+    /// left. Needs 4 bytes and a bit per slot of scratch space instead of
+    /// a full copy.
     pub fn compact_in_place(&mut self, root: NodeId) {
-        const FREE: u32 = u32::MAX;
-        const MOVED: u32 = u32::MAX - 1;
-        let len = self.values.len();
-        // new id of every live slot, in depth-first group order
-        let mut new_of = vec![FREE; len];
+        let mut new_of = vec![UNUSED; self.values.len()];
+        let mut leaf_new_of = vec![UNUSED; self.leaf_values.len()];
         new_of[root as usize] = 0;
-        let mut next = 1u32;
+        let (mut next, mut next_leaf) = (1u32, 0u32);
         let mut stack = vec![root];
         while let Some(n) = stack.pop() {
             let k = self.masks[n as usize].count_ones();
             if k == 0 {
                 continue;
             }
+            // each first child is read once, here, so it can be rewritten
+            // in its old slot; the slots move afterwards
             let first = self.first_child[n as usize];
-            for i in 0..k {
-                new_of[(first + i) as usize] = next + i;
-            }
-            next += k;
-            stack.extend((0..k).rev().map(|i| first + i));
-        }
-        for (i, &m) in self.masks.iter().enumerate() {
-            if new_of[i] != FREE && m != 0 {
-                self.first_child[i] = new_of[self.first_child[i] as usize];
-            }
-        }
-        // follow each chain: the element at `dst` is picked up before its slot
-        // is overwritten; a chain ends at a free or already emptied slot
-        let has_extras = self.default_extra.is_some();
-        for start in 0..len {
-            let mut dst = new_of[start];
-            if dst == FREE || dst == MOVED {
-                continue;
-            }
-            new_of[start] = MOVED;
-            let mut carry = self.slot(start, has_extras);
-            loop {
-                let d = dst as usize;
-                let following = new_of[d];
-                let displaced = self.slot(d, has_extras);
-                self.put_slot(d, carry, has_extras);
-                if following == FREE || following == MOVED {
-                    break;
+            if in_leaf_pool(first) {
+                for i in 0..k {
+                    leaf_new_of[leaf_index(first + i)] = next_leaf + i;
                 }
-                new_of[d] = MOVED;
-                carry = displaced;
-                dst = following;
+                self.first_child[n as usize] = LEAF_POOL | next_leaf;
+                next_leaf += k;
+            } else {
+                for i in 0..k {
+                    new_of[(first + i) as usize] = next + i;
+                }
+                self.first_child[n as usize] = next;
+                next += k;
+                stack.extend((0..k).rev().map(|i| first + i));
             }
         }
-        let live = next as usize;
-        self.values.truncate(live);
-        self.masks.truncate(live);
-        self.first_child.truncate(live);
-        self.extras.truncate(if has_extras { live } else { 0 });
-        self.shrink_to_fit();
-        self.free = Default::default();
-        self.free_slots = 0;
-    }
-
-    #[inline]
-    fn slot(&self, i: usize, extras: bool) -> (f32, u8, NodeId, u32) {
-        (self.values[i], self.masks[i], self.first_child[i], if extras { self.extras[i] } else { 0 })
-    }
-
-    #[inline]
-    fn put_slot(&mut self, i: usize, s: (f32, u8, NodeId, u32), extras: bool) {
-        self.values[i] = s.0;
-        self.masks[i] = s.1;
-        self.first_child[i] = s.2;
-        if extras {
-            self.extras[i] = s.3;
+        let (live, live_leaves) = (next as usize, next_leaf as usize);
+        let mut done = BitVec::new();
+        move_slots(&mut self.values, &new_of, &mut done, live);
+        move_slots(&mut self.masks, &new_of, &mut done, live);
+        move_slots(&mut self.first_child, &new_of, &mut done, live);
+        move_slots(&mut self.leaf_values, &leaf_new_of, &mut done, live_leaves);
+        if self.default_extra.is_some() {
+            move_slots(&mut self.extras, &new_of, &mut done, live);
+            move_slots(&mut self.leaf_extras, &leaf_new_of, &mut done, live_leaves);
         }
+        self.shrink_to_fit();
+        self.free = FreeRuns::default();
+        self.leaf_free = FreeRuns::default();
     }
 
     pub fn usage(&self) -> ArenaUsage {
-        let free_list_bytes: usize = self.free.iter().map(|f| f.capacity() * std::mem::size_of::<NodeId>()).sum();
+        let free_slots = self.free_slot_count();
         ArenaUsage {
-            live_slots: self.values.len() - self.free_slots,
-            free_slots: self.free_slots,
+            live_slots: self.slot_count() - free_slots,
+            free_slots,
             bytes_reserved: self.values.capacity() * 4
                 + self.masks.capacity()
                 + self.first_child.capacity() * 4
                 + self.extras.capacity() * 4
-                + free_list_bytes,
+                + self.leaf_values.capacity() * 4
+                + self.leaf_extras.capacity() * 4
+                + self.free.bytes()
+                + self.leaf_free.bytes(),
         }
     }
 
-    /// The slot arrays, for read-only passes over the whole tree: values,
-    /// child masks, first children and extras (empty when extras are off).
+    /// The arrays of both pools, for read-only passes over the whole tree.
     #[inline]
-    pub(crate) fn parts(&self) -> (&[f32], &[u8], &[NodeId], &[u32]) {
-        (&self.values, &self.masks, &self.first_child, &self.extras)
+    pub(crate) fn parts(&self) -> Parts<'_> {
+        Parts {
+            values: &self.values,
+            masks: &self.masks,
+            first_child: &self.first_child,
+            extras: &self.extras,
+            leaf_values: &self.leaf_values,
+            leaf_extras: &self.leaf_extras,
+        }
     }
 
-    /// Mutable access to every slot's value (free slots included).
-    pub fn values_mut(&mut self) -> &mut [f32] {
-        &mut self.values
+    /// Replaces every slot's value `v` by `f(v)` (free slots included).
+    pub fn map_values(&mut self, f: impl Fn(f32) -> f32) {
+        for v in self.values.iter_mut().chain(&mut self.leaf_values) {
+            *v = f(*v);
+        }
     }
+}
+
+/// Marks slots that no live node maps to in [`NodeArena::compact_in_place`].
+const UNUSED: u32 = u32::MAX;
+
+/// Moves `slots[i]` to `slots[new_of[i]]` for every slot with a new place
+/// (a permutation of `0..live` on those), then drops all past `live`.
+/// Follows each chain of moves, picking up what a move overwrites; a chain
+/// ends at a slot whose content is unused or already picked up.
+fn move_slots<T: Copy>(slots: &mut Vec<T>, new_of: &[u32], picked: &mut BitVec, live: usize) {
+    picked.clear();
+    picked.resize(slots.len(), false);
+    for start in 0..slots.len() {
+        let mut dst = new_of[start];
+        if dst == UNUSED || picked[start] {
+            continue;
+        }
+        picked.set(start, true);
+        let mut carry = slots[start];
+        loop {
+            let d = dst as usize;
+            if new_of[d] == UNUSED || picked[d] {
+                slots[d] = carry;
+                break;
+            }
+            picked.set(d, true);
+            carry = std::mem::replace(&mut slots[d], carry);
+            dst = new_of[d];
+        }
+    }
+    slots.truncate(live);
 }
 
 /// Why [`PreorderFill::push`] refused a node.
@@ -547,104 +732,132 @@ pub(crate) enum FillError {
     Complete,
 }
 
-/// The arrays of an arena being filled in pre-order: zero-initialised
-/// (extras: the default) up to their length, which is the capacity in
-/// slots; the first `len` slots are in use.
+/// An arena being filled in pre-order. Its arrays are initialised (zero,
+/// extras the default) up to their length, which is the capacity in slots;
+/// the first `len` inner and `leaf_len` leaf slots are in use.
 struct Slots {
-    values: Vec<f32>,
-    masks: Vec<u8>,
-    first_child: Vec<NodeId>,
-    extras: Vec<u32>,
-    default_extra: Option<u32>,
+    arena: NodeArena,
     len: usize,
+    leaf_len: usize,
     /// Expected node count; capacity grows toward it, never past what the
     /// nodes given so far justify (see [`Self::grow`]).
     hint: usize,
 }
 
+/// Grows `v` to `cap` elements of `fill`. Fresh zeroed memory comes from
+/// the allocator already zeroed, so large zero reservations cost no writes
+/// (nor resident memory) until used.
+fn fill_to<T: Clone>(v: &mut Vec<T>, cap: usize, fill: T) {
+    if v.is_empty() {
+        *v = vec![fill; cap];
+    } else {
+        v.resize(cap, fill);
+    }
+}
+
 impl Slots {
     fn new(default_extra: Option<u32>, hint: usize) -> Self {
-        Slots {
-            values: Vec::new(),
-            masks: Vec::new(),
-            first_child: Vec::new(),
-            extras: Vec::new(),
-            default_extra,
-            len: 0,
-            hint,
-        }
+        Slots { arena: NodeArena { default_extra, ..Default::default() }, len: 0, leaf_len: 0, hint }
     }
 
-    /// Makes room for `n` more slots at once. Fresh zeroed memory comes
-    /// from the allocator already zeroed, so large reservations cost no
-    /// writes up front.
+    /// Makes room for `n` more slots at once in each pool (either may need
+    /// them all).
     fn reserve(&mut self, n: usize) {
-        let cap = self.len + n.min(u32::MAX as usize - 2 - self.len);
-        if cap <= self.values.len() {
-            return;
-        }
-        if self.values.is_empty() {
-            self.values = vec![0.0; cap];
-            self.masks = vec![0; cap];
-            self.first_child = vec![NO_CHILD; cap];
-            if let Some(e) = self.default_extra {
-                self.extras = vec![e; cap];
+        self.reserve_pool(n, false);
+        self.reserve_pool(n, true);
+    }
+
+    fn reserve_pool(&mut self, n: usize, leaf: bool) {
+        let a = &mut self.arena;
+        let len = if leaf { self.leaf_len } else { self.len };
+        let cap = len + n.min(LEAF_POOL as usize - 1 - len);
+        if leaf {
+            if cap > a.leaf_values.len() {
+                fill_to(&mut a.leaf_values, cap, 0.0);
+                if let Some(e) = a.default_extra {
+                    fill_to(&mut a.leaf_extras, cap, e);
+                }
             }
-        } else {
-            self.values.resize(cap, 0.0);
-            self.masks.resize(cap, 0);
-            self.first_child.resize(cap, NO_CHILD);
-            if let Some(e) = self.default_extra {
-                self.extras.resize(cap, e);
+        } else if cap > a.values.len() {
+            fill_to(&mut a.values, cap, 0.0);
+            fill_to(&mut a.masks, cap, 0);
+            fill_to(&mut a.first_child, cap, NO_CHILD);
+            if let Some(e) = a.default_extra {
+                fill_to(&mut a.extras, cap, e);
             }
         }
     }
 
-    /// Makes room for `k` more slots: doubles the capacity, capped at the
-    /// hint while the hint is still ahead, so memory stays within twice
-    /// what the input has really announced.
+    /// Makes room for `k` more slots in a pool: doubles its capacity,
+    /// capped at the hint while the hint is still ahead, so memory stays
+    /// within twice what the input has really announced.
     #[cold]
     #[inline(never)]
-    fn grow(&mut self, k: usize) {
-        let len = self.len;
-        assert!(len + k <= u32::MAX as usize - 2, "node arena exceeds 2^32 slots");
+    fn grow(&mut self, k: usize, leaf: bool) {
+        let len = if leaf { self.leaf_len } else { self.len };
+        assert!(len + k < LEAF_POOL as usize, "node arena exceeds 2^31 slots in a pool");
         let mut want = (2 * len).max(1024);
         if self.hint >= len + k {
             want = want.min(self.hint);
         }
-        self.reserve(want.max(len + k) - len);
+        self.reserve_pool(want.max(len + k) - len, leaf);
     }
 
-    /// Takes `k` more slots; returns the first.
+    /// Takes `k` more inner slots; returns the first.
     #[inline(always)]
     fn take(&mut self, k: usize) -> NodeId {
         let first = self.len;
-        if first + k > self.values.len() {
-            self.grow(k);
+        if first + k > self.arena.values.len() {
+            self.grow(k, false);
         }
         self.len = first + k;
         first as NodeId
     }
 
+    /// Takes `k` more leaf slots; returns the first.
+    #[inline(always)]
+    fn take_leaves(&mut self, k: usize) -> NodeId {
+        let first = self.leaf_len;
+        if first + k > self.arena.leaf_values.len() {
+            self.grow(k, true);
+        }
+        self.leaf_len = first + k;
+        LEAF_POOL | first as NodeId
+    }
+
+    /// A new child group of `k` slots for a node at `depth`.
+    #[inline(always)]
+    fn take_group(&mut self, k: usize, depth: usize) -> NodeId {
+        if leaf_group(depth as u8) {
+            self.take_leaves(k)
+        } else {
+            self.take(k)
+        }
+    }
+
+    /// The values of the group of `k` slots from `first`.
+    #[inline(always)]
+    fn group_values(&mut self, first: NodeId, k: usize) -> &mut [f32] {
+        let a = &mut self.arena;
+        if in_leaf_pool(first) {
+            &mut a.leaf_values[leaf_index(first)..][..k]
+        } else {
+            &mut a.values[first as usize..][..k]
+        }
+    }
+
     /// The arena of the slots in use.
     fn into_arena(self) -> NodeArena {
-        let len = self.len;
-        let mut a = NodeArena {
-            values: self.values,
-            masks: self.masks,
-            first_child: self.first_child,
-            extras: self.extras,
-            default_extra: self.default_extra,
-            free: Default::default(),
-            free_slots: 0,
-        };
-        if a.values.len() > len || a.values.capacity() > len {
-            a.values.truncate(len);
-            a.masks.truncate(len);
-            a.first_child.truncate(len);
-            a.extras.truncate(if a.default_extra.is_some() { len } else { 0 });
-            a.shrink_to_fit();
-        }
+        let (len, leaf_len) = (self.len, self.leaf_len);
+        let mut a = self.arena;
+        let extras = a.default_extra.is_some();
+        a.values.truncate(len);
+        a.masks.truncate(len);
+        a.first_child.truncate(len);
+        a.extras.truncate(if extras { len } else { 0 });
+        a.leaf_values.truncate(leaf_len);
+        a.leaf_extras.truncate(if extras { leaf_len } else { 0 });
+        a.shrink_to_fit();
         a
     }
 }
@@ -694,7 +907,7 @@ impl PreorderFill {
 
     /// Nodes given or announced so far.
     pub(crate) fn len(&self) -> usize {
-        self.slots.len
+        self.slots.len + self.slots.leaf_len
     }
 
     /// Gives the next node: its value, its extra (`None` keeps the
@@ -713,19 +926,18 @@ impl PreorderFill {
             return Err(FillError::Complete);
         };
         let s = &mut self.slots;
-        let i = id as usize;
-        s.values[i] = value;
-        if let (Some(e), Some(slot)) = (extra, s.extras.get_mut(i)) {
-            *slot = e;
+        s.arena.set_value(id, value);
+        if let Some(e) = extra {
+            s.arena.set_extra(id, e);
         }
         if mask != 0 {
             if depth >= 16 {
                 return Err(FillError::TooDeep);
             }
             let k = mask.count_ones();
-            let first = s.take(k as usize);
-            s.masks[i] = mask;
-            s.first_child[i] = first;
+            let first = s.take_group(k as usize, depth);
+            s.arena.masks[id as usize] = mask;
+            s.arena.first_child[id as usize] = first;
             self.open[depth] = (first, first + k);
             self.depth = depth + 1;
         } else {
@@ -787,7 +999,7 @@ impl LabelFill {
     pub(crate) fn new(default_extra: Option<u32>, hint: usize, root_value: f32, free: f32, occupied: f32) -> Self {
         let mut slots = Slots::new(default_extra, hint);
         let root = slots.take(1);
-        slots.values[root as usize] = root_value;
+        slots.arena.values[root as usize] = root_value;
         LabelFill {
             slots,
             label_values: [0.0, free, occupied, -f32::MAX],
@@ -834,21 +1046,21 @@ impl LabelFill {
         let due = even_bits(labels & (labels >> 1));
         let k = mask.count_ones();
         let s = &mut self.slots;
-        let first = s.take(k as usize);
+        let first = s.take_group(k as usize, depth);
         let mut rest = mask;
-        for v in &mut s.values[first as usize..(first + k) as usize] {
+        for v in s.group_values(first, k as usize) {
             let pos = rest.trailing_zeros();
             rest &= rest - 1;
             *v = self.label_values[usize::from((labels >> (2 * pos)) as u8 & 3)];
         }
-        s.masks[id as usize] = mask;
-        s.first_child[id as usize] = first;
+        s.arena.masks[id as usize] = mask;
+        s.arena.first_child[id as usize] = first;
         if due != 0 {
             self.open[depth] = OpenGroup { parent: id, first, mask, due };
             self.depth = depth + 1;
         } else {
             if id != 0 {
-                s.values[id as usize] = max_of(&s.values[first as usize..(first + k) as usize]);
+                s.arena.values[id as usize] = max_of(s.group_values(first, k as usize));
             }
             self.close_groups();
         }
@@ -865,8 +1077,8 @@ impl LabelFill {
                 break;
             }
             if g.parent != 0 {
-                let (a, b) = (g.first as usize, (g.first + g.mask.count_ones()) as usize);
-                self.slots.values[g.parent as usize] = max_of(&self.slots.values[a..b]);
+                let max = max_of(self.slots.group_values(g.first, g.mask.count_ones() as usize));
+                self.slots.arena.values[g.parent as usize] = max;
             }
             self.depth -= 1;
         }
@@ -907,7 +1119,7 @@ mod tests {
     fn children_stay_in_order_while_groups_move() {
         let mut a = NodeArena::with_root(0.0);
         for &pos in &[5usize, 1, 7, 0] {
-            a.insert_child(0, pos, pos as f32);
+            a.insert_child(0, pos, pos as f32, 0);
         }
         let kids: Vec<_> = a.children(0).map(|(i, id)| (i, a.value(id))).collect();
         assert_eq!(kids, vec![(0, 0.0), (1, 1.0), (5, 5.0), (7, 7.0)]);
@@ -917,20 +1129,102 @@ mod tests {
         assert_eq!(a.usage().free_slots, 6);
         let c = a.child(0, 1).unwrap();
         a.set_value(c, 9.0);
-        a.expand_node(c);
+        a.expand_node(c, 1);
         assert_eq!(a.remove_child(0, 1), 9);
         let kids: Vec<_> = a.children(0).map(|(i, id)| (i, a.value(id))).collect();
         assert_eq!(kids, vec![(0, 0.0), (5, 5.0), (7, 7.0)]);
         let c = a.compacted(0);
         let mut d = a.clone();
         d.compact_in_place(0);
-        assert_eq!(
-            (d.values.clone(), d.masks.clone(), d.first_child.clone()),
-            (c.values.clone(), c.masks.clone(), c.first_child.clone())
-        );
+        assert_same_slots(&c, &d);
         assert_eq!(c.usage().free_slots, 0);
         assert_eq!(c.usage().live_slots, 4);
         let kids: Vec<_> = c.children(0).map(|(i, id)| (i, c.value(id))).collect();
         assert_eq!(kids, vec![(0, 0.0), (5, 5.0), (7, 7.0)]);
+    }
+
+    /// Both arenas hold the same slots, and no spare capacity.
+    fn assert_same_slots(a: &NodeArena, b: &NodeArena) {
+        assert_eq!(a.values, b.values);
+        assert_eq!(a.masks, b.masks);
+        assert_eq!(a.first_child, b.first_child);
+        assert_eq!(a.extras, b.extras);
+        assert_eq!(a.leaf_values, b.leaf_values);
+        assert_eq!(a.leaf_extras, b.leaf_extras);
+        for x in [a, b] {
+            assert_eq!(x.free_slot_count(), 0);
+            assert_eq!(x.values.capacity(), x.values.len());
+            assert_eq!(x.leaf_values.capacity(), x.leaf_values.len());
+        }
+    }
+
+    /// A chain of single children from the root down to depth `depth`;
+    /// returns the node there.
+    fn chain(a: &mut NodeArena, depth: u8, pos: usize) -> NodeId {
+        let mut n = 0;
+        for d in 0..depth {
+            n = a.child(n, pos).unwrap_or_else(|| a.insert_child(n, pos, 0.0, d));
+        }
+        n
+    }
+
+    #[test]
+    fn voxels_live_in_the_leaf_pool() {
+        let mut a = NodeArena::with_root_and_extras(0.0, Some(7));
+        let p = chain(&mut a, 15, 3);
+        assert!(!in_leaf_pool(p));
+        let inner_slots = a.values.len();
+        for &pos in &[6usize, 2, 4] {
+            let c = a.insert_child(p, pos, pos as f32, 15);
+            assert!(in_leaf_pool(c));
+            assert_eq!((a.value(c), a.extra(c), a.mask(c), a.first_child(c)), (pos as f32, 7, 0, NO_CHILD));
+            assert!(!a.has_children(c));
+            assert_eq!(a.children(c).count(), 0);
+            a.set_extra(c, 100 + pos as u32);
+        }
+        // the inner pool did not grow; the leaf pool holds the runs of 1, 2
+        // and 3 slots, the first two free
+        assert_eq!(a.values.len(), inner_slots);
+        assert_eq!(a.leaf_values.len(), 6);
+        assert_eq!(a.leaf_free.slots, 3);
+        let kids: Vec<_> = a.children(p).map(|(i, c)| (i, a.value(c), a.extra(c))).collect();
+        assert_eq!(kids, vec![(2, 2.0, 102), (4, 4.0, 104), (6, 6.0, 106)]);
+        // a freed run is reused, in its own pool
+        assert_eq!(a.remove_child(p, 4), 1);
+        assert_eq!(a.leaf_values.len(), 6);
+        assert_eq!(a.leaf_free.slots, 4);
+        let u = a.usage();
+        assert_eq!((u.live_slots, u.free_slots), (16 + 2, 4));
+        // a second depth-15 node, expanded: eight voxels copying its data
+        let q = a.insert_child(0, 5, 0.0, 0);
+        let q = chain_below(&mut a, q, 1, 15);
+        a.set_value(q, 1.5);
+        a.set_extra(q, 9);
+        a.expand_node(q, 15);
+        assert!(a.children(q).all(|(_, c)| in_leaf_pool(c) && a.value(c) == 1.5 && a.extra(c) == 9));
+        let c = a.compacted(0);
+        let mut d = a.clone();
+        d.compact_in_place(0);
+        assert_same_slots(&c, &d);
+        assert_eq!(d.leaf_values.len(), 10);
+        assert_eq!(d.usage().live_slots, a.usage().live_slots);
+        // depth first: p's group before q's
+        let p2 = chain(&mut d, 15, 3);
+        assert_eq!(d.first_child(p2), LEAF_POOL);
+        let kids: Vec<_> = d.children(p2).map(|(i, c)| (i, d.value(c), d.extra(c))).collect();
+        assert_eq!(kids, vec![(2, 2.0, 102), (6, 6.0, 106)]);
+        // real bytes: 9 per inner slot, 8 per voxel with extras
+        assert_eq!(d.usage().bytes_reserved, d.values.len() * 13 + 10 * 8);
+        // removing the chain frees both pools
+        d.remove_all_children(0);
+        assert_eq!(d.usage().live_slots, 1);
+    }
+
+    /// Extends a chain of child 0s from `n` at `depth` down to `to`.
+    fn chain_below(a: &mut NodeArena, mut n: NodeId, depth: u8, to: u8) -> NodeId {
+        for d in depth..to {
+            n = a.insert_child(n, 0, 0.0, d);
+        }
+        n
     }
 }

@@ -62,7 +62,7 @@ impl CountingTree {
                 Some(c) => c,
                 None => {
                     self.size += 1;
-                    a.insert_child(node, pos, 0.0)
+                    a.insert_child(node, pos, 0.0, depth)
                 }
             };
             a.set_extra(node, a.extra(node).wrapping_add(1));

@@ -6,9 +6,9 @@ mod cursor;
 mod iter;
 mod search_index;
 
-pub(crate) use arena::prefetch;
 pub(crate) use arena::LabelFill;
 use arena::PreorderFill;
+pub(crate) use arena::{in_leaf_pool, leaf_index, Parts};
 pub use arena::{ArenaUsage, NodeArena, NodeId};
 pub use counting::CountingTree;
 pub(crate) use cursor::PathSearch;
@@ -301,7 +301,7 @@ impl OccupancyTree {
                     c
                 }
                 None if !arena.has_children(node) && !created => {
-                    arena.expand_node(node);
+                    arena.expand_node(node, depth);
                     self.size += 8;
                     created = false;
                     arena.child(node, pos).expect("just expanded")
@@ -309,7 +309,7 @@ impl OccupancyTree {
                 None => {
                     self.size += 1;
                     created = true;
-                    arena.insert_child(node, pos, 0.0)
+                    arena.insert_child(node, pos, 0.0, depth)
                 }
             };
         }
@@ -409,9 +409,7 @@ impl OccupancyTree {
         let sensor = self.sensor;
         if let Some(a) = self.arena.as_mut() {
             // free slots are rewritten too; their values are never read
-            for v in a.values_mut() {
-                *v = sensor.max_likelihood(*v);
-            }
+            a.map_values(|v| sensor.max_likelihood(v));
         }
     }
 
@@ -486,7 +484,7 @@ impl OccupancyTree {
                 return;
             }
             if !a.has_children(n) {
-                a.expand_node(n);
+                a.expand_node(n, depth);
                 *added += 8;
             }
             let first = a.first_child(n);
@@ -515,7 +513,7 @@ impl OccupancyTree {
             let pos = key.child_index(depth);
             if a.child(n, pos).is_none() {
                 if !a.has_children(n) && n != ROOT {
-                    a.expand_node(n);
+                    a.expand_node(n, depth);
                     t.size += 8;
                 } else {
                     return false;
@@ -589,7 +587,7 @@ impl OccupancyTree {
             return;
         };
         let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
-        let (_, masks, first_child, _) = a.parts();
+        let (masks, first_child) = (a.parts().masks, a.parts().first_child);
         for chunk in keys.chunks(LANES) {
             let mut code = [0u64; LANES];
             for (c, k) in code.iter_mut().zip(chunk) {
@@ -954,12 +952,12 @@ impl Batch<'_> {
             if self.sensor.is_saturated(a.value(n), self.delta) {
                 return false;
             }
-            a.expand_node(n);
+            a.expand_node(n, depth);
             self.size += 8;
         } else {
             new_children = needed & !mask;
             if new_children != 0 {
-                a.add_missing_children(n, new_children, 0.0);
+                a.add_missing_children(n, new_children, 0.0, depth);
                 self.size += new_children.count_ones() as isize;
             }
         }
