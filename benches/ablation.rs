@@ -28,7 +28,11 @@ static ALLOC: CountingAlloc = CountingAlloc;
 /// Layouts measured per dataset: (id, label, description).
 const LAYOUTS: [(&str, &str, &str); 6] = [
     ("pointer", "pointer (paper)", "one `Box` per node + lazily allocated `[Option<Box<Node>>; 8]` per inner node"),
-    ("arena-key", "arena, per key", "`OccupancyTree` (9 B/node SoA arena) driven by `update(key, delta)`"),
+    (
+        "arena-key",
+        "arena, per key",
+        "`OccupancyTree` (SoA arena: 9 B per node above depth 16, 4 B per voxel) driven by `update(key, delta)`",
+    ),
     ("arena-batch", "arena, batch", "`OccupancyTree` driven by `update_batch` (the `insert_point_cloud` path)"),
     ("arena-compact", "arena, batch + compact", "as *arena, batch*, then `compact()` after the last scan"),
     ("block8", "block8", "8-slot blocks of `{f32 value, u32 child_block}` (64 B per inner node)"),
@@ -404,6 +408,7 @@ fn run_stats(c: &ChildArgs) -> Value {
     let occupied: f64 = tree.leaves(0).filter(|n| tree.is_occupied(n.value)).map(|n| n.size().powi(3)).sum();
     let grid = tree.memory_full_grid(BoundsRule::CenterHalfSize);
     let (n, l, i) = counts(&tree);
+    let voxels = tree.leaves(0).filter(|n| n.depth == 16).count();
     let mut ot_bytes = Vec::new();
     ot::write(&tree, &mut ot_bytes).unwrap();
     let mut bt_bytes = Vec::new();
@@ -433,7 +438,7 @@ fn run_stats(c: &ChildArgs) -> Value {
 
     json!({
         "size": size, "known_volume": known, "occupied_volume": occupied, "full_grid": grid,
-        "pruned": {"nodes": n, "leaves": l, "inner": i, "octomap": tree.octomap_memory_usage(),
+        "pruned": {"nodes": n, "leaves": l, "inner": i, "voxels": voxels, "octomap": tree.octomap_memory_usage(),
                    "paper32": paper_bytes(i, l, 4), "paper64": paper_bytes(i, l, 8), "arena_compact": pruned_arena},
         "ml": {"nodes": mn, "leaves": mlv, "inner": mi, "octomap": ml_octomap,
                "paper32": paper_bytes(mi, mlv, 4), "paper64": paper_bytes(mi, mlv, 8), "arena_compact": ml_arena},
@@ -870,10 +875,12 @@ fn write_report(o: &Opts, ds: &[Dataset], elapsed: f64, load: [String; 2]) {
         let c = &d.layouts[ac];
         let pt = &d.layouts[p];
         let frac = f(&d.stats["pruned"]["inner"]) / f(&d.stats["pruned"]["nodes"]);
+        let voxels = f(&d.stats["pruned"]["voxels"]) / f(&d.stats["pruned"]["nodes"]);
         let mut r = vec![
             name(d),
             format!("{frac:.3}"),
-            format!("{:.3}", 9.0 / (16.0 + 64.0 * frac)),
+            format!("{voxels:.3}"),
+            format!("{:.3}", (9.0 - 5.0 * voxels) / (16.0 + 64.0 * frac)),
             mark(f(&a["live"]) / f(&pt["live"]), 0.25),
             mark(f(&a["heap"]) / f(&pt["heap"]), 0.25),
             mark(f(&c["live"]) / f(&pt["live"]), 0.25),
@@ -894,6 +901,7 @@ fn write_report(o: &Opts, ds: &[Dataset], elapsed: f64, load: [String; 2]) {
             &[
                 "dataset",
                 "f",
+                "v",
                 "bound",
                 "T1 requested",
                 "T1 heap",
@@ -902,17 +910,18 @@ fn write_report(o: &Opts, ds: &[Dataset], elapsed: f64, load: [String; 2]) {
                 "T2 heap",
                 "T2 RSS, compacted",
             ],
-            &[false, true, true, true, true, true, true, true, true],
+            &[false, true, true, true, true, true, true, true, true, true],
             &rows,
         ),
     );
     w(&mut md, "");
     w(
         &mut md,
-        "Reading: the arena holds 9 B per node, the pointer tree `16 + 64·f` B per node where `f` is the fraction \
-         of inner nodes (column *f*), so on requested bytes the ratio is bounded below by `9 / (16 + 64·f)` \
-         (column *bound*: growth slack of the arena's vectors comes on top unless compacted); it can reach 1/4 \
-         only when `f ≥ 0.3125`. Against malloc's real footprint (heap: a 16 B box is a 32 B chunk, a 64 B child \
+        "Reading: the arena holds 9 B per node above depth 16 and 4 B per depth-16 voxel (value-only leaf pool), \
+         `9 − 5·v` B per node where `v` is the fraction of nodes at depth 16 (column *v*); the pointer tree holds \
+         `16 + 64·f` B per node where `f` is the fraction of inner nodes (column *f*). So on requested bytes the \
+         ratio is bounded below by `(9 − 5·v) / (16 + 64·f)` (column *bound*: growth slack of the arena's vectors \
+         and free runs come on top unless compacted). Against malloc's real footprint (heap: a 16 B box is a 32 B chunk, a 64 B child \
          array an 80 B chunk) the pointer tree costs `32 + 80·f` B per node.",
     );
     w(&mut md, "");

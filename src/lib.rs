@@ -41,5 +41,6 @@ pub use ray::{CastOptions, CastOutcome, FanRay, RayFan, RayKeys};
 pub use scan::{OutOfMap, ScanOptions, ScanReport, UpdateBox};
 pub use sensor::{SensorModel, SensorProbabilities};
 pub use tree::{
-    Bounds, BoundsRule, Clock, CountingTree, Found, InnerNodes, KeyBox, NodeKind, OccupancyTree, SearchIndex, TreeError,
+    Bounds, BoundsRule, Clock, Compaction, CountingTree, Found, InnerNodes, KeyBox, NodeKind, OccupancyTree,
+    SearchIndex, TreeError,
 };

@@ -315,10 +315,10 @@ impl NodeArena {
     fn push_run_growing(&mut self, len: usize) -> NodeId {
         let start = self.values.len();
         assert!(start + len < LEAF_POOL as usize, "node arena exceeds 2^31 inner slots");
-        // grow by a quarter rather than doubling: large reallocations are
+        // grow by an eighth rather than doubling: large reallocations are
         // remapped in place by the allocator, and peak memory stays low; keep
         // room for eight more slots, which the fast path appends
-        let more = (len + 8).max(start / 4).max(1024);
+        let more = (len + 8).max(start / 8).max(1024);
         if start + len + 8 > self.values.capacity() {
             self.values.reserve_exact(more);
             self.masks.reserve_exact(more);
@@ -351,13 +351,13 @@ impl NodeArena {
         LEAF_POOL | start as NodeId
     }
 
-    /// Makes room for `len` more leaf slots, growing by a quarter.
+    /// Makes room for `len` more leaf slots, growing by an eighth.
     #[cold]
     #[inline(never)]
     fn grow_leaves(&mut self, len: usize) {
         let start = self.leaf_values.len();
         assert!(start + len < LEAF_POOL as usize, "node arena exceeds 2^31 leaf slots");
-        let more = len.max(start / 4).max(1024);
+        let more = len.max(start / 8).max(1024);
         self.leaf_values.reserve_exact(more);
         if self.default_extra.is_some() {
             self.leaf_extras.reserve_exact(more);

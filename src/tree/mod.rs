@@ -148,6 +148,24 @@ pub struct OccupancyTree {
     changes: Option<HashMap<Key, bool>>,
     kind: NodeKind,
     clock: Clock,
+    compaction: Compaction,
+}
+
+/// When the arena is re-laid (see [`OccupancyTree::compact`]) to give back
+/// the slots that moved and pruned child groups left free. Revisiting
+/// mapped space prunes more than it creates, and those slots are only
+/// reused by groups of their size: building an indoor map left up to 28%
+/// of the slots free.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Compaction {
+    /// After a batch update ([`OccupancyTree::update_batch`], so after each
+    /// scan of `insert_point_cloud`) that leaves more than an eighth of the
+    /// slots free. Each compaction follows at least that many frees, so its
+    /// cost is bounded by a few slot moves per update.
+    #[default]
+    Automatic,
+    /// Only when [`OccupancyTree::compact`] is called.
+    Manual,
 }
 
 impl OccupancyTree {
@@ -173,6 +191,7 @@ impl OccupancyTree {
             changes: None,
             kind,
             clock: Clock::System,
+            compaction: Compaction::default(),
         })
     }
 
@@ -378,6 +397,12 @@ impl OccupancyTree {
         };
         batch.apply(ROOT, 0, codes, created);
         self.size = batch.size as usize;
+        if self.compaction == Compaction::Automatic {
+            let a = self.arena.as_mut().expect("root exists");
+            if a.free_slot_count() * 8 > a.slot_count() {
+                a.compact_in_place(ROOT);
+            }
+        }
     }
 
     /// Recomputes every inner node as the maximum of its children
@@ -843,6 +868,11 @@ impl OccupancyTree {
     /// Slot statistics of the arena.
     pub fn arena_usage(&self) -> Option<ArenaUsage> {
         self.arena.as_ref().map(|a| a.usage())
+    }
+
+    /// When the arena is compacted without being asked.
+    pub fn set_compaction(&mut self, compaction: Compaction) {
+        self.compaction = compaction;
     }
 
     /// Re-lays the arena in depth-first (Morton) order with no free slots,
