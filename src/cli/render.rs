@@ -101,7 +101,7 @@ fn top_view(tree: &OccupancyTree, a: &Args, depth: u8) -> Result<(u32, u32, Vec<
     let (ox, oy) = (cx - s * f64::from(w) / 2.0, cy + s * f64::from(h) / 2.0);
     let (wu, hu) = (w as usize, h as usize);
     let mut top = vec![f64::NEG_INFINITY; wu * hu];
-    let mut free = vec![false; wu * hu];
+    let mut free = bitvec::bitvec![0; wu * hu];
     let span = |a: f64, b: f64, n: usize| -> Option<(usize, usize)> {
         let (i0, i1) = (a.floor(), (b.ceil() - 1.0).max(a.floor()));
         if i1 < 0.0 || i0 >= n as f64 {
@@ -127,7 +127,7 @@ fn top_view(tree: &OccupancyTree, a: &Args, depth: u8) -> Result<(u32, u32, Vec<
                 if occ {
                     top[i] = top[i].max(c[2] + half);
                 } else {
-                    free[i] = true;
+                    free.set(i, true);
                 }
             }
         }

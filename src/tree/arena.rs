@@ -24,8 +24,6 @@
 //! add a `u32` *extra* per node in each pool; plain trees leave those arrays
 //! empty and pay nothing for them.
 
-use bitvec::vec::BitVec;
-
 use crate::key::TREE_DEPTH;
 
 /// Id of a node in the arena.
@@ -607,14 +605,15 @@ impl NodeArena {
         self.leaf_extras.shrink_to_fit();
     }
 
-    /// Re-lays both pools in place in depth-first order: the root first,
-    /// each node's child group placed as the node is visited, no free runs
-    /// left. Needs 4 bytes and a bit per slot of scratch space instead of
-    /// a full copy.
+    /// Re-lays both pools in depth-first order: the root first, each
+    /// node's child group placed as the node is visited, no free runs left.
+    /// Groups move whole, so each array is rebuilt by copying runs (one
+    /// cache miss per group rather than per slot); the scratch space is the
+    /// run list (5 bytes per group) and one array's new copy at a time.
     pub fn compact_in_place(&mut self, root: NodeId) {
-        let mut new_of = vec![UNUSED; self.values.len()];
-        let mut leaf_new_of = vec![UNUSED; self.leaf_values.len()];
-        new_of[root as usize] = 0;
+        let mut inner = Runs::default();
+        let mut leaf = Runs::default();
+        inner.push(root, 1);
         let (mut next, mut next_leaf) = (1u32, 0u32);
         let mut stack = vec![root];
         while let Some(n) = stack.pop() {
@@ -623,34 +622,27 @@ impl NodeArena {
                 continue;
             }
             // each first child is read once, here, so it can be rewritten
-            // in its old slot; the slots move afterwards
+            // before the slots move
             let first = self.first_child[n as usize];
             if in_leaf_pool(first) {
-                for i in 0..k {
-                    leaf_new_of[leaf_index(first + i)] = next_leaf + i;
-                }
+                leaf.push(leaf_index(first) as u32, k);
                 self.first_child[n as usize] = LEAF_POOL | next_leaf;
                 next_leaf += k;
             } else {
-                for i in 0..k {
-                    new_of[(first + i) as usize] = next + i;
-                }
+                inner.push(first, k);
                 self.first_child[n as usize] = next;
                 next += k;
                 stack.extend((0..k).rev().map(|i| first + i));
             }
         }
-        let (live, live_leaves) = (next as usize, next_leaf as usize);
-        let mut done = BitVec::new();
-        move_slots(&mut self.values, &new_of, &mut done, live);
-        move_slots(&mut self.masks, &new_of, &mut done, live);
-        move_slots(&mut self.first_child, &new_of, &mut done, live);
-        move_slots(&mut self.leaf_values, &leaf_new_of, &mut done, live_leaves);
+        inner.gather(&mut self.values, next);
+        inner.gather(&mut self.masks, next);
+        inner.gather(&mut self.first_child, next);
+        leaf.gather(&mut self.leaf_values, next_leaf);
         if self.default_extra.is_some() {
-            move_slots(&mut self.extras, &new_of, &mut done, live);
-            move_slots(&mut self.leaf_extras, &leaf_new_of, &mut done, live_leaves);
+            inner.gather(&mut self.extras, next);
+            leaf.gather(&mut self.leaf_extras, next_leaf);
         }
-        self.shrink_to_fit();
         self.free = FreeRuns::default();
         self.leaf_free = FreeRuns::default();
     }
@@ -692,35 +684,29 @@ impl NodeArena {
     }
 }
 
-/// Marks slots that no live node maps to in [`NodeArena::compact_in_place`].
-const UNUSED: u32 = u32::MAX;
+/// Child groups in their new order, as (first old slot, length) runs.
+#[derive(Default)]
+struct Runs {
+    firsts: Vec<u32>,
+    lens: Vec<u8>,
+}
 
-/// Moves `slots[i]` to `slots[new_of[i]]` for every slot with a new place
-/// (a permutation of `0..live` on those), then drops all past `live`.
-/// Follows each chain of moves, picking up what a move overwrites; a chain
-/// ends at a slot whose content is unused or already picked up.
-fn move_slots<T: Copy>(slots: &mut Vec<T>, new_of: &[u32], picked: &mut BitVec, live: usize) {
-    picked.clear();
-    picked.resize(slots.len(), false);
-    for start in 0..slots.len() {
-        let mut dst = new_of[start];
-        if dst == UNUSED || picked[start] {
-            continue;
-        }
-        picked.set(start, true);
-        let mut carry = slots[start];
-        loop {
-            let d = dst as usize;
-            if new_of[d] == UNUSED || picked[d] {
-                slots[d] = carry;
-                break;
-            }
-            picked.set(d, true);
-            carry = std::mem::replace(&mut slots[d], carry);
-            dst = new_of[d];
-        }
+impl Runs {
+    fn push(&mut self, first: u32, len: u32) {
+        self.firsts.push(first);
+        self.lens.push(len as u8);
     }
-    slots.truncate(live);
+
+    /// Replaces `slots` by the concatenation of the runs (`live` slots).
+    fn gather<T: Copy>(&self, slots: &mut Vec<T>, live: u32) {
+        let mut out = Vec::with_capacity(live as usize);
+        for (&first, &len) in self.firsts.iter().zip(&self.lens) {
+            let first = first as usize;
+            out.extend_from_slice(&slots[first..first + len as usize]);
+        }
+        debug_assert_eq!(out.len(), live as usize);
+        *slots = out;
+    }
 }
 
 /// Why [`PreorderFill::push`] refused a node.
