@@ -1,12 +1,17 @@
-//! Prints arena slot usage while building a map from a `.graph` file:
-//! `cargo run --release --example arena_usage -- SCANS.graph RES`.
+//! Prints the free fraction of arena slots after each scan while building a
+//! map from a `.graph` file, then the compaction's time and effect:
+//! `cargo run --release --example arena_usage -- SCANS.graph [RES] [manual]`
+//! (`manual`: no automatic compaction during the build).
 use octolinear::formats::graph;
-use octolinear::{OccupancyTree, ScanOptions};
+use octolinear::{Compaction, OccupancyTree, ScanOptions};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let g = graph::read_file(&args[1])?;
     let mut tree = OccupancyTree::new(args.get(2).map_or(Ok(0.1), |r| r.parse())?)?;
+    if args.get(3).is_some_and(|a| a == "manual") {
+        tree.set_compaction(Compaction::Manual);
+    }
     let t = std::time::Instant::now();
     for node in &g.nodes {
         let (cloud, origin) = node.graph2tree();

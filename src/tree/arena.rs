@@ -147,6 +147,19 @@ impl Parts<'_> {
         }
     }
 
+    /// One step of a descent: child `pos` of `n`, which lies above depth
+    /// 16 (so in the inner pool, indexed without the pool check), or
+    /// `Err(mask of n)` when that child does not exist.
+    #[inline(always)]
+    pub fn descend(&self, n: NodeId, pos: u64) -> Result<NodeId, u8> {
+        let m = self.masks[n as usize];
+        if m & (1 << pos) == 0 {
+            Err(m)
+        } else {
+            Ok(self.first_child[n as usize] + (u32::from(m) & ((1 << pos) - 1)).count_ones())
+        }
+    }
+
     /// Asks for the cache lines of the group starting at `first`.
     #[inline(always)]
     pub fn prefetch_group(&self, first: NodeId) {

@@ -30,16 +30,17 @@ impl<'a> PathSearch<'a> {
         let start = (common as u8).min(self.len);
         self.key = key;
         self.len = start;
+        let p = a.parts();
         let mut node = self.path[start as usize];
         for d in start..TREE_DEPTH {
-            match a.child(node, key.child_index(d)) {
-                Some(c) => node = c,
-                None if a.has_children(node) => return None,
-                None => return Some(Found { value: a.value(node), depth: d, is_leaf: true, extra: a.extra(node) }),
+            match p.descend(node, key.child_index(d) as u64) {
+                Ok(c) => node = c,
+                Err(0) => return Some(Found { value: p.value(node), depth: d, is_leaf: true, extra: p.extra(node) }),
+                Err(_) => return None,
             }
             self.path[d as usize + 1] = node;
             self.len = d + 1;
         }
-        Some(Found { value: a.value(node), depth: TREE_DEPTH, is_leaf: !a.has_children(node), extra: a.extra(node) })
+        Some(Found { value: p.value(node), depth: TREE_DEPTH, is_leaf: true, extra: p.extra(node) })
     }
 }

@@ -588,15 +588,16 @@ impl OccupancyTree {
         let a = self.arena.as_ref()?;
         let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
         let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
+        let code = MortonCode::encode(key).0;
+        let p = a.parts();
         let mut node = ROOT;
         for d in 0..depth {
-            match a.child(node, key.child_index(d)) {
-                Some(c) => node = c,
-                None if a.has_children(node) => return None,
-                None => return Some((node, d, true)),
+            match p.descend(node, (code >> (3 * (TREE_DEPTH - 1 - d))) & 7) {
+                Ok(c) => node = c,
+                Err(m) => return (m == 0).then_some((node, d, true)),
             }
         }
-        Some((node, depth, !a.has_children(node)))
+        Some((node, depth, depth == TREE_DEPTH || p.masks[node as usize] == 0))
     }
 
     /// [`Self::search`] for many keys at once, answers in `out` (cleared
@@ -612,7 +613,7 @@ impl OccupancyTree {
             return;
         };
         let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
-        let (masks, first_child) = (a.parts().masks, a.parts().first_child);
+        let p = a.parts();
         for chunk in keys.chunks(LANES) {
             let mut code = [0u64; LANES];
             for (c, k) in code.iter_mut().zip(chunk) {
@@ -628,15 +629,13 @@ impl OccupancyTree {
                 while lanes != 0 {
                     let l = lanes.trailing_zeros() as usize;
                     lanes &= lanes - 1;
-                    let n = node[l] as usize;
-                    let pos = (code[l] >> shift) & 7;
-                    let m = masks[n];
-                    if m & (1 << pos) != 0 {
-                        node[l] = first_child[n] + (u32::from(m) & ((1 << pos) - 1)).count_ones();
-                    } else {
-                        walking &= !(1 << l);
-                        if m == 0 {
-                            found[l] = Some((node[l], d, true));
+                    match p.descend(node[l], (code[l] >> shift) & 7) {
+                        Ok(c) => node[l] = c,
+                        Err(m) => {
+                            walking &= !(1 << l);
+                            if m == 0 {
+                                found[l] = Some((node[l], d, true));
+                            }
                         }
                     }
                 }
