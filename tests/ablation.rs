@@ -6,7 +6,7 @@
 
 use octolinear::ablation::alloc::{self, CountingAlloc};
 use octolinear::ablation::pointer::PointerTree;
-use octolinear::ablation::variants::{ArenaBatch, ArenaCompact, ArenaPerKey, Block8, Split8};
+use octolinear::ablation::variants::{ArenaBatch, ArenaCompact, ArenaPerKey, Block8, MappedLayout, Split8};
 use octolinear::ablation::{build, graph2tree_sensor, leaf_dump, tree_leaf_dump, Layout, LeafRecord, ScanKeys};
 use octolinear::simulate::{simulate, LidarConfig, SceneKind, SplitMix64};
 use octolinear::{InnerNodes, Key, OccupancyTree, Point3, ScanOptions, SensorModel};
@@ -64,6 +64,7 @@ fn check_all(res: f64, sensor: SensorModel, keys: &[ScanKeys], want: &[LeafRecor
     one::<ArenaCompact>("arena compact", res, sensor, keys, want, want_size);
     one::<Block8>("block8", res, sensor, keys, want, want_size);
     one::<Split8>("split8", res, sensor, keys, want, want_size);
+    one::<MappedLayout>("mapped", res, sensor, keys, want, want_size);
 }
 
 #[test]
@@ -121,6 +122,8 @@ fn searches_and_ray_casts_agree() {
     let (tree, keys) = reference(0.1, sensor, &s);
     let p: PointerTree = build(0.1, sensor, &keys);
     let b: Split8 = build(0.1, sensor, &keys);
+    let m: MappedLayout = build(0.1, sensor, &keys);
+    assert!(m.map().is_some(), "finish() wrote the .olm bytes");
     let mut rng = SplitMix64(9);
     for _ in 0..20_000 {
         let k = Key::new(
@@ -131,6 +134,7 @@ fn searches_and_ray_casts_agree() {
         let want = tree.search(k, 0).map(|f| f.value.to_bits());
         assert_eq!(p.search(k).map(f32::to_bits), want, "{k}");
         assert_eq!(b.search(k).map(f32::to_bits), want, "{k}");
+        assert_eq!(m.search(k).map(f32::to_bits), want, "{k}");
     }
     let ks = tree.key_space();
     let a: ArenaBatch = build(0.1, sensor, &keys);

@@ -7,6 +7,9 @@
 //!   the batch walk ([`OccupancyTree::update_batch`], what
 //!   `insert_point_cloud` uses), and optionally [`OccupancyTree::compact`]ed
 //!   after the last scan.
+//! * [`MappedLayout`] is the native read-only format: built as
+//!   [`ArenaBatch`], written to `.olm` bytes in [`Layout::finish`] (the tree
+//!   is dropped) and queried in place through a `MapView`.
 //! * [`BlockTree`] keeps eight slots per inner node, one block per child
 //!   array, absent children marked by a sentinel: [`Interleaved`] stores
 //!   8-byte `{f32 value, u32 child_block}` slots (64-byte blocks), [`Split`]
@@ -14,6 +17,7 @@
 
 use super::{Layout, MAX_DEPTH};
 use crate::key::Key;
+use crate::mapped::{self, MappedMap};
 use crate::morton::MortonCode;
 use crate::sensor::SensorModel;
 use crate::tree::{InnerNodes, OccupancyTree};
@@ -83,6 +87,82 @@ impl<const BATCH: bool, const COMPACT: bool> Layout for ArenaLayout<BATCH, COMPA
     /// tree object.
     fn bytes_formula(&self) -> usize {
         self.tree.memory_usage()
+    }
+}
+
+// ----- the native mapped format ---------------------------------------
+
+/// `.olm` (full variant, the writer's default rank index) held in a `Vec`
+/// and queried in place. Until [`Layout::finish`] it is an [`ArenaBatch`];
+/// updates after that are refused by a panic (it is read-only).
+pub struct MappedLayout {
+    building: Option<ArenaBatch>,
+    map: Option<MappedMap<Vec<u8>>>,
+}
+
+impl MappedLayout {
+    fn building(&mut self) -> &mut ArenaBatch {
+        self.building.as_mut().expect("a mapped layout is read-only after finish()")
+    }
+
+    /// The mapped map (after [`Layout::finish`]).
+    pub fn map(&self) -> Option<&MappedMap<Vec<u8>>> {
+        self.map.as_ref()
+    }
+}
+
+impl Layout for MappedLayout {
+    fn new(resolution: f64, sensor: SensorModel) -> Self {
+        MappedLayout { building: Some(ArenaBatch::new(resolution, sensor)), map: None }
+    }
+
+    fn apply_update(&mut self, key: Key, delta: f32, sensor: &SensorModel) {
+        self.building().apply_update(key, delta, sensor);
+    }
+
+    fn apply_scan(&mut self, free: &[Key], occupied: &[Key], sensor: &SensorModel) {
+        self.building().apply_scan(free, occupied, sensor);
+    }
+
+    fn finish(&mut self) {
+        let Some(arena) = self.building.take() else { return };
+        let mut bytes = mapped::to_bytes(&arena.tree, mapped::WriteOptions::default()).expect("writing to a Vec");
+        drop(arena);
+        bytes.shrink_to_fit();
+        self.map = Some(MappedMap::new(bytes).expect("the writer's own output"));
+    }
+
+    fn search(&self, key: Key) -> Option<f32> {
+        match (&self.map, &self.building) {
+            (Some(m), _) => m.view().search(key, 0).map(|f| f.value),
+            (None, Some(b)) => b.search(key),
+            (None, None) => None,
+        }
+    }
+
+    fn for_each_leaf<F: FnMut(Key, u8, f32)>(&self, mut f: F) {
+        match (&self.map, &self.building) {
+            (Some(m), _) => m.view().leaves(0).for_each(|n| f(n.key, n.depth, n.value)),
+            (None, Some(b)) => b.for_each_leaf(f),
+            (None, None) => {}
+        }
+    }
+
+    fn node_count(&self) -> usize {
+        match (&self.map, &self.building) {
+            (Some(m), _) => m.view().size_counter() as usize,
+            (None, Some(b)) => b.node_count(),
+            (None, None) => 0,
+        }
+    }
+
+    /// The `.olm` file's size once written, the arena's before.
+    fn bytes_formula(&self) -> usize {
+        match (&self.map, &self.building) {
+            (Some(m), _) => m.bytes().len(),
+            (None, Some(b)) => b.bytes_formula(),
+            (None, None) => 0,
+        }
     }
 }
 
