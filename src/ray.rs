@@ -7,7 +7,7 @@
 //! they are reproduced exactly here.
 
 use crate::geometry::Point3;
-use crate::key::{Key, KeyError, KeySpace, KEY_CENTER};
+use crate::key::{Key, KeyError, KeySpace};
 use crate::morton::MortonCode;
 use crate::sensor::SensorModel;
 use crate::tree::{Found, OccupancyTree};
@@ -201,18 +201,9 @@ pub struct AxisSteps {
 impl FanRay {
     #[inline(always)]
     fn new(start: u64, step: [i32; 3], t_max: [f64; 3], t_delta: [f64; 3], end_code: u64, length: f64) -> Self {
-        let mut fill = [0u64; 3];
-        let mut add = [0u64; 3];
-        for i in 0..3 {
-            (fill[i], add[i]) = match step[i] {
-                1 => (!AXIS_MASKS[i], 1 << i),
-                -1 => (0, (1u64 << i).wrapping_neg()),
-                _ => (0, 0),
-            };
-        }
         FanRay {
             state: WalkState { code: start, end_code, length, clock: StepClock::new(t_max, t_delta) },
-            steps: AxisSteps { fill, add },
+            steps: AxisSteps::new(step),
         }
     }
 
@@ -233,6 +224,30 @@ impl FanRay {
     }
 }
 
+impl AxisSteps {
+    /// The constants for a ray stepping by `step` (-1, 0 or +1) per axis.
+    #[inline(always)]
+    fn new(step: [i32; 3]) -> Self {
+        let mut fill = [0u64; 3];
+        let mut add = [0u64; 3];
+        for i in 0..3 {
+            (fill[i], add[i]) = match step[i] {
+                1 => (!AXIS_MASKS[i], 1 << i),
+                -1 => (0, (1u64 << i).wrapping_neg()),
+                _ => (0, 0),
+            };
+        }
+        AxisSteps { fill, add }
+    }
+
+    /// `code` moved one voxel along `dim`.
+    #[inline(always)]
+    fn apply(&self, code: u64, dim: usize) -> u64 {
+        let m = AXIS_MASKS[dim];
+        ((((code & m) | self.fill[dim]).wrapping_add(self.add[dim])) & m) | (code & !m)
+    }
+}
+
 impl WalkState {
     /// [`FanRay::next_code`], given the ray's [`AxisSteps`].
     #[inline(always)]
@@ -240,8 +255,7 @@ impl WalkState {
         // the code in one register; the axis to step comes from compare
         // masks (no branch on it), its constants from small tables
         let dim = self.clock.step().min(2);
-        let (m, fl, ad) = (AXIS_MASKS[dim], steps.fill[dim], steps.add[dim]);
-        self.code = ((((self.code & m) | fl).wrapping_add(ad)) & m) | (self.code & !m);
+        self.code = steps.apply(self.code, dim);
         if self.code == self.end_code || self.clock.min() > self.length {
             self.length = f64::NEG_INFINITY; // stays done
             return None;
@@ -511,7 +525,7 @@ impl OccupancyTree {
     /// Follows a ray until it meets an occupied voxel, as OctoMap's `castRay`.
     pub fn cast_ray(&self, origin: Point3, direction: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
         let mut path = crate::tree::PathSearch::new(self);
-        cast_ray_with(self.key_space(), self.sensor(), |k| path.search(k), origin, direction, opts)
+        cast_ray_with(self.key_space(), self.sensor(), |c| path.search(c), origin, direction, opts)
     }
 
     /// Where a ray from `origin` along `direction` enters the voxel centred
@@ -557,29 +571,42 @@ impl OccupancyTree {
     }
 }
 
-/// OctoMap's `castRay` over any map, given its voxel search (depth 16):
-/// shared by the arena tree and the memory-mapped view, so both step
-/// exactly alike.
+/// OctoMap's `castRay` over any map, given its voxel search (depth 16) by
+/// Morton code: shared by the arena tree and the memory-mapped view, so
+/// both step exactly alike. The walk stays on Morton codes (as
+/// [`FanRay`]); keys are decoded only where a point is reported or the
+/// maximum range is tested.
 pub(crate) fn cast_ray_with(
     keys: &KeySpace,
     sensor: &SensorModel,
-    mut search: impl FnMut(Key) -> Option<Found>,
+    mut search: impl FnMut(u64) -> Option<Found>,
     origin: Point3,
     direction: Point3,
     opts: CastOptions,
 ) -> Result<CastOutcome, CastError> {
+    let center_of = |code: u64| keys.key_to_point(MortonCode(code).decode());
     let start = keys.key(origin)?;
-    match search(start) {
-        Some(n) if sensor.is_occupied(n.value) => return Ok(CastOutcome::Occupied { end: keys.key_to_point(start) }),
+    let mut code = MortonCode::encode(start).0;
+    match search(code) {
+        Some(n) if sensor.is_occupied(n.value) => return Ok(CastOutcome::Occupied { end: center_of(code) }),
         Some(_) => {}
-        None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end: keys.key_to_point(start) }),
+        None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end: center_of(code) }),
         None => {}
     }
     let direction = direction.normalized();
-    let mut dda = Dda::new(keys, origin, start, direction, false);
+    let dda = Dda::new(keys, origin, start, direction, false);
     if dda.step == [0; 3] {
         return Err(CastError::ZeroDirection);
     }
+    let steps = AxisSteps::new(dda.step);
+    // per axis, its bits in a code at the last key before leaving the map
+    // (an axis that does not step is never chosen, and no code matches)
+    let edge: [u64; 3] = std::array::from_fn(|i| match dda.step[i] {
+        1 => AXIS_MASKS[i],
+        -1 => 0,
+        _ => u64::MAX,
+    });
+    let mut clock = StepClock::new(dda.t_max, dda.t_delta);
     let max_range = opts.max_range.unwrap_or(-1.0);
     let max_range_set = max_range > 0.0;
     let max_range_sq = max_range * max_range;
@@ -589,14 +616,15 @@ pub(crate) fn cast_ray_with(
     let surely_inside = (max_range - keys.resolution()) * (1.0 - 1e-6);
     let o = [origin.x, origin.y, origin.z];
     loop {
-        let dim = min_axis(&dda.t_max);
-        let k = dda.key.0[dim];
-        if (dda.step[dim] < 0 && k == 0) || (dda.step[dim] > 0 && u32::from(k) == 2 * KEY_CENTER - 1) {
-            return Ok(CastOutcome::LeftMap { end: keys.key_to_point(dda.key) });
+        // the smallest t_max is where the next voxel is entered
+        let t_entry = clock.min();
+        let dim = clock.step().min(2);
+        if code & AXIS_MASKS[dim] == edge[dim] {
+            return Ok(CastOutcome::LeftMap { end: center_of(code) });
         }
-        let t_entry = dda.advance(dim);
+        code = steps.apply(code, dim);
         if max_range_set && t_entry >= surely_inside {
-            let end = keys.key_to_point(dda.key);
+            let end = center_of(code);
             let e = [end.x, end.y, end.z];
             let mut dist_sq = 0.0f64;
             for j in 0..3 {
@@ -607,12 +635,10 @@ pub(crate) fn cast_ray_with(
                 return Ok(CastOutcome::MaxRange { end });
             }
         }
-        match search(dda.key) {
-            Some(n) if sensor.is_occupied(n.value) => {
-                return Ok(CastOutcome::Occupied { end: keys.key_to_point(dda.key) })
-            }
+        match search(code) {
+            Some(n) if sensor.is_occupied(n.value) => return Ok(CastOutcome::Occupied { end: center_of(code) }),
             Some(_) => {}
-            None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end: keys.key_to_point(dda.key) }),
+            None if !opts.ignore_unknown => return Ok(CastOutcome::Unknown { end: center_of(code) }),
             None => {}
         }
     }

@@ -386,7 +386,7 @@ impl<'a> MapView<'a> {
         let (keys, sensor) = (&self.meta.keys, &self.meta.header.sensor);
         with_nav!(self.nav, |nav| {
             let mut path = query::PathSearch::new(nav);
-            crate::ray::cast_ray_with(keys, sensor, |k| path.search(k), origin, direction, opts)
+            crate::ray::cast_ray_with(keys, sensor, |c| path.search(c), origin, direction, opts)
         })
     }
 

@@ -10,9 +10,10 @@ use super::nav::{Extras, Nav, Node};
 use crate::geometry::Point3;
 use crate::key::packed;
 use crate::key::{adjust_key_to_depth, Key, KeySpace, KEY_CENTER, TREE_DEPTH};
+use crate::morton::MortonCode;
 use crate::ray::{CastError, CastOptions, CastOutcome};
 use crate::sensor::SensorModel;
-use crate::tree::{Found, KeyBox, OccupancyTree};
+use crate::tree::{shared_levels, Found, KeyBox, OccupancyTree};
 
 /// What ray casting needs from a map: OctoMap's `search` and its key space.
 /// Implemented by [`OccupancyTree`] and by the mapped views, so that one
@@ -331,7 +332,8 @@ pub fn cast_ray<M: OccupancyLookup + ?Sized>(
     if !map.has_occupancy() {
         return Err(CastError::NoOccupancy);
     }
-    crate::ray::cast_ray_with(map.key_space(), map.sensor(), |k| map.search(k, 0), origin, direction, opts)
+    let search = |code| map.search(MortonCode(code).decode(), 0);
+    crate::ray::cast_ray_with(map.key_space(), map.sensor(), search, origin, direction, opts)
 }
 
 /// Depth-16 searches that restart from the deepest node shared with the
@@ -340,37 +342,34 @@ pub fn cast_ray<M: OccupancyLookup + ?Sized>(
 /// Answers are those of [`search`]: the shared nodes are the same nodes.
 pub(crate) struct PathSearch<N: Nav> {
     nav: N,
-    key: Key,
-    /// Entries `0..len` hold the nodes at depths `0..len` on `key`'s path.
+    /// The previous query's Morton code.
+    code: u64,
+    /// Entries `0..len` hold the nodes at depths `0..len` on `code`'s path.
     len: u8,
     path: [(Node, f32, u8); TREE_DEPTH as usize + 1],
 }
 
 impl<N: Nav> PathSearch<N> {
     pub fn new(nav: N) -> Self {
-        PathSearch { nav, key: Key::ROOT, len: 0, path: [(Node::default(), 0.0, 0); TREE_DEPTH as usize + 1] }
+        PathSearch { nav, code: 0, len: 0, path: [(Node::default(), 0.0, 0); TREE_DEPTH as usize + 1] }
     }
 
+    /// `search(key, 0)` for the key whose Morton code is `code`.
     #[inline]
-    pub fn search(&mut self, key: Key) -> Option<Found> {
-        // levels whose child index is the same for both keys
-        let mut common = u32::from(TREE_DEPTH);
-        for a in 0..3 {
-            common = common.min((key.0[a] ^ self.key.0[a]).leading_zeros());
-        }
+    pub fn search(&mut self, code: u64) -> Option<Found> {
         let start = if self.len == 0 {
             let root = self.nav.root()?;
             let (v, m) = self.nav.get(root)?;
             self.path[0] = (root, v, m);
             0
         } else {
-            (common as u8).min(self.len - 1)
+            shared_levels(code, self.code).min(self.len - 1)
         };
-        self.key = key;
+        self.code = code;
         self.len = start + 1;
         let (mut node, mut value, mut mask) = self.path[start as usize];
         for d in start..TREE_DEPTH {
-            let pos = key.child_index(d);
+            let pos = ((code >> (3 * (15 - u32::from(d)))) & 7) as usize;
             if mask & (1 << pos) == 0 {
                 if mask != 0 {
                     return None;

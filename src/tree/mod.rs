@@ -11,7 +11,7 @@ use arena::PreorderFill;
 pub(crate) use arena::{in_leaf_pool, leaf_index, Parts};
 pub use arena::{ArenaUsage, NodeArena, NodeId};
 pub use counting::CountingTree;
-pub(crate) use cursor::PathSearch;
+pub(crate) use cursor::{shared_levels, PathSearch};
 pub use iter::{KeyBox, NodeItem, NodeIter};
 pub(crate) use search_index::LevelTables;
 pub use search_index::SearchIndex;
