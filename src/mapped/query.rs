@@ -346,41 +346,70 @@ pub(crate) struct PathSearch<N: Nav> {
     code: u64,
     /// Entries `0..len` hold the nodes at depths `0..len` on `code`'s path.
     len: u8,
+    /// A query sharing at least this many levels with `code` has `answer`
+    /// too (as in the tree's `PathSearch`).
+    settled: u8,
+    answer: Option<Found>,
     path: [(Node, f32, u8); TREE_DEPTH as usize + 1],
 }
 
 impl<N: Nav> PathSearch<N> {
     pub fn new(nav: N) -> Self {
-        PathSearch { nav, code: 0, len: 0, path: [(Node::default(), 0.0, 0); TREE_DEPTH as usize + 1] }
+        let path = [(Node::default(), 0.0, 0); TREE_DEPTH as usize + 1];
+        PathSearch { nav, code: 0, len: 0, settled: TREE_DEPTH + 1, answer: None, path }
     }
 
     /// `search(key, 0)` for the key whose Morton code is `code`.
-    #[inline]
+    #[inline(always)]
     pub fn search(&mut self, code: u64) -> Option<Found> {
+        let shared = shared_levels(code, self.code);
+        self.code = code;
+        if shared >= self.settled {
+            return self.answer;
+        }
         let start = if self.len == 0 {
-            let root = self.nav.root()?;
-            let (v, m) = self.nav.get(root)?;
-            self.path[0] = (root, v, m);
+            match self.nav.root().and_then(|r| Some((r, self.nav.get(r)?))) {
+                Some((root, (v, m))) => self.path[0] = (root, v, m),
+                // no root (or a corrupted one): `None` for every query
+                None => {
+                    (self.settled, self.answer) = (0, None);
+                    return None;
+                }
+            }
             0
         } else {
-            shared_levels(code, self.code).min(self.len - 1)
+            shared.min(self.len - 1)
         };
-        self.code = code;
-        self.len = start + 1;
+        self.descend(start, code)
+    }
+
+    /// The search from the path's node at depth `start`.
+    #[inline]
+    fn descend(&mut self, start: u8, code: u64) -> Option<Found> {
         let (mut node, mut value, mut mask) = self.path[start as usize];
-        for d in start..TREE_DEPTH {
+        let mut d = start;
+        let (answer, settled) = loop {
+            if d == TREE_DEPTH {
+                break (Some(Found { value, depth: d, is_leaf: mask == 0, extra: 0 }), d);
+            }
             let pos = ((code >> (3 * (15 - u32::from(d)))) & 7) as usize;
             if mask & (1 << pos) == 0 {
                 if mask != 0 {
-                    return None;
+                    break (None, d + 1);
                 }
-                return Some(Found { value, depth: d, is_leaf: true, extra: 0 });
+                break (Some(Found { value, depth: d, is_leaf: true, extra: 0 }), d);
             }
-            node = self.nav.child(node, mask, pos)?;
-            (value, mask) = self.nav.get(node)?;
-            self.path[d as usize + 1] = (node, value, mask);
-            self.len = d + 2;
-        }
-        Some(Found { value, depth: TREE_DEPTH, is_leaf: mask == 0, extra: 0 })
+            // a corrupted file may end the walk: no answer, as `search`
+            let Some((c, (v, m))) = self.nav.child(node, mask, pos).and_then(|c| Some((c, self.nav.get(c)?))) else {
+                self.len = d + 1;
+                self.settled = TREE_DEPTH + 1;
+                return None;
+            };
+            (node, value, mask) = (c, v, m);
+            d += 1;
+            self.path[d as usize] = (node, value, mask);
+        };
+        (self.len, self.settled, self.answer) = (d + 1, settled, answer);
+        answer
     }
 }
