@@ -383,8 +383,9 @@ impl<N: Nav> PathSearch<N> {
         self.descend(start, code)
     }
 
-    /// The search from the path's node at depth `start`.
-    #[inline]
+    /// The search from the path's node at depth `start` (kept out of
+    /// line, so that the caller's loop holds only the compare above).
+    #[inline(never)]
     fn descend(&mut self, start: u8, code: u64) -> Option<Found> {
         let (mut node, mut value, mut mask) = self.path[start as usize];
         let mut d = start;

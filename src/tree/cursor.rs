@@ -44,8 +44,9 @@ impl<'a> PathSearch<'a> {
         self.descend(shared.min(self.len), code)
     }
 
-    /// The search from the path's node at depth `start`.
-    #[inline]
+    /// The search from the path's node at depth `start` (kept out of
+    /// line, so that the caller's loop holds only the compare above).
+    #[inline(never)]
     fn descend(&mut self, start: u8, code: u64) -> Option<Found> {
         let p = self.parts?;
         let mut node = self.path[start as usize];
