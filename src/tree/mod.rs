@@ -5,6 +5,7 @@ mod counting;
 mod cursor;
 mod iter;
 mod search_index;
+mod trunk;
 
 pub(crate) use arena::LabelFill;
 use arena::PreorderFill;
@@ -15,6 +16,7 @@ pub(crate) use cursor::{shared_levels, PathSearch};
 pub use iter::{KeyBox, NodeItem, NodeIter};
 pub(crate) use search_index::LevelTables;
 pub use search_index::SearchIndex;
+pub(crate) use trunk::Trunks;
 
 use crate::geometry::Point3;
 use crate::key::{adjust_key_to_depth, Key, KeyError, KeySpace, TREE_DEPTH};
@@ -149,6 +151,9 @@ pub struct OccupancyTree {
     kind: NodeKind,
     clock: Clock,
     compaction: Compaction,
+    /// Where searches start ([`Trunks`]): derived after bulk changes,
+    /// reset to the root by any other change (see [`Self::arena_mut`]).
+    trunks: Trunks<NodeId>,
 }
 
 /// When the arena is re-laid (see [`OccupancyTree::compact`]) to give back
@@ -192,6 +197,7 @@ impl OccupancyTree {
             kind,
             clock: Clock::System,
             compaction: Compaction::default(),
+            trunks: Trunks::at_root(ROOT),
         })
     }
 
@@ -248,6 +254,26 @@ impl OccupancyTree {
         self.arena.as_ref()
     }
 
+    /// The arena for a change: searches start at the root again until
+    /// [`Self::refresh_trunks`], since the change may move or remove the
+    /// trunk ends. Every change goes through here.
+    fn arena_mut(&mut self) -> Option<&mut NodeArena> {
+        self.trunks = Trunks::at_root(ROOT);
+        self.arena.as_mut()
+    }
+
+    /// Derives the search starts from the current nodes (a few dozen node
+    /// visits), after a change that costs far more.
+    fn refresh_trunks(&mut self) {
+        self.trunks = match &self.arena {
+            Some(a) => {
+                let p = a.parts();
+                Trunks::build(ROOT, |n| Some(p.mask(n)), |n, _, pos| p.descend(n, pos as u64).ok())
+            }
+            None => Trunks::at_root(ROOT),
+        };
+    }
+
     /// Replaces the content with `arena`, which has no free slots (as
     /// built by [`PreorderBuilder`]): its slot count is the node count.
     pub(crate) fn set_arena_with_size(&mut self, arena: NodeArena) {
@@ -255,12 +281,14 @@ impl OccupancyTree {
         debug_assert_eq!(usage.free_slots, 0);
         self.size = usage.live_slots;
         self.arena = Some(arena);
+        self.refresh_trunks();
         debug_assert_eq!(self.size, self.calc_num_nodes());
     }
 
     /// Removes every node.
     pub fn clear(&mut self) {
         self.arena = None;
+        self.trunks = Trunks::at_root(ROOT);
         self.size = 0;
     }
 
@@ -308,6 +336,7 @@ impl OccupancyTree {
             self.size += 1;
             created = true;
         }
+        self.trunks = Trunks::at_root(ROOT); // as `arena_mut`, borrowing only the arena
         let arena = self.arena.as_mut().expect("root exists");
         let mut path = [ROOT; TREE_DEPTH as usize];
         let mut node = ROOT;
@@ -386,6 +415,7 @@ impl OccupancyTree {
             created = true;
         }
         let rules = self.rules();
+        self.trunks = Trunks::at_root(ROOT); // as `arena_mut`, borrowing only the arena
         let mut batch = Batch {
             arena: self.arena.as_mut().expect("root exists"),
             rules,
@@ -398,11 +428,12 @@ impl OccupancyTree {
         batch.apply(ROOT, 0, codes, created);
         self.size = batch.size as usize;
         if self.compaction == Compaction::Automatic {
-            let a = self.arena.as_mut().expect("root exists");
+            let a = self.arena_mut().expect("root exists");
             if a.free_slot_count() * 8 > a.slot_count() {
                 a.compact_in_place(ROOT);
             }
         }
+        self.refresh_trunks();
     }
 
     /// Recomputes every inner node as the maximum of its children
@@ -423,19 +454,21 @@ impl OccupancyTree {
             }
         }
         let rules = self.rules();
-        if let Some(a) = self.arena.as_mut() {
+        if let Some(a) = self.arena_mut() {
             recurse(a, ROOT, rules);
         }
+        self.refresh_trunks();
     }
 
     /// Sets every node to the clamping bound on its side of the occupancy
     /// threshold (`toMaxLikelihood`).
     pub fn to_max_likelihood(&mut self) {
         let sensor = self.sensor;
-        if let Some(a) = self.arena.as_mut() {
+        if let Some(a) = self.arena_mut() {
             // free slots are rewritten too; their values are never read
             a.map_values(|v| sensor.max_likelihood(v));
         }
+        self.refresh_trunks();
     }
 
     /// Merges complete groups of eight equal leaf children into their
@@ -489,7 +522,7 @@ impl OccupancyTree {
             }
         }
         let rules = self.rules();
-        let Some(a) = self.arena.as_mut() else { return };
+        let Some(a) = self.arena_mut() else { return };
         // OctoMap prunes level by level from depth 15 up and stops after the
         // first level that merged nothing; find that level first, then merge
         // everything below it in one bottom-up pass
@@ -499,6 +532,7 @@ impl OccupancyTree {
         let mut pruned = 0;
         merge_below(a, ROOT, 0, stop.max(1), rules, &mut pruned);
         self.size -= 8 * pruned;
+        self.refresh_trunks();
     }
 
     /// Gives every leaf above depth 16 eight children holding its value
@@ -518,10 +552,11 @@ impl OccupancyTree {
             }
         }
         let mut added = 0;
-        if let Some(a) = self.arena.as_mut() {
+        if let Some(a) = self.arena_mut() {
             recurse(a, ROOT, 0, &mut added);
         }
         self.size += added;
+        self.refresh_trunks();
     }
 
     /// Deletes the node at `depth` (0 or 16 = a voxel) containing `key`,
@@ -561,6 +596,7 @@ impl OccupancyTree {
         }
         let max_depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
         let rules = self.rules();
+        self.trunks = Trunks::at_root(ROOT); // as `arena_mut`
         recurse(self, ROOT, 0, max_depth, key, rules)
     }
 
@@ -590,8 +626,8 @@ impl OccupancyTree {
         let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
         let code = MortonCode::encode(key).0;
         let p = a.parts();
-        let mut node = ROOT;
-        for d in 0..depth {
+        let (mut node, from) = self.trunks.start(code, depth);
+        for d in from..depth {
             match p.descend(node, (code >> (3 * (TREE_DEPTH - 1 - d))) & 7) {
                 Ok(c) => node = c,
                 Err(m) => return (m == 0).then_some((node, d, true)),
@@ -620,10 +656,21 @@ impl OccupancyTree {
                 let k = if depth == TREE_DEPTH { *k } else { adjust_key_to_depth(*k, depth) };
                 *c = MortonCode::encode(k).0;
             }
+            // each lane starts at its trunk end: lanes join the walk at
+            // that depth; those starting at `depth` itself have arrived
             let mut node = [ROOT; LANES];
+            let mut joins = [0u32; TREE_DEPTH as usize + 1];
+            for l in 0..chunk.len() {
+                let (n, from) = self.trunks.start(code[l], depth);
+                node[l] = n;
+                joins[from as usize] |= 1 << l;
+            }
             let mut found: [Option<(NodeId, u8, bool)>; LANES] = [None; LANES];
-            let mut walking = (1u32 << chunk.len()) - 1;
+            let mut walking = 0u32;
+            let mut waiting = ((1u32 << chunk.len()) - 1) & !joins[depth as usize];
             for d in 0..depth {
+                walking |= joins[d as usize];
+                waiting &= !joins[d as usize];
                 let shift = 3 * (TREE_DEPTH - 1 - d);
                 let mut lanes = walking;
                 while lanes != 0 {
@@ -639,10 +686,11 @@ impl OccupancyTree {
                         }
                     }
                 }
-                if walking == 0 {
+                if walking | waiting == 0 {
                     break;
                 }
             }
+            walking |= joins[depth as usize];
             while walking != 0 {
                 let l = walking.trailing_zeros() as usize;
                 walking &= walking - 1;
@@ -669,7 +717,7 @@ impl OccupancyTree {
             return None;
         }
         let (id, _, _) = self.search_id(key, 0)?;
-        let a = self.arena.as_mut()?;
+        let a = self.arena_mut()?;
         let e = a.extra(id);
         let current = (e != WHITE).then(|| unpack_rgb(e));
         let rgb = f(current, a.value(id));
@@ -745,7 +793,7 @@ impl OccupancyTree {
         }
         let now = self.clock.now();
         let sensor = self.sensor;
-        let Some(a) = self.arena.as_mut() else { return };
+        let Some(a) = self.arena_mut() else { return };
         let mut stack = vec![ROOT];
         while let Some(n) = stack.pop() {
             if a.has_children(n) {
@@ -758,6 +806,7 @@ impl OccupancyTree {
                 }
             }
         }
+        self.refresh_trunks();
     }
 
     /// A cursor on the root, `None` for an empty tree.
@@ -877,9 +926,10 @@ impl OccupancyTree {
     /// Re-lays the arena in depth-first (Morton) order with no free slots,
     /// so traversals walk memory forwards and no capacity is wasted.
     pub fn compact(&mut self) {
-        if let Some(a) = self.arena.as_mut() {
+        if let Some(a) = self.arena_mut() {
             a.compact_in_place(ROOT);
         }
+        self.refresh_trunks();
     }
 
     // ----- change detection ----------------------------------------------
