@@ -6,9 +6,11 @@
 //! bounds-checked slices, never by casting pointers, so any byte string is
 //! safe to parse.
 
+use super::nav::Node;
 use super::OlmError;
 use crate::key::KeySpace;
 use crate::sensor::SensorModel;
+use crate::tree::Trunks;
 use std::ops::Range;
 
 /// First eight bytes of every `.olm` file.
@@ -323,6 +325,9 @@ pub(crate) struct Meta {
     pub header: Header,
     pub keys: KeySpace,
     pub ranges: Ranges,
+    /// Where searches start, derived at the first search (a few dozen
+    /// node reads, so that opening stays O(1)); `None` without a root.
+    pub trunks: std::sync::OnceLock<Option<Trunks<Node>>>,
 }
 
 /// CRC-32 of the header bytes before the checksum field.
@@ -544,6 +549,7 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Meta, OlmError> {
         },
         keys: KeySpace::new(resolution),
         ranges,
+        trunks: std::sync::OnceLock::new(),
     })
 }
 

@@ -58,7 +58,7 @@ use crate::geometry::Point3;
 use crate::key::{Key, KeyError, KeySpace};
 use crate::ray::{CastError, CastOptions, CastOutcome};
 use crate::sensor::SensorModel;
-use crate::tree::{CountingTree, Found, KeyBox, LevelTables, OccupancyTree, PreorderBuilder};
+use crate::tree::{CountingTree, Found, KeyBox, LevelTables, OccupancyTree, PreorderBuilder, Trunks};
 use format::Meta;
 use nav::{with_nav, AnyNav, Extras, MlNav, Nav, Node, PtrNav, RankNav};
 use query::RawIter;
@@ -244,6 +244,11 @@ impl<'a> MapView<'a> {
         &self.meta.header
     }
 
+    /// The search starts ([`query::trunks`]), derived once per map.
+    fn trunks(&self) -> Option<&'a Trunks<Node>> {
+        self.meta.trunks.get_or_init(|| with_nav!(self.nav, |nav| query::trunks(nav))).as_ref()
+    }
+
     pub fn bytes(&self) -> &'a [u8] {
         self.data
     }
@@ -304,7 +309,8 @@ impl<'a> MapView<'a> {
     /// `Found::extra` holds the node's colour or stamp, as the tree's.
     #[inline]
     pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
-        with_nav!(self.nav, |nav| query::search(nav, self.extras, key, depth))
+        let trunks = self.trunks()?;
+        with_nav!(self.nav, |nav| query::search(nav, self.extras, trunks, key, depth))
     }
 
     /// The colour of the node [`Self::search`] finds (`getColor`; white
@@ -344,7 +350,12 @@ impl<'a> MapView<'a> {
     /// [`Self::search`] for many keys at once, answers in `out` in the order
     /// of `keys` (as [`OccupancyTree::search_many`]).
     pub fn search_many(&self, keys: &[Key], depth: u8, out: &mut Vec<Option<Found>>) {
-        with_nav!(self.nav, |nav| query::search_many(nav, self.extras, keys, depth, out))
+        let Some(trunks) = self.trunks() else {
+            out.clear();
+            out.resize(keys.len(), None);
+            return;
+        };
+        with_nav!(self.nav, |nav| query::search_many(nav, self.extras, trunks, keys, depth, out))
     }
 
     /// The root's value, `None` for an empty map.

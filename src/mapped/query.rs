@@ -13,7 +13,7 @@ use crate::key::{adjust_key_to_depth, Key, KeySpace, KEY_CENTER, TREE_DEPTH};
 use crate::morton::MortonCode;
 use crate::ray::{CastError, CastOptions, CastOutcome};
 use crate::sensor::SensorModel;
-use crate::tree::{shared_levels, Found, KeyBox, OccupancyTree};
+use crate::tree::{shared_levels, Found, KeyBox, OccupancyTree, Trunks};
 
 /// What ray casting needs from a map: OctoMap's `search` and its key space.
 /// Implemented by [`OccupancyTree`] and by the mapped views, so that one
@@ -55,14 +55,8 @@ pub(crate) fn normalize_depth(depth: u8) -> u8 {
 }
 
 /// `search` on any layout (mirrors `OccupancyTree::search`), with the
-/// node found (its `extra` is left 0).
-#[inline(always)]
-pub(crate) fn search_node<N: Nav>(nav: N, key: Key, depth: u8) -> Option<(Found, Node)> {
-    search_node_from(nav, key, depth, None)
-}
-
-/// [`search_node`] starting at `start` (a node on the key's path and its
-/// depth, at most `depth`) instead of the root.
+/// node found (its `extra` is left 0), starting at `start` (a node on the
+/// key's path and its depth, at most `depth`) or else the root.
 #[inline(always)]
 pub(crate) fn search_node_from<N: Nav>(
     nav: N,
@@ -91,15 +85,31 @@ pub(crate) fn search_node_from<N: Nav>(
     Some((Found { value: nav.get(node)?.0, depth, is_leaf: mask == 0, extra: 0 }, node))
 }
 
-/// `search` on any layout, the node's colour or stamp filled in.
+/// `search` on any layout from the trunk end above the key (see
+/// [`Trunks`]), the node's colour or stamp filled in.
 #[inline(always)]
-pub(crate) fn search<N: Nav>(nav: N, extras: Extras<'_>, key: Key, depth: u8) -> Option<Found> {
-    search_node(nav, key, depth).map(|(f, n)| Found { extra: extras.get(n), ..f })
+pub(crate) fn search<N: Nav>(nav: N, extras: Extras<'_>, trunks: &Trunks<Node>, key: Key, depth: u8) -> Option<Found> {
+    let depth = normalize_depth(depth);
+    let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
+    let start = trunks.start(MortonCode::encode(key).0, depth);
+    search_node_from(nav, key, depth, Some(start)).map(|(f, n)| Found { extra: extras.get(n), ..f })
+}
+
+/// The trunks of a mapped tree; `None` when it has no root.
+pub(crate) fn trunks<N: Nav>(nav: N) -> Option<Trunks<Node>> {
+    nav.root().map(|r| Trunks::build(r, |n| nav.mask(n), |n, m, pos| nav.child(n, m, pos)))
 }
 
 /// [`search`] for many keys, eight descents in lockstep so that their
 /// cache misses overlap (as `OccupancyTree::search_many`).
-pub(crate) fn search_many<N: Nav>(nav: N, extras: Extras<'_>, keys: &[Key], depth: u8, out: &mut Vec<Option<Found>>) {
+pub(crate) fn search_many<N: Nav>(
+    nav: N,
+    extras: Extras<'_>,
+    trunks: &Trunks<Node>,
+    keys: &[Key],
+    depth: u8,
+    out: &mut Vec<Option<Found>>,
+) {
     const LANES: usize = 8;
     out.clear();
     let depth = normalize_depth(depth);
@@ -112,12 +122,28 @@ pub(crate) fn search_many<N: Nav>(nav: N, extras: Extras<'_>, keys: &[Key], dept
         for (k, c) in key.iter_mut().zip(chunk) {
             *k = if depth == TREE_DEPTH { *c } else { adjust_key_to_depth(*c, depth) };
         }
+        // each lane starts at its trunk end and joins the walk at its depth
+        // (as `OccupancyTree::search_many`)
         let mut at = [root; LANES];
+        let mut joins = [0u32; TREE_DEPTH as usize + 1];
         // lanes that end on a node, at the depth where they end
         let mut ends = [depth; LANES];
-        let mut walking = (1u32 << chunk.len()) - 1;
-        let mut ended = walking;
+        let mut ended = (1u32 << chunk.len()) - 1;
+        for l in 0..chunk.len() {
+            let (node, from) = trunks.start(MortonCode::encode(key[l]).0, depth);
+            match nav.mask(node) {
+                Some(mask) => {
+                    at[l] = (node, mask);
+                    joins[from as usize] |= 1 << l;
+                }
+                None => ended &= !(1 << l),
+            }
+        }
+        let mut walking = 0u32;
+        let mut waiting = ended & !joins[depth as usize];
         for d in 0..depth {
+            walking |= joins[d as usize];
+            waiting &= !joins[d as usize];
             let mut lanes = walking;
             while lanes != 0 {
                 let l = lanes.trailing_zeros() as usize;
@@ -141,7 +167,7 @@ pub(crate) fn search_many<N: Nav>(nav: N, extras: Extras<'_>, keys: &[Key], dept
                     }
                 }
             }
-            if walking == 0 {
+            if walking | waiting == 0 {
                 break;
             }
         }
