@@ -140,9 +140,13 @@ impl KeySpace {
     /// `coordToKeyChecked(double)`: the key, or why there is none.
     #[inline(always)]
     pub fn coord_to_key(&self, coord: f64) -> Result<u16, KeyError> {
-        let scaled = i64::from(floor_to_int(self.resolution_factor * coord)) + i64::from(KEY_CENTER);
-        if (0..2 * i64::from(KEY_CENTER)).contains(&scaled) {
-            Ok(scaled as u16)
+        // OctoMap's `(int) floor(x) + 32768` in range exactly when `floor(x)`
+        // is in [-32768, 32768) (NaN is not); `floor` is one `roundsd` on
+        // the crate's x86-64-v2 target
+        let floored = (self.resolution_factor * coord).floor();
+        let center = f64::from(KEY_CENTER);
+        if (-center..center).contains(&floored) {
+            Ok((floored as i32 + KEY_CENTER as i32) as u16)
         } else if !coord.is_finite() {
             Err(KeyError::NotFinite { value: coord })
         } else {
