@@ -31,7 +31,9 @@ use crate::ray::{point_along, FanRay, RayFan, RayKeys};
 use crate::tree::{InnerNodes, OccupancyTree};
 use hashbrown::HashSet;
 use rayon::prelude::*;
+use std::collections::BTreeMap;
 use std::hash::{BuildHasherDefault, Hasher};
+use std::sync::{Condvar, Mutex};
 
 /// A hasher for keys: the Morton code mixed by one multiplication.
 #[derive(Default, Clone, Copy)]
@@ -437,11 +439,12 @@ impl OccupancyTree {
     /// [`Self::insert_point_cloud`] on each (`scans` gives each scan's
     /// points and origin), calling `after_each` with the tree and the
     /// scan's report once it is in. With more than one thread the work is
-    /// pipelined: while one scan's update is applied to the tree, the next
-    /// scan's rays are cast (a scan's update depends on the map's key space
-    /// only, never on its content), and the thread that applied joins the
-    /// casting when done. Stops at the first scan that is refused, with its
-    /// position in `scans`; the scans before it are in.
+    /// pipelined: while one scan's update is applied to the tree, the
+    /// following scans are cast, each whole on one thread (a scan's update
+    /// depends on the map's key space only, never on its content), and the
+    /// thread that applies casts too whenever the next update is not ready.
+    /// Stops at the first scan that is refused, with its position in
+    /// `scans`; the scans before it are in.
     pub fn insert_point_clouds<I, P>(
         &mut self,
         scans: I,
@@ -453,7 +456,7 @@ impl OccupancyTree {
         I::IntoIter: Send,
         P: AsRef<[Point3]> + Send,
     {
-        let mut scans = scans.into_iter().enumerate();
+        let scans = scans.into_iter().enumerate();
         // colour trees apply key by key in OctoMap's order: no pipeline
         if opts.threads == Some(1) || self.kind() == crate::tree::NodeKind::Color {
             for (i, (points, origin)) in scans {
@@ -462,27 +465,12 @@ impl OccupancyTree {
             }
             return Ok(());
         }
-        let keys = self.key_space().clone();
-        // cast on whatever pool runs the pipeline
-        let cast_opts = ScanOptions { threads: None, ..*opts };
-        let compute = |(i, (points, origin)): (usize, (P, Point3))| {
-            (i, compute_update(&keys, points.as_ref(), origin, &cast_opts))
-        };
-        let mut run = || {
-            let mut next = scans.next().map(compute);
-            while let Some((i, result)) = next.take() {
-                let (update, report) = result.map_err(|e| (i, e))?;
-                let following = scans.next();
-                let (report, computed) =
-                    rayon::join(|| self.apply_update(&update, report, opts.inner), || following.map(compute));
-                drop(update);
-                after_each(self, report);
-                next = computed;
-            }
-            Ok(())
+        let run = |tree: &mut Self| {
+            let threads = rayon::current_num_threads();
+            tree.insert_pipelined(scans, threads, opts, &mut after_each)
         };
         match opts.threads {
-            None => run(),
+            None => run(self),
             // a pool of its own per call rather than the cached one: workers
             // that slept long (between calls) were seen to be woken onto
             // the CPU of the thread waking them and to share it for a whole
@@ -493,8 +481,71 @@ impl OccupancyTree {
                 .num_threads(n)
                 .build()
                 .map_err(|_| (0, ScanError::ThreadPool("could not start ray-casting threads")))?
-                .install(run),
+                .install(|| run(self)),
         }
+    }
+
+    /// [`Self::insert_point_clouds`] on `threads` threads: `threads - 1`
+    /// casters take scans in order and cast each on one thread; this
+    /// thread applies the updates in order and casts too whenever the next
+    /// update is not ready. Each scan is cast whole by one thread, so there
+    /// is no merge of per-thread lists, and the thread that applies never
+    /// waits while there is a scan to cast. At most `2 * threads` scans are
+    /// cast ahead of the tree.
+    fn insert_pipelined<S, P>(
+        &mut self,
+        scans: S,
+        threads: usize,
+        opts: &ScanOptions,
+        after_each: &mut (impl FnMut(&mut Self, ScanReport) + Send),
+    ) -> Result<(), (usize, ScanError)>
+    where
+        S: Iterator<Item = (usize, (P, Point3))> + Send,
+        P: AsRef<[Point3]> + Send,
+    {
+        let keys = self.key_space().clone();
+        let cast_opts = ScanOptions { threads: Some(1), ..*opts };
+        let pipeline = Pipeline {
+            state: Mutex::new(PipelineState {
+                scans: scans.fuse(),
+                taken: 0,
+                applied: 0,
+                exhausted: false,
+                stopped: false,
+                cast: BTreeMap::new(),
+            }),
+            changed: Condvar::new(),
+            lookahead: 2 * threads.max(1),
+        };
+        let cast = |(i, (points, origin)): (usize, (P, Point3))| {
+            let result = compute_update(&keys, points.as_ref(), origin, &cast_opts);
+            pipeline.lock().cast.insert(i, result);
+            pipeline.changed.notify_all();
+        };
+        rayon::scope(|scope| {
+            for _ in 1..threads {
+                scope.spawn(|_| {
+                    // a panicking caster stops the others and this thread
+                    let _stop = StopOnDrop { pipeline: &pipeline, only_on_panic: true };
+                    while let Some(scan) = pipeline.take() {
+                        cast(scan);
+                    }
+                });
+            }
+            // stops the casters however this thread leaves (a panic in
+            // `after_each` included), so that the scope can end
+            let _stop = StopOnDrop { pipeline: &pipeline, only_on_panic: false };
+            for k in 0.. {
+                let Some(result) = pipeline.next_update(k, &cast) else { return Ok(()) };
+                let (update, report) = result.map_err(|e| (k, e))?;
+                let report = self.apply_update(&update, report, opts.inner);
+                drop(update);
+                pipeline.lock().applied = k + 1;
+                pipeline.changed.notify_all();
+                after_each(self, report);
+            }
+            Ok(())
+        })
     }
 
     /// Integrates a coloured scan into a colour tree: the scan as
@@ -599,6 +650,102 @@ impl OccupancyTree {
         }
         self.update_point(end, true, inner)?;
         Ok(())
+    }
+}
+
+type CastResult = Result<(ScanUpdate, ScanReport), ScanError>;
+
+/// What the threads of [`OccupancyTree::insert_point_clouds`] share.
+struct Pipeline<S> {
+    state: Mutex<PipelineState<S>>,
+    /// Signalled when a cast is stored, a scan applied, or the pipeline
+    /// stopped.
+    changed: Condvar,
+    lookahead: usize,
+}
+
+struct PipelineState<S> {
+    scans: std::iter::Fuse<S>,
+    /// Scans taken for casting (they are taken in order).
+    taken: usize,
+    applied: usize,
+    exhausted: bool,
+    stopped: bool,
+    /// Cast scans waiting to be applied, by position.
+    cast: BTreeMap<usize, CastResult>,
+}
+
+impl<S: Iterator> Pipeline<S> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, PipelineState<S>> {
+        // a panicking thread stops the pipeline (`StopOnDrop`); the state
+        // stays consistent, so a poisoned lock is still usable
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The next scan to cast, if the look-ahead allows one now.
+    fn try_take(&self, s: &mut PipelineState<S>) -> Option<S::Item> {
+        if s.stopped || s.exhausted || s.taken - s.applied >= self.lookahead {
+            return None;
+        }
+        let scan = s.scans.next();
+        match scan {
+            Some(_) => s.taken += 1,
+            None => s.exhausted = true,
+        }
+        scan
+    }
+
+    /// A caster's next scan, waiting while the look-ahead is full; `None`
+    /// when the scans are all taken or the pipeline stopped.
+    fn take(&self) -> Option<S::Item> {
+        let mut s = self.lock();
+        loop {
+            if let Some(scan) = self.try_take(&mut s) {
+                return Some(scan);
+            }
+            if s.stopped || s.exhausted {
+                return None;
+            }
+            s = self.changed.wait(s).unwrap_or_else(|e| e.into_inner());
+        }
+    }
+
+    /// The cast of scan `k`, casting other scans (with `cast`) while it is
+    /// not ready; `None` after the last scan.
+    fn next_update(&self, k: usize, cast: &impl Fn(S::Item)) -> Option<CastResult> {
+        let mut s = self.lock();
+        loop {
+            if let Some(result) = s.cast.remove(&k) {
+                return Some(result);
+            }
+            // after the last scan, or a caster's panic (which the scope
+            // then raises here)
+            if (s.exhausted && s.taken == k) || s.stopped {
+                return None;
+            }
+            if let Some(scan) = self.try_take(&mut s) {
+                drop(s);
+                cast(scan);
+                s = self.lock();
+            } else if !(s.stopped || s.exhausted && s.taken == k) {
+                s = self.changed.wait(s).unwrap_or_else(|e| e.into_inner());
+            }
+        }
+    }
+}
+
+/// Stops a [`Pipeline`] when dropped, or only when dropped by a panic.
+struct StopOnDrop<'a, S: Iterator> {
+    pipeline: &'a Pipeline<S>,
+    only_on_panic: bool,
+}
+
+impl<S: Iterator> Drop for StopOnDrop<'_, S> {
+    fn drop(&mut self) {
+        if !self.only_on_panic || std::thread::panicking() {
+            self.pipeline.lock().stopped = true;
+            self.pipeline.changed.notify_all();
+        }
     }
 }
 
@@ -834,7 +981,7 @@ mod tests {
         // a refused scan stops the sequence after the scans before it
         let mut bad = scans.clone();
         bad[2].0.push(Point3::new(1e9, 0.0, 0.0));
-        for threads in [Some(1), Some(2)] {
+        for threads in [Some(1), Some(2), Some(8)] {
             let opts = ScanOptions { threads, out_of_map: OutOfMap::Error, ..Default::default() };
             let mut t = OccupancyTree::new(0.1).unwrap();
             let mut n = 0;
@@ -843,6 +990,17 @@ mod tests {
             assert_eq!(err.0, 2);
             assert!(matches!(err.1, ScanError::PointOutOfMap { .. }));
             assert_eq!(n, 2);
+        }
+
+        // a panic in the callback reaches the caller; the casters stop
+        for threads in [Some(2), Some(8)] {
+            let opts = ScanOptions { threads, ..Default::default() };
+            let caught = std::panic::catch_unwind(|| {
+                let mut t = OccupancyTree::new(0.1).unwrap();
+                let input = scans.iter().map(|(p, o)| (p.as_slice(), *o));
+                let _ = t.insert_point_clouds(input, &opts, |_, _| panic!("callback"));
+            });
+            assert!(caught.is_err());
         }
     }
 }
