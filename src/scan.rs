@@ -490,8 +490,9 @@ impl OccupancyTree {
     /// thread applies the updates in order and casts too whenever the next
     /// update is not ready. Each scan is cast whole by one thread, so there
     /// is no merge of per-thread lists, and the thread that applies never
-    /// waits while there is a scan to cast. At most `2 * threads` scans are
-    /// cast ahead of the tree.
+    /// waits while there is a scan to cast. At most `threads + 1` scans are
+    /// cast ahead of the tree (twice the threads raised the peak memory of
+    /// a 2-thread build from 22 to 24 MB).
     fn insert_pipelined<S, P>(
         &mut self,
         scans: S,
@@ -515,7 +516,7 @@ impl OccupancyTree {
                 cast: BTreeMap::new(),
             }),
             changed: Condvar::new(),
-            lookahead: 2 * threads.max(1),
+            lookahead: threads.max(1) + 1,
         };
         let cast = |(i, (points, origin)): (usize, (P, Point3))| {
             let result = compute_update(&keys, points.as_ref(), origin, &cast_opts);
