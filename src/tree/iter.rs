@@ -1,6 +1,6 @@
 //! Depth-first iteration in OctoMap's order (children 0..7).
 
-use super::{NodeArena, NodeId, OccupancyTree, ROOT};
+use super::{leaf_index, NodeArena, NodeId, OccupancyTree, ROOT};
 use crate::geometry::Point3;
 use crate::key::packed::{self, child0, pack, unpack};
 use crate::key::{Key, KeySpace, KEY_CENTER, TREE_DEPTH};
@@ -209,10 +209,38 @@ impl<'a> Iterator for NodeIter<'a> {
             }
         }
         let (walk, mut stack) = (self.walk, self.stack);
-        while let Some(item) = walk.step(a, &mut stack) {
-            acc = f(acc, item);
+        let p = a.parts();
+        let last = TREE_DEPTH as usize;
+        loop {
+            // a node at depth 15 with its children open: they are voxels in
+            // the leaf pool, one group, all leaves; walked here without the
+            // general step's mask look-up and frame bookkeeping
+            if stack.len == last && walk.bbx.is_none() {
+                let fr = &mut stack.frames[last - 1];
+                while fr.remaining != 0 {
+                    let pos = fr.remaining.trailing_zeros() as usize;
+                    fr.remaining &= fr.remaining - 1;
+                    let i = leaf_index(fr.next);
+                    fr.next += 1;
+                    let key = unpack(packed::child(fr.base, pos, TREE_DEPTH - 1));
+                    let extra = p.leaf_extras.get(i).copied().unwrap_or(0);
+                    let item = NodeItem {
+                        key,
+                        depth: TREE_DEPTH,
+                        value: p.leaf_values[i],
+                        extra,
+                        is_leaf: true,
+                        keys: walk.keys,
+                    };
+                    acc = f(acc, item);
+                }
+                stack.len -= 1;
+            }
+            match walk.step(a, &mut stack) {
+                Some(item) => acc = f(acc, item),
+                None => return acc,
+            }
         }
-        acc
     }
 }
 
