@@ -150,6 +150,27 @@ impl<'a> Walk<'a> {
     /// The next node below the frames of `st`, if any.
     #[inline(always)]
     fn step(&self, a: &NodeArena, st: &mut Stack) -> Option<NodeItem<'a>> {
+        // the children of a node at depth 15: voxels in the leaf pool, one
+        // group, all leaves, taken without the mask look-up, the box test
+        // (none here) and the frame bookkeeping below
+        if st.len == TREE_DEPTH as usize && self.bbx.is_none() {
+            let f = &mut st.frames[st.len - 1];
+            if f.remaining != 0 {
+                let pos = f.remaining.trailing_zeros() as usize;
+                f.remaining &= f.remaining - 1;
+                let i = leaf_index(f.next);
+                f.next += 1;
+                let p = a.parts();
+                return Some(NodeItem {
+                    key: unpack(packed::child(f.base, pos, TREE_DEPTH - 1)),
+                    depth: TREE_DEPTH,
+                    value: p.leaf_values[i],
+                    extra: p.leaf_extras.get(i).copied().unwrap_or(0),
+                    is_leaf: true,
+                    keys: self.keys,
+                });
+            }
+        }
         while st.len > 0 {
             let parent_depth = (st.len - 1) as u8;
             let f = &mut st.frames[st.len - 1];
@@ -212,9 +233,7 @@ impl<'a> Iterator for NodeIter<'a> {
         let p = a.parts();
         let last = TREE_DEPTH as usize;
         loop {
-            // a node at depth 15 with its children open: they are voxels in
-            // the leaf pool, one group, all leaves; walked here without the
-            // general step's mask look-up and frame bookkeeping
+            // as the start of `Walk::step`, all of a group in one loop
             if stack.len == last && walk.bbx.is_none() {
                 let fr = &mut stack.frames[last - 1];
                 while fr.remaining != 0 {
