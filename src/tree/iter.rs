@@ -1,6 +1,6 @@
 //! Depth-first iteration in OctoMap's order (children 0..7).
 
-use super::{leaf_index, NodeArena, NodeId, OccupancyTree, ROOT};
+use super::{leaf_index, NodeArena, NodeId, OccupancyTree, Parts, ROOT};
 use crate::geometry::Point3;
 use crate::key::packed::{self, child0, pack, unpack};
 use crate::key::{Key, KeySpace, KEY_CENTER, TREE_DEPTH};
@@ -147,6 +147,24 @@ impl<'a> Walk<'a> {
         NodeItem { key, depth, value: a.value(n), extra: a.extra(n), is_leaf, keys: self.keys }
     }
 
+    /// The next voxel of a frame of depth-15 children (one with children
+    /// left).
+    #[inline(always)]
+    fn voxel(&self, p: &Parts<'_>, f: &mut Frame) -> NodeItem<'a> {
+        let pos = f.remaining.trailing_zeros() as usize;
+        f.remaining &= f.remaining - 1;
+        let i = leaf_index(f.next);
+        f.next += 1;
+        NodeItem {
+            key: unpack(packed::child(f.base, pos, TREE_DEPTH - 1)),
+            depth: TREE_DEPTH,
+            value: p.leaf_values[i],
+            extra: p.leaf_extras.get(i).copied().unwrap_or(0),
+            is_leaf: true,
+            keys: self.keys,
+        }
+    }
+
     /// The next node below the frames of `st`, if any.
     #[inline(always)]
     fn step(&self, a: &NodeArena, st: &mut Stack) -> Option<NodeItem<'a>> {
@@ -156,19 +174,7 @@ impl<'a> Walk<'a> {
         if st.len == TREE_DEPTH as usize && self.bbx.is_none() {
             let f = &mut st.frames[st.len - 1];
             if f.remaining != 0 {
-                let pos = f.remaining.trailing_zeros() as usize;
-                f.remaining &= f.remaining - 1;
-                let i = leaf_index(f.next);
-                f.next += 1;
-                let p = a.parts();
-                return Some(NodeItem {
-                    key: unpack(packed::child(f.base, pos, TREE_DEPTH - 1)),
-                    depth: TREE_DEPTH,
-                    value: p.leaf_values[i],
-                    extra: p.leaf_extras.get(i).copied().unwrap_or(0),
-                    is_leaf: true,
-                    keys: self.keys,
-                });
+                return Some(self.voxel(&a.parts(), f));
             }
         }
         while st.len > 0 {
@@ -237,21 +243,7 @@ impl<'a> Iterator for NodeIter<'a> {
             if stack.len == last && walk.bbx.is_none() {
                 let fr = &mut stack.frames[last - 1];
                 while fr.remaining != 0 {
-                    let pos = fr.remaining.trailing_zeros() as usize;
-                    fr.remaining &= fr.remaining - 1;
-                    let i = leaf_index(fr.next);
-                    fr.next += 1;
-                    let key = unpack(packed::child(fr.base, pos, TREE_DEPTH - 1));
-                    let extra = p.leaf_extras.get(i).copied().unwrap_or(0);
-                    let item = NodeItem {
-                        key,
-                        depth: TREE_DEPTH,
-                        value: p.leaf_values[i],
-                        extra,
-                        is_leaf: true,
-                        keys: walk.keys,
-                    };
-                    acc = f(acc, item);
+                    acc = f(acc, walk.voxel(&p, fr));
                 }
                 stack.len -= 1;
             }
