@@ -22,7 +22,8 @@
 //! merging end points for `discretize`.
 //!
 //! [`OccupancyTree::insert_point_clouds`] integrates a sequence of scans and,
-//! with several threads, casts the next scan while one is applied.
+//! with several threads, casts the following scans (each whole on one
+//! thread) while one is applied.
 
 use crate::geometry::Point3;
 use crate::key::{Key, KeyError, KeySpace};
