@@ -667,6 +667,8 @@ struct Pipeline<S> {
 }
 
 struct PipelineState<S> {
+    /// Advanced under the lock: the caller's iterator (which may transform
+    /// each scan, as `octolinear build` does) runs on one thread at a time.
     scans: std::iter::Fuse<S>,
     /// Scans taken for casting (they are taken in order).
     taken: usize,

@@ -276,7 +276,7 @@ pub fn run(a: Args) -> Result<()> {
         }
     } else {
         // scan by scan, each released once transformed; with several
-        // threads the next scan is cast while one is applied
+        // threads the following scans are cast while one is applied
         let ids: Vec<_> = g.nodes.iter().map(|node| node.id).collect();
         let scans = std::mem::take(&mut g.nodes).into_iter().map(|node| {
             let (cloud, origin) = node.graph2tree();
