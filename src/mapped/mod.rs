@@ -388,6 +388,15 @@ impl<'a> MapView<'a> {
         self.iter(max_depth, true, Some(bbx))
     }
 
+    /// The answers of `castRay`'s search cursor to `codes`, in order.
+    #[cfg(test)]
+    pub(crate) fn path_search_all(&self, codes: &[u64]) -> Vec<Option<Found>> {
+        with_nav!(self.nav, |nav| {
+            let mut path = query::PathSearch::new(nav);
+            codes.iter().map(|&c| path.search(c)).collect()
+        })
+    }
+
     /// OctoMap's `castRay`, as [`OccupancyTree::cast_ray`]. A counting map
     /// has no occupancy: [`CastError::NoOccupancy`].
     pub fn cast_ray(&self, origin: Point3, direction: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {

@@ -78,3 +78,66 @@ impl<'a> PathSearch<'a> {
 pub(crate) fn shared_levels(a: u64, b: u64) -> u8 {
     (((a ^ b).leading_zeros() - 16) / 3) as u8
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::key::Key;
+    use crate::mapped::{self, MappedMap};
+    use crate::morton::MortonCode;
+    use crate::InnerNodes;
+
+    /// Any sequence of codes, steps to neighbours and jumps alike, gets
+    /// `search`'s answers from both cursors (the resumed paths and the
+    /// settled answers included).
+    #[test]
+    fn cursors_answer_as_search_for_any_sequence() {
+        let mut tree = OccupancyTree::new(0.1).unwrap();
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut rand = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let near = |r: u64| (32700 + (r % 140)) as u16;
+        for i in 0..3000 {
+            let k = Key([near(rand()), near(rand() >> 16), near(rand() >> 32)]);
+            tree.update_occupancy(k, i % 3 != 0, InnerNodes::Update);
+        }
+        // pruned regions: a full block of equal free voxels
+        for x in 32704..32720u16 {
+            for y in 32704..32720u16 {
+                for z in 32704..32720u16 {
+                    tree.set_value(Key([x, y, z]), -2.0, InnerNodes::Update);
+                }
+            }
+        }
+        tree.prune();
+        let bytes = mapped::to_bytes(&tree, mapped::WriteOptions::default()).unwrap();
+        let map = MappedMap::new(bytes).unwrap();
+        let mut key = Key([32710, 32710, 32710]);
+        let codes: Vec<u64> = (0..20_000)
+            .map(|i| {
+                let r = rand();
+                key = if i % 7 == 0 {
+                    Key([near(r), near(r >> 16), near(r >> 32)])
+                } else {
+                    let axis = (r % 3) as usize;
+                    key.0[axis] = if r & 8 == 0 { key.0[axis].wrapping_add(1) } else { key.0[axis].wrapping_sub(1) };
+                    key
+                };
+                MortonCode::encode(key).0
+            })
+            .collect();
+        let mut ours = PathSearch::new(&tree);
+        let theirs = map.view().path_search_all(&codes);
+        for (&code, t) in codes.iter().zip(theirs) {
+            let key = MortonCode(code).decode();
+            let want = tree.search(key, 0);
+            assert_eq!(ours.search(code), want, "{key}");
+            let bits = |f: Option<Found>| f.map(|f| (f.value.to_bits(), f.depth, f.is_leaf));
+            assert_eq!(bits(t), bits(want), "mapped, {key}");
+        }
+    }
+}
