@@ -13,7 +13,7 @@ use crate::key::{adjust_key_to_depth, Key, KeySpace, KEY_CENTER, TREE_DEPTH};
 use crate::morton::MortonCode;
 use crate::ray::{CastError, CastOptions, CastOutcome};
 use crate::sensor::SensorModel;
-use crate::tree::{shared_levels, Found, KeyBox, OccupancyTree, Trunks};
+use crate::tree::{Found, KeyBox, LastAnswer, OccupancyTree, Trunks};
 
 /// What ray casting needs from a map: OctoMap's `search` and its key space.
 /// Implemented by [`OccupancyTree`] and by the mapped views, so that one
@@ -368,39 +368,31 @@ pub fn cast_ray<M: OccupancyLookup + ?Sized>(
 /// Answers are those of [`search`]: the shared nodes are the same nodes.
 pub(crate) struct PathSearch<N: Nav> {
     nav: N,
-    /// The previous query's Morton code.
-    code: u64,
-    /// Entries `0..len` hold the nodes at depths `0..len` on `code`'s path.
+    last: LastAnswer,
+    /// Entries `0..len` hold the nodes at depths `0..len` on the previous
+    /// query's path.
     len: u8,
-    /// A query sharing at least this many levels with `code` has `answer`
-    /// too (as in the tree's `PathSearch`).
-    settled: u8,
-    answer: Option<Found>,
     path: [(Node, f32, u8); TREE_DEPTH as usize + 1],
 }
 
 impl<N: Nav> PathSearch<N> {
     pub fn new(nav: N) -> Self {
         let path = [(Node::default(), 0.0, 0); TREE_DEPTH as usize + 1];
-        PathSearch { nav, code: 0, len: 0, settled: TREE_DEPTH + 1, answer: None, path }
+        PathSearch { nav, last: LastAnswer::new(), len: 0, path }
     }
 
     /// `search(key, 0)` for the key whose Morton code is `code`.
     #[inline(always)]
     pub fn search(&mut self, code: u64) -> Option<Found> {
-        let shared = shared_levels(code, self.code);
-        self.code = code;
-        if shared >= self.settled {
-            return self.answer;
-        }
+        let shared = match self.last.next(code) {
+            Ok(answer) => return answer,
+            Err(shared) => shared,
+        };
         let start = if self.len == 0 {
             match self.nav.root().and_then(|r| Some((r, self.nav.get(r)?))) {
                 Some((root, (v, m))) => self.path[0] = (root, v, m),
                 // no root (or a corrupted one): `None` for every query
-                None => {
-                    (self.settled, self.answer) = (0, None);
-                    return None;
-                }
+                None => return self.last.set(0, None),
             }
             0
         } else {
@@ -429,14 +421,13 @@ impl<N: Nav> PathSearch<N> {
             // a corrupted file may end the walk: no answer, as `search`
             let Some((c, (v, m))) = self.nav.child(node, mask, pos).and_then(|c| Some((c, self.nav.get(c)?))) else {
                 self.len = d + 1;
-                self.settled = TREE_DEPTH + 1;
-                return None;
+                return self.last.set(TREE_DEPTH + 1, None);
             };
             (node, value, mask) = (c, v, m);
             d += 1;
             self.path[d as usize] = (node, value, mask);
         };
-        (self.len, self.settled, self.answer) = (d + 1, settled, answer);
-        answer
+        self.len = d + 1;
+        self.last.set(settled, answer)
     }
 }

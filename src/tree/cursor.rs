@@ -10,38 +10,75 @@ use super::arena::Parts;
 use super::{Found, NodeId, OccupancyTree, ROOT};
 use crate::key::TREE_DEPTH;
 
+/// A path cursor's previous query and how far its answer holds: a query
+/// sharing at least `settled` levels with `code` has `answer` too (the leaf
+/// found, or the missing child, lies on its path as well), so a ray
+/// crossing a pruned voxel or unknown space gets it in a compare. Shared by
+/// this cursor and the mapped view's.
+#[derive(Clone, Copy)]
+pub(crate) struct LastAnswer {
+    code: u64,
+    settled: u8,
+    answer: Option<Found>,
+}
+
+impl LastAnswer {
+    /// Nothing holds yet.
+    pub fn new() -> Self {
+        LastAnswer { code: 0, settled: TREE_DEPTH + 1, answer: None }
+    }
+
+    /// Takes `code` as the current query: the previous answer when it
+    /// holds, else `Err` with the levels `code` shares with the previous
+    /// query (whose path the cursor still has).
+    #[inline(always)]
+    pub fn next(&mut self, code: u64) -> Result<Option<Found>, u8> {
+        let shared = shared_levels(code, self.code);
+        self.code = code;
+        if shared >= self.settled {
+            Ok(self.answer)
+        } else {
+            Err(shared)
+        }
+    }
+
+    /// The current query's answer, holding for queries that share
+    /// `settled` levels with it (0: every query; 17: none).
+    #[inline(always)]
+    pub fn set(&mut self, settled: u8, answer: Option<Found>) -> Option<Found> {
+        (self.settled, self.answer) = (settled, answer);
+        answer
+    }
+}
+
 /// A search cursor over one tree (which cannot change while it exists).
 pub(crate) struct PathSearch<'a> {
     parts: Option<Parts<'a>>,
-    /// The previous query's Morton code.
-    code: u64,
-    /// Entries `0..=len` are the nodes at depths `0..=len` on `code`'s path.
+    last: LastAnswer,
+    /// Entries `0..=len` are the nodes at depths `0..=len` on the previous
+    /// query's path.
     len: u8,
-    /// A query sharing at least this many levels with `code` has `answer`
-    /// too: the leaf found (or the missing child) lies on its path as well.
-    /// A ray crossing a pruned voxel or unknown space gets it in a compare.
-    settled: u8,
-    answer: Option<Found>,
     path: [NodeId; TREE_DEPTH as usize + 1],
 }
 
 impl<'a> PathSearch<'a> {
     pub fn new(tree: &'a OccupancyTree) -> Self {
         let parts = tree.arena().map(|a| a.parts());
-        // an empty tree answers `None` to everything
-        let settled = if parts.is_some() { TREE_DEPTH + 1 } else { 0 };
-        PathSearch { parts, code: 0, len: 0, settled, answer: None, path: [ROOT; TREE_DEPTH as usize + 1] }
+        let mut last = LastAnswer::new();
+        if parts.is_none() {
+            // an empty tree answers `None` to everything
+            last.set(0, None);
+        }
+        PathSearch { parts, last, len: 0, path: [ROOT; TREE_DEPTH as usize + 1] }
     }
 
     /// `tree.search(key, 0)` for the key whose Morton code is `code`.
     #[inline(always)]
     pub fn search(&mut self, code: u64) -> Option<Found> {
-        let shared = shared_levels(code, self.code);
-        self.code = code;
-        if shared >= self.settled {
-            return self.answer;
+        match self.last.next(code) {
+            Ok(answer) => answer,
+            Err(shared) => self.descend(shared.min(self.len), code),
         }
-        self.descend(shared.min(self.len), code)
     }
 
     /// The search from the path's node at depth `start` (kept out of
@@ -67,15 +104,15 @@ impl<'a> PathSearch<'a> {
                 Err(_) => break (None, d + 1),
             }
         };
-        (self.len, self.settled, self.answer) = (d, settled, answer);
-        answer
+        self.len = d;
+        self.last.set(settled, answer)
     }
 }
 
 /// The number of levels (0..=16) whose child index is the same in two
 /// 48-bit Morton codes.
 #[inline(always)]
-pub(crate) fn shared_levels(a: u64, b: u64) -> u8 {
+fn shared_levels(a: u64, b: u64) -> u8 {
     (((a ^ b).leading_zeros() - 16) / 3) as u8
 }
 

@@ -12,7 +12,7 @@ use arena::PreorderFill;
 pub(crate) use arena::{in_leaf_pool, leaf_index, Parts};
 pub use arena::{ArenaUsage, NodeArena, NodeId};
 pub use counting::CountingTree;
-pub(crate) use cursor::{shared_levels, PathSearch};
+pub(crate) use cursor::{LastAnswer, PathSearch};
 pub use iter::{KeyBox, NodeItem, NodeIter};
 pub(crate) use search_index::LevelTables;
 pub use search_index::SearchIndex;
@@ -258,8 +258,14 @@ impl OccupancyTree {
     /// [`Self::refresh_trunks`], since the change may move or remove the
     /// trunk ends. Every change goes through here.
     fn arena_mut(&mut self) -> Option<&mut NodeArena> {
-        self.trunks = Trunks::at_root(ROOT);
+        self.forget_trunks();
         self.arena.as_mut()
+    }
+
+    /// What [`Self::arena_mut`] does first, for changes that need the
+    /// arena borrowed apart from other fields.
+    fn forget_trunks(&mut self) {
+        self.trunks = Trunks::at_root(ROOT);
     }
 
     /// Derives the search starts from the current nodes (a few dozen node
@@ -288,7 +294,7 @@ impl OccupancyTree {
     /// Removes every node.
     pub fn clear(&mut self) {
         self.arena = None;
-        self.trunks = Trunks::at_root(ROOT);
+        self.forget_trunks();
         self.size = 0;
     }
 
@@ -336,7 +342,7 @@ impl OccupancyTree {
             self.size += 1;
             created = true;
         }
-        self.trunks = Trunks::at_root(ROOT); // as `arena_mut`, borrowing only the arena
+        self.forget_trunks();
         let arena = self.arena.as_mut().expect("root exists");
         let mut path = [ROOT; TREE_DEPTH as usize];
         let mut node = ROOT;
@@ -415,7 +421,7 @@ impl OccupancyTree {
             created = true;
         }
         let rules = self.rules();
-        self.trunks = Trunks::at_root(ROOT); // as `arena_mut`, borrowing only the arena
+        self.forget_trunks();
         let mut batch = Batch {
             arena: self.arena.as_mut().expect("root exists"),
             rules,
@@ -596,7 +602,7 @@ impl OccupancyTree {
         }
         let max_depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
         let rules = self.rules();
-        self.trunks = Trunks::at_root(ROOT); // as `arena_mut`
+        self.forget_trunks();
         recurse(self, ROOT, 0, max_depth, key, rules)
     }
 
