@@ -625,23 +625,15 @@ impl OccupancyTree {
     }
 
     /// [`Self::search`] giving the node id (valid until the next change).
-    #[inline]
+    #[inline(always)]
     fn search_id(&self, key: Key, depth: u8) -> Option<(NodeId, u8, bool)> {
         let a = self.arena.as_ref()?;
-        let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
-        let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
+        let (key, depth) = search_target(key, depth);
         // the table encoding (the `morton` criterion rows: about twice the
         // speed of shifts and masks) took 6% off a small-map query
         let code = MortonCode::encode_table(key).0;
-        let p = a.parts();
-        let (mut node, from) = self.trunks.start(code, depth);
-        for d in from..depth {
-            match p.descend(node, (code >> (3 * (TREE_DEPTH - 1 - d))) & 7) {
-                Ok(c) => node = c,
-                Err(m) => return (m == 0).then_some((node, d, true)),
-            }
-        }
-        Some((node, depth, depth == TREE_DEPTH || p.masks[node as usize] == 0))
+        let (node, from) = self.trunks.start(code, depth);
+        descend_to(&a.parts(), node, from, depth, code)
     }
 
     /// [`Self::search`] for many keys at once, answers in `out` (cleared
@@ -1372,4 +1364,26 @@ fn count_leaves(a: &NodeArena, n: NodeId) -> usize {
     }
     let first = a.first_child(n);
     (0..a.mask(n).count_ones()).map(|i| count_leaves(a, first + i)).sum()
+}
+/// A search's key and depth as OctoMap's `search` takes them: depth 0 (or
+/// above 16) means 16, and a coarser depth's key is its node's centre key.
+#[inline(always)]
+fn search_target(key: Key, depth: u8) -> (Key, u8) {
+    let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
+    (if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) }, depth)
+}
+
+/// The rest of a search for the Morton `code` from `node`, which lies at
+/// depth `from` on its path, down to `depth`: the node found, its depth
+/// and whether it is a leaf; `None` when the path ends at an inner node
+/// lacking the needed child (unknown space).
+#[inline(always)]
+fn descend_to(p: &Parts<'_>, mut node: NodeId, from: u8, depth: u8, code: u64) -> Option<(NodeId, u8, bool)> {
+    for d in from..depth {
+        match p.descend(node, (code >> (3 * (TREE_DEPTH - 1 - d))) & 7) {
+            Ok(c) => node = c,
+            Err(m) => return (m == 0).then_some((node, d, true)),
+        }
+    }
+    Some((node, depth, depth == TREE_DEPTH || p.masks[node as usize] == 0))
 }

@@ -10,8 +10,9 @@
 //! ids move on structural changes). Answers are exactly
 //! [`OccupancyTree::search`]'s.
 
-use super::{Found, NodeArena, NodeId, OccupancyTree, ROOT};
+use super::{descend_to, search_target, Found, NodeArena, NodeId, OccupancyTree, ROOT};
 use crate::key::{adjust_key_to_depth, Key, TREE_DEPTH};
+use crate::morton::MortonCode;
 
 /// One hash slot: the key prefix plus one (0 = empty) and its node.
 #[derive(Clone, Copy, Default)]
@@ -203,21 +204,17 @@ impl<'t> SearchIndex<'t> {
         self.tables.start(key, depth).unwrap_or((ROOT, 0))
     }
 
-    /// `tree.search(key, depth)`.
+    /// `tree.search(key, depth)`: the descent of [`OccupancyTree::search`]
+    /// from the deepest table that answers, or from the trunk end when none
+    /// does (as in unknown space above the tables).
     #[inline]
     pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
         let a = self.tree.arena()?;
-        let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
-        let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
-        let (mut node, from) = self.start(key, depth);
-        for d in from..depth {
-            match a.child(node, key.child_index(d)) {
-                Some(c) => node = c,
-                None if a.has_children(node) => return None,
-                None => return Some(found(a, node, d, true)),
-            }
-        }
-        Some(found(a, node, depth, !a.has_children(node)))
+        let (key, depth) = search_target(key, depth);
+        let code = MortonCode::encode_table(key).0;
+        let (node, from) = self.tables.start(key, depth).unwrap_or_else(|| self.tree.trunks.start(code, depth));
+        let (node, depth, is_leaf) = descend_to(&a.parts(), node, from, depth, code)?;
+        Some(found(a, node, depth, is_leaf))
     }
 
     /// [`Self::search`] for many keys, answers in `out` (cleared first) in
