@@ -364,6 +364,12 @@ impl<'a> MapView<'a> {
     }
 
     fn iter(&self, max_depth: u8, leaves_only: bool, bbx: Option<KeyBox>) -> MapIter<'a> {
+        // as the arena's iterators: a walk over all of a small map asks for
+        // all of it at once (a prefetch never faults, on unmapped pages
+        // neither)
+        if bbx.is_none() && self.data.len() <= crate::tree::WHOLE_PREFETCH_BYTES {
+            crate::tree::prefetch_lines(self.data);
+        }
         let keys = &self.meta.keys;
         let e = self.extras;
         MapIter(match self.nav {

@@ -676,6 +676,30 @@ impl NodeArena {
         }
     }
 
+    /// Asks for every cache line of the arena when it is small enough to
+    /// stay in a core's L2 (at most [`WHOLE_PREFETCH_BYTES`]); returns
+    /// whether it did. A walk over a small tree that other work has pushed
+    /// out of L2 otherwise waits for its nodes one dependent miss at a time;
+    /// asked for at once, the lines arrive together in about a microsecond.
+    /// `voxels`: the walk reaches depth 16, so the leaf pool is wanted too.
+    pub(crate) fn prefetch_all_if_small(&self, voxels: bool) -> bool {
+        let p = self.parts();
+        let leaf_pool = if voxels { 4 * (p.leaf_values.len() + p.leaf_extras.len()) } else { 0 };
+        let bytes = 4 * (p.values.len() + p.first_child.len() + p.extras.len()) + p.masks.len() + leaf_pool;
+        if bytes > WHOLE_PREFETCH_BYTES {
+            return false;
+        }
+        prefetch_lines(p.masks);
+        prefetch_lines(p.first_child);
+        prefetch_lines(p.values);
+        prefetch_lines(p.extras);
+        if voxels {
+            prefetch_lines(p.leaf_values);
+            prefetch_lines(p.leaf_extras);
+        }
+        true
+    }
+
     /// The arrays of both pools, for read-only passes over the whole tree.
     #[inline]
     pub(crate) fn parts(&self) -> Parts<'_> {
@@ -1093,6 +1117,22 @@ impl LabelFill {
 #[inline(always)]
 fn max_of(values: &[f32]) -> f32 {
     values.iter().fold(-f32::MAX, |m, &v| if v > m { v } else { m })
+}
+
+/// Arenas (and mapped files) up to this size are prefetched whole before
+/// an iteration: a quarter of the smallest L2 of current x86 and Arm cores
+/// (1 MB here), so the lines stay there for the walk.
+pub(crate) const WHOLE_PREFETCH_BYTES: usize = 256 << 10;
+
+/// [`prefetch`] for every 64-byte line of `s`.
+pub(crate) fn prefetch_lines<T>(s: &[T]) {
+    let step = (64 / std::mem::size_of::<T>().max(1)).max(1);
+    for i in (0..s.len()).step_by(step) {
+        prefetch(s, i);
+    }
+    if let Some(last) = s.len().checked_sub(1) {
+        prefetch(s, last);
+    }
 }
 
 /// Asks for the cache line holding `s[i]` (nothing when `i` is out of

@@ -117,7 +117,11 @@ impl<'a> NodeIter<'a> {
         bbx: Option<KeyBox>,
     ) -> Self {
         let max_depth = if max_depth == 0 || max_depth > TREE_DEPTH { TREE_DEPTH } else { max_depth };
-        let prefetch = arena.is_some_and(|a| a.slot_count() > PREFETCH_MIN_SLOTS && a.free_slot_count() > 0);
+        // a walk over all of a small arena asks for it whole (and then needs
+        // no group prefetches; a box walk may visit little of it); a large
+        // scattered one is asked for group by group as it is walked
+        let whole = bbx.is_none() && arena.is_some_and(|a| a.prefetch_all_if_small(max_depth == TREE_DEPTH));
+        let prefetch = !whole && arena.is_some_and(|a| a.slot_count() > PREFETCH_MIN_SLOTS && a.free_slot_count() > 0);
         NodeIter {
             walk: Walk { arena, keys, max_depth, leaves_only, bbx, prefetch },
             stack: Stack { frames: [Frame::default(); TREE_DEPTH as usize], len: 0 },

@@ -9,7 +9,7 @@ mod trunk;
 
 pub(crate) use arena::LabelFill;
 use arena::PreorderFill;
-pub(crate) use arena::{in_leaf_pool, leaf_index, Parts};
+pub(crate) use arena::{in_leaf_pool, leaf_index, prefetch_lines, Parts, WHOLE_PREFETCH_BYTES};
 pub use arena::{ArenaUsage, NodeArena, NodeId};
 pub use counting::CountingTree;
 pub(crate) use cursor::{LastAnswer, PathSearch};
