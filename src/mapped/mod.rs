@@ -515,10 +515,12 @@ impl<'a> MapSearchIndex<'a> {
         self.tables.bytes()
     }
 
-    /// [`MapView::search`].
+    /// [`MapView::search`], from the deepest table that answers, or from
+    /// the trunk end when none does.
     #[inline]
     pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
-        let start = self.tables.start(key, query::normalize_depth(depth));
+        let trunks = self.view.trunks()?;
+        let start = |code, depth| self.tables.start(key, depth).or_else(|| Some(trunks.start(code, depth)));
         with_nav!(self.view.nav, |nav| query::search_node_from(nav, key, depth, start)
             .map(|(f, n)| Found { extra: self.view.extras.get(n), ..f }))
     }

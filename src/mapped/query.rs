@@ -55,33 +55,24 @@ pub(crate) fn normalize_depth(depth: u8) -> u8 {
 }
 
 /// `search` on any layout (mirrors `OccupancyTree::search`), with the
-/// node found (its `extra` is left 0), starting at `start` (a node on the
-/// key's path and its depth, at most `depth`) or else the root.
+/// node found (its `extra` is left 0). `start` gives, for the key's Morton
+/// code and the search depth, a node on the key's path and its depth (at
+/// most the search depth), or `None` for the root.
 #[inline(always)]
 pub(crate) fn search_node_from<N: Nav>(
     nav: N,
     key: Key,
     depth: u8,
-    start: Option<(Node, u8)>,
+    start: impl FnOnce(u64, u8) -> Option<(Node, u8)>,
 ) -> Option<(Found, Node)> {
     let depth = normalize_depth(depth);
     let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
-    let (mut node, from) = match start {
+    let code = MortonCode::encode_table(key).0;
+    let (node, from) = match start(code, depth) {
         Some(s) => s,
         None => (nav.root()?, 0),
     };
-    let mut mask = nav.mask(node)?;
-    for d in from..depth {
-        let pos = key.child_index(d);
-        if mask & (1 << pos) == 0 {
-            if mask != 0 {
-                return None;
-            }
-            return Some((Found { value: nav.get(node)?.0, depth: d, is_leaf: true, extra: 0 }, node));
-        }
-        node = nav.child(node, mask, pos)?;
-        mask = nav.mask(node)?;
-    }
+    let (node, depth, mask) = nav.descend(node, from, depth, code)?;
     Some((Found { value: nav.get(node)?.0, depth, is_leaf: mask == 0, extra: 0 }, node))
 }
 
@@ -89,10 +80,8 @@ pub(crate) fn search_node_from<N: Nav>(
 /// [`Trunks`]), the node's colour or stamp filled in.
 #[inline(always)]
 pub(crate) fn search<N: Nav>(nav: N, extras: Extras<'_>, trunks: &Trunks<Node>, key: Key, depth: u8) -> Option<Found> {
-    let depth = normalize_depth(depth);
-    let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
-    let start = trunks.start(MortonCode::encode_table(key).0, depth);
-    search_node_from(nav, key, depth, Some(start)).map(|(f, n)| Found { extra: extras.get(n), ..f })
+    search_node_from(nav, key, depth, |code, depth| Some(trunks.start(code, depth)))
+        .map(|(f, n)| Found { extra: extras.get(n), ..f })
 }
 
 /// The trunks of a mapped tree; `None` when it has no root.
