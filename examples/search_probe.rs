@@ -84,7 +84,7 @@ fn main() {
     println!("compacted, cold     {:6.2} ns/leaf ({:.1} us)", t * 1e9 / nl, t * 1e6);
     let deep = tree.leaves(0).filter(|l| l.depth == 16).count();
     println!("depth-16 leaves {deep} of {}", leaves.len());
-    for d in [9u8, 10, 11, 12, 13] {
+    for d in [9u8, 10, 11, 12, 13, 14, 15] {
         let index = octolinear::SearchIndex::at_depth(&tree, d);
         let t = best(reps, || keys.iter().filter_map(|&k| index.search(k, 0)).map(|f| f.value).sum::<f32>());
         println!("index {d} search(key)  {:6.2} ns", ns(t));
@@ -98,6 +98,12 @@ fn main() {
         queries.iter().filter_map(|&p| view.search_point(p, 0).ok().flatten()).map(|f| f.value).sum::<f32>()
     });
     println!("mapped search_point {:6.2} ns", ns(t));
+    let index = mapped::MapSearchIndex::new(view);
+    let t = best(reps, || keys.iter().filter_map(|&k| index.search(k, 0)).map(|f| f.value).sum::<f32>());
+    println!("mapped index {} search(key) {:6.2} ns", index.depth(), ns(t));
+    let t =
+        best(reps, || queries.iter().filter_map(|&p| index.search(view.key(p).ok()?, 0)).map(|f| f.value).sum::<f32>());
+    println!("mapped index, points {:6.2} ns", ns(t));
 }
 
 /// The fastest of 50 leaf folds, each after writing 32 MB elsewhere (the

@@ -245,6 +245,7 @@ impl<'a> MapView<'a> {
     }
 
     /// The search starts ([`query::trunks`]), derived once per map.
+    #[inline]
     fn trunks(&self) -> Option<&'a Trunks<Node>> {
         self.meta.trunks.get_or_init(|| with_nav!(self.nav, |nav| query::trunks(nav))).as_ref()
     }
@@ -494,7 +495,8 @@ pub struct MapSearchIndex<'a> {
 impl<'a> MapSearchIndex<'a> {
     pub fn new(view: MapView<'a>) -> Self {
         let tables = with_nav!(view.nav, |nav| {
-            LevelTables::build(nav.root(), view.node_count(), None, |n, out| {
+            let trunk_depth = view.trunks().map_or(0, |t| t.shallowest_end());
+            LevelTables::build(nav.root(), view.node_count(), None, trunk_depth, |n, out| {
                 let Some(mask) = nav.mask(n) else { return };
                 let mut ch = [Node::default(); 8];
                 let Some(k) = nav.children(n, mask, &mut ch) else { return };
@@ -520,8 +522,9 @@ impl<'a> MapSearchIndex<'a> {
     #[inline]
     pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
         let trunks = self.view.trunks()?;
-        let start = |code, depth| self.tables.start(key, depth).or_else(|| Some(trunks.start(code, depth)));
-        with_nav!(self.view.nav, |nav| query::search_node_from(nav, key, depth, start)
+        let (code, depth) = query::search_target(key, depth);
+        let start = self.tables.start(key, depth).unwrap_or_else(|| trunks.start(code, depth));
+        with_nav!(self.view.nav, |nav| query::search_from(nav, code, depth, start)
             .map(|(f, n)| Found { extra: self.view.extras.get(n), ..f }))
     }
 }

@@ -54,25 +54,21 @@ pub(crate) fn normalize_depth(depth: u8) -> u8 {
     }
 }
 
-/// `search` on any layout (mirrors `OccupancyTree::search`), with the
-/// node found (its `extra` is left 0). `start` gives, for the key's Morton
-/// code and the search depth, a node on the key's path and its depth (at
-/// most the search depth), or `None` for the root.
+/// A search's depth (0 or above 16 means 16), its key's Morton code at
+/// that depth (a coarse node's centre key, as `search` takes it).
 #[inline(always)]
-pub(crate) fn search_node_from<N: Nav>(
-    nav: N,
-    key: Key,
-    depth: u8,
-    start: impl FnOnce(u64, u8) -> Option<(Node, u8)>,
-) -> Option<(Found, Node)> {
+pub(crate) fn search_target(key: Key, depth: u8) -> (u64, u8) {
     let depth = normalize_depth(depth);
     let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
-    let code = MortonCode::encode_table(key).0;
-    let (node, from) = match start(code, depth) {
-        Some(s) => s,
-        None => (nav.root()?, 0),
-    };
-    let (node, depth, mask) = nav.descend(node, from, depth, code)?;
+    (MortonCode::encode_table(key).0, depth)
+}
+
+/// `search` on any layout (mirrors `OccupancyTree::search`) for a
+/// [`search_target`], with the node found (its `extra` is left 0), from
+/// `start` (a node on the key's path and its depth, at most `depth`).
+#[inline(always)]
+pub(crate) fn search_from<N: Nav>(nav: N, code: u64, depth: u8, start: (Node, u8)) -> Option<(Found, Node)> {
+    let (node, depth, mask) = nav.descend(start.0, start.1, depth, code)?;
     Some((Found { value: nav.get(node)?.0, depth, is_leaf: mask == 0, extra: 0 }, node))
 }
 
@@ -80,8 +76,8 @@ pub(crate) fn search_node_from<N: Nav>(
 /// [`Trunks`]), the node's colour or stamp filled in.
 #[inline(always)]
 pub(crate) fn search<N: Nav>(nav: N, extras: Extras<'_>, trunks: &Trunks<Node>, key: Key, depth: u8) -> Option<Found> {
-    search_node_from(nav, key, depth, |code, depth| Some(trunks.start(code, depth)))
-        .map(|(f, n)| Found { extra: extras.get(n), ..f })
+    let (code, depth) = search_target(key, depth);
+    search_from(nav, code, depth, trunks.start(code, depth)).map(|(f, n)| Found { extra: extras.get(n), ..f })
 }
 
 /// The trunks of a mapped tree; `None` when it has no root.

@@ -100,11 +100,14 @@ impl<T: Copy + Default> LevelTables<T> {
     /// (child index, child). `depth` `None` chooses the deepest depth
     /// holding at most one node per 32 of `total_nodes` and at most 8192;
     /// `Some(d)` builds at `d` (0: no tables; above 15 counts as 15). The
-    /// walk visits only the levels down to that depth.
+    /// walk visits only the levels down to that depth. Tables at or above
+    /// `trunk_depth` are left out: a search starts at least that deep from
+    /// its trunk end, and in unknown space it would probe them in vain.
     pub fn build(
         root: Option<T>,
         total_nodes: u64,
         depth: Option<u8>,
+        trunk_depth: u8,
         mut children: impl FnMut(T, &mut Vec<(usize, T)>),
     ) -> Self {
         let Some(root) = root else { return LevelTables { tables: Vec::new() } };
@@ -127,7 +130,7 @@ impl<T: Copy + Default> LevelTables<T> {
         }
         let mut tables = Vec::new();
         let mut d = (levels.len() - 1) as u8;
-        while d > 0 {
+        while d > trunk_depth {
             tables.push(Table::new(d, &levels[d as usize]));
             d = d.saturating_sub(TABLE_STEP);
         }
@@ -181,7 +184,8 @@ impl<'t> SearchIndex<'t> {
 
     fn build(tree: &'t OccupancyTree, depth: Option<u8>) -> Self {
         let a = tree.arena();
-        let tables = LevelTables::build(a.map(|_| ROOT), tree.size() as u64, depth, |n, out| {
+        let trunk_depth = tree.trunks.shallowest_end();
+        let tables = LevelTables::build(a.map(|_| ROOT), tree.size() as u64, depth, trunk_depth, |n, out| {
             if let Some(a) = a {
                 out.extend(a.children(n));
             }

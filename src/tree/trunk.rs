@@ -54,6 +54,14 @@ impl<N: Copy> Trunks<N> {
         t
     }
 
+    /// The depth of the shallowest chain end below the root (0 when the
+    /// root has no children): every search for a key inside the chains'
+    /// regions starts at least this deep.
+    pub fn shallowest_end(&self) -> u8 {
+        let present = self.ends.iter().map(|e| (e >> DEPTH_SHIFT) as u8).filter(|&d| d > 0);
+        present.min().unwrap_or(0)
+    }
+
     /// The node a search for `code` (a Morton code, at `depth`) can start
     /// from, and its depth.
     #[inline(always)]
