@@ -187,22 +187,38 @@ impl Nav for RankNav<'_> {
         if self.log2 != 3 {
             return descend_by_child(self, node, from, depth, code);
         }
+        // the sections cut to the blocks that nodes `0..n` use, once per
+        // descent, so that a level checks only its block
+        let blocks = (self.n as usize).div_ceil(8);
+        let (Some(masks), Some(dir)) = (self.masks.get(..8 * blocks), self.dir.get(..4 * blocks)) else {
+            return descend_by_child(self, node, from, depth, code);
+        };
+        let n = u64::from(self.n);
         let mut i = node.idx;
         for d in from..depth {
             let block = (i >> 3) as usize;
-            let word = u64_at(self.masks, 8 * block)?;
+            if block >= blocks {
+                return None;
+            }
+            let word = u64::from_le_bytes(masks[8 * block..8 * block + 8].try_into().ok()?);
             let shift = 8 * (i & 7);
             let mask = (word >> shift) as u8;
-            let pos = ((code >> (3 * (TREE_DEPTH - 1 - d))) & 7) as usize;
-            if mask & (1 << pos) == 0 {
+            let pos = ((code >> (3 * (TREE_DEPTH - 1 - d))) & 7) as u32;
+            if u32::from(mask) & (1 << pos) == 0 {
                 return (mask == 0).then_some((Node { idx: i, label: 0 }, d, 0));
             }
-            // RankNav::first_child and child, on the word in hand
-            let rank = u32_at(self.dir, 4 * block)?.wrapping_add((word & ((1u64 << shift) - 1)).count_ones());
-            let first = rank.checked_add(1).filter(|&f| f > i)?;
-            i = first.checked_add((mask & below(pos)).count_ones()).filter(|&c| c < self.n)?;
+            // RankNav::first_child and child, on the word in hand (in u64:
+            // no overflow), as in a verified file: the first child after
+            // the node, the child a node
+            let base = u32::from_le_bytes(dir[4 * block..4 * block + 4].try_into().ok()?);
+            let first = u64::from(base) + u64::from((word & ((1u64 << shift) - 1)).count_ones()) + 1;
+            let c = first + u64::from((u32::from(mask) & ((1 << pos) - 1)).count_ones());
+            if first <= u64::from(i) || c >= n {
+                return None;
+            }
+            i = c as u32;
         }
-        let mask = *self.masks.get(i as usize)?;
+        let mask = *masks.get(i as usize)?;
         Some((Node { idx: i, label: 0 }, depth, mask))
     }
 
