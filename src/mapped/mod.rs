@@ -55,7 +55,7 @@ pub use write::{
 };
 
 use crate::geometry::Point3;
-use crate::key::{Key, KeyError, KeySpace};
+use crate::key::{Key, KeyError, KeySpace, TREE_DEPTH};
 use crate::ray::{CastError, CastOptions, CastOutcome};
 use crate::sensor::SensorModel;
 use crate::tree::{CountingTree, Found, KeyBox, LevelTables, OccupancyTree, PreorderBuilder, Trunks};
@@ -293,6 +293,7 @@ impl<'a> MapView<'a> {
     }
 
     /// The key of the voxel containing `p`.
+    #[inline]
     pub fn key(&self, p: Point3) -> Result<Key, KeyError> {
         self.meta.keys.key(p)
     }
@@ -344,6 +345,7 @@ impl<'a> MapView<'a> {
     }
 
     /// [`Self::search`] at the voxel containing `p`.
+    #[inline]
     pub fn search_point(&self, p: Point3, depth: u8) -> Result<Option<Found>, KeyError> {
         Ok(self.search(self.meta.keys.key(p)?, depth))
     }
@@ -489,19 +491,39 @@ fn preorder<N: Nav>(nav: N, extras: Extras<'_>, b: &mut PreorderBuilder) -> Resu
 /// below. Opt-in for query-heavy work; opening stays O(1).
 pub struct MapSearchIndex<'a> {
     view: MapView<'a>,
-    tables: LevelTables<Node>,
+    tables: LevelTables<IndexEntry>,
+}
+
+/// A node in a [`MapSearchIndex`] table, with what a search's first step
+/// below it needs where the layout allows it (rank and pointer layouts:
+/// child `pos` is `first` plus the children before `pos`), so that the
+/// step reads nothing from the file.
+#[derive(Clone, Copy, Default)]
+struct IndexEntry {
+    node: Node,
+    mask: u8,
+    /// 0 (never a child's index: the root's) when the step is not known.
+    first: u32,
 }
 
 impl<'a> MapSearchIndex<'a> {
     pub fn new(view: MapView<'a>) -> Self {
         let tables = with_nav!(view.nav, |nav| {
+            let entry = |node: Node| {
+                let mask = nav.mask(node).unwrap_or(0);
+                // known only when all the children lie in the file
+                let first = nav
+                    .first_child_index(node, mask)
+                    .filter(|&f| u64::from(f) + u64::from(mask.count_ones()) <= view.node_count())
+                    .unwrap_or(0);
+                IndexEntry { node, mask, first }
+            };
             let trunk_depth = view.trunks().map_or(0, |t| t.shallowest_end());
-            LevelTables::build(nav.root(), view.node_count(), None, trunk_depth, |n, out| {
-                let Some(mask) = nav.mask(n) else { return };
+            LevelTables::build(nav.root().map(entry), view.node_count(), None, trunk_depth, |e, out| {
                 let mut ch = [Node::default(); 8];
-                let Some(k) = nav.children(n, mask, &mut ch) else { return };
-                let positions = (0..8).filter(|p| mask & (1 << p) != 0);
-                out.extend(positions.zip(ch[..k].iter().copied()));
+                let Some(k) = nav.children(e.node, e.mask, &mut ch) else { return };
+                let positions = (0..8).filter(|p| e.mask & (1 << p) != 0);
+                out.extend(positions.zip(ch[..k].iter().map(|&c| entry(c))));
             })
         });
         MapSearchIndex { view, tables }
@@ -517,13 +539,27 @@ impl<'a> MapSearchIndex<'a> {
         self.tables.bytes()
     }
 
-    /// [`MapView::search`], from the deepest table that answers, or from
-    /// the trunk end when none does.
+    /// [`MapView::search`], from the deepest table that answers (one step
+    /// below it taken from the table), or from the trunk end when none does.
     #[inline]
     pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
         let trunks = self.view.trunks()?;
         let (code, depth) = query::search_target(key, depth);
-        let start = self.tables.start(key, depth).unwrap_or_else(|| trunks.start(code, depth));
+        let (start, depth) = match self.tables.start(key, depth) {
+            Some((e, d)) if e.first != 0 && d < depth => {
+                let pos = (code >> (3 * (TREE_DEPTH - 1 - d))) & 7;
+                if e.mask & (1 << pos) != 0 {
+                    let c = e.first + (u32::from(e.mask) & ((1 << pos) - 1)).count_ones();
+                    ((Node { idx: c, label: 0 }, d + 1), depth)
+                } else if e.mask == 0 {
+                    ((e.node, d), d)
+                } else {
+                    return None;
+                }
+            }
+            Some((e, d)) => ((e.node, d), depth),
+            None => (trunks.start(code, depth), depth),
+        };
         with_nav!(self.view.nav, |nav| query::search_from(nav, code, depth, start)
             .map(|(f, n)| Found { extra: self.view.extras.get(n), ..f }))
     }

@@ -30,6 +30,13 @@ pub(crate) trait Nav: Copy {
     }
     /// Child `pos` (present in `mask`, the node's mask).
     fn child(&self, n: Node, mask: u8, pos: usize) -> Option<Node>;
+    /// Where the children of `n` (whose mask is `mask`) begin, for the
+    /// layouts whose child `pos` is that index plus the number of children
+    /// before `pos`; `None` for the others.
+    #[inline(always)]
+    fn first_child_index(&self, _n: Node, _mask: u8) -> Option<u32> {
+        None
+    }
     /// A search's descent for the Morton `code` from `node`, at depth
     /// `from` on its path, down to `depth`: where it stops, at what depth,
     /// and that node's mask (0 when it stopped early at a leaf); `None`
@@ -154,6 +161,11 @@ impl RankNav<'_> {
 }
 
 impl Nav for RankNav<'_> {
+    #[inline(always)]
+    fn first_child_index(&self, n: Node, mask: u8) -> Option<u32> {
+        (mask != 0).then(|| self.first_child(n)).flatten()
+    }
+
     #[inline(always)]
     fn root(&self) -> Option<Node> {
         (self.n > 0).then_some(Node { idx: 0, label: 0 })
@@ -296,6 +308,11 @@ impl PtrNav<'_> {
 }
 
 impl Nav for PtrNav<'_> {
+    #[inline(always)]
+    fn first_child_index(&self, n: Node, mask: u8) -> Option<u32> {
+        (mask != 0).then(|| self.first_child(n)).flatten()
+    }
+
     #[inline(always)]
     fn root(&self) -> Option<Node> {
         (self.n > 0).then_some(Node { idx: 0, label: 0 })

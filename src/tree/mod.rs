@@ -241,6 +241,7 @@ impl OccupancyTree {
     }
 
     /// The key of the voxel containing `p`.
+    #[inline]
     pub fn key(&self, p: Point3) -> Result<Key, KeyError> {
         self.keys.key(p)
     }
@@ -703,6 +704,7 @@ impl OccupancyTree {
     }
 
     /// [`Self::search`] at the voxel containing `p`.
+    #[inline]
     pub fn search_point(&self, p: Point3, depth: u8) -> Result<Option<Found>, KeyError> {
         Ok(self.search(self.keys.key(p)?, depth))
     }
