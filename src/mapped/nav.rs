@@ -183,10 +183,13 @@ impl Nav for RankNav<'_> {
         self.masks.get(n.idx as usize).copied()
     }
 
+    /// Child `pos` lies after its parent and within the nodes (in a
+    /// corrupted file a rank may point anywhere; [`Nav::descend`] makes the
+    /// same test, so single and batched searches agree on any bytes).
     #[inline(always)]
     fn child(&self, n: Node, mask: u8, pos: usize) -> Option<Node> {
-        let c = self.first_child(n)?.checked_add((mask & below(pos)).count_ones())?;
-        (c < self.n).then_some(Node { idx: c, label: 0 })
+        let c = u64::from(self.rank(n.idx)?) + 1 + u64::from((mask & below(pos)).count_ones());
+        (c > u64::from(n.idx) && c < u64::from(self.n)).then_some(Node { idx: c as u32, label: 0 })
     }
 
     /// With the writer's default 8-node blocks, one word of masks holds a
@@ -200,35 +203,42 @@ impl Nav for RankNav<'_> {
             return descend_by_child(self, node, from, depth, code);
         }
         // the sections cut to the blocks that nodes `0..n` use, once per
-        // descent, so that a level checks only its block
+        // descent, so that a level tests only its block
         let blocks = (self.n as usize).div_ceil(8);
         let (Some(masks), Some(dir)) = (self.masks.get(..8 * blocks), self.dir.get(..4 * blocks)) else {
             return descend_by_child(self, node, from, depth, code);
         };
         let n = u64::from(self.n);
         let mut i = node.idx;
+        // the child positions still to take, left-aligned: level `d`'s three
+        // bits are the top ones when it is reached
+        let mut positions = (code << (64 - 3 * u32::from(TREE_DEPTH))) << (3 * u32::from(from));
         for d in from..depth {
             let block = (i >> 3) as usize;
             if block >= blocks {
                 return None;
             }
             let word = u64::from_le_bytes(masks[8 * block..8 * block + 8].try_into().ok()?);
-            let shift = 8 * (i & 7);
-            let mask = (word >> shift) as u8;
-            let pos = ((code >> (3 * (TREE_DEPTH - 1 - d))) & 7) as u32;
-            if u32::from(mask) & (1 << pos) == 0 {
+            let pos = (positions >> 61) as u32;
+            positions <<= 3;
+            // node i's mask is the word's byte i & 7; child `pos`'s bit in
+            // the word is `bit`
+            let bit = 8 * (i & 7) + pos;
+            if word & (1 << bit) == 0 {
+                let mask = (word >> (8 * (i & 7))) as u8;
                 return (mask == 0).then_some((Node { idx: i, label: 0 }, d, 0));
             }
-            // RankNav::first_child and child, on the word in hand (in u64:
-            // no overflow), as in a verified file: the first child after
-            // the node, the child a node
-            let base = u32::from_le_bytes(dir[4 * block..4 * block + 4].try_into().ok()?);
-            let first = u64::from(base) + u64::from((word & ((1u64 << shift) - 1)).count_ones()) + 1;
-            let c = first + u64::from((u32::from(mask) & ((1 << pos) - 1)).count_ones());
-            if first <= u64::from(i) || c >= n {
+            // RankNav::first_child and child in one count: the children of
+            // the nodes before `i` in its block and of `i` before `pos` are
+            // the word's bits below `bit`; the mask and the directory entry
+            // plus one come off the chain of dependent steps
+            let base = u64::from(u32::from_le_bytes(dir[4 * block..4 * block + 4].try_into().ok()?)) + 1;
+            let child = base + u64::from((word & ((1u64 << bit) - 1)).count_ones());
+            // `child`'s test (a branch beside the chain of dependent steps)
+            if child <= u64::from(i) || child >= n {
                 return None;
             }
-            i = c as u32;
+            i = child as u32;
         }
         let mask = *masks.get(i as usize)?;
         Some((Node { idx: i, label: 0 }, depth, mask))
