@@ -82,6 +82,8 @@ fn main() {
     compacted.compact();
     let t = cold_fold(&compacted);
     println!("compacted, cold     {:6.2} ns/leaf ({:.1} us)", t * 1e9 / nl, t * 1e6);
+    let t = best(reps, || keys.iter().filter_map(|&k| compacted.search(k, 0)).map(|f| f.value).sum::<f32>());
+    println!("compacted search(key) {:6.2} ns", ns(t));
     let deep = tree.leaves(0).filter(|l| l.depth == 16).count();
     println!("depth-16 leaves {deep} of {}", leaves.len());
     for d in [9u8, 10, 11, 12, 13, 14, 15] {
