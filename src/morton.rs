@@ -111,12 +111,6 @@ impl MortonCode {
 /// digits that are equal in every code, as the high ones of codes from one
 /// region usually are.
 pub fn sort_codes(codes: &mut Vec<u64>) {
-    sort_codes_with(codes, &mut Vec::new());
-}
-
-/// [`sort_codes`] with a scratch list whose memory it reuses (and leaves
-/// there for the next call): a sequence of scans sorts without allocating.
-pub fn sort_codes_with(codes: &mut Vec<u64>, scratch: &mut Vec<u64>) {
     const BITS: u32 = 12;
     const BUCKETS: usize = 1 << BITS;
     if codes.len() < 256 {
@@ -131,9 +125,7 @@ pub fn sort_codes_with(codes: &mut Vec<u64>, scratch: &mut Vec<u64>) {
         }
     }
     let n = codes.len() as u32;
-    let buf = scratch;
-    buf.clear();
-    buf.resize(codes.len(), 0);
+    let mut buf = vec![0u64; codes.len()];
     for (d, hist) in count.iter_mut().enumerate() {
         if hist.contains(&n) {
             continue; // every code has the same digit here
@@ -150,7 +142,7 @@ pub fn sort_codes_with(codes: &mut Vec<u64>, scratch: &mut Vec<u64>) {
             buf[hist[b] as usize] = c;
             hist[b] += 1;
         }
-        std::mem::swap(codes, buf);
+        std::mem::swap(codes, &mut buf);
     }
 }
 

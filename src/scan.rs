@@ -83,42 +83,9 @@ struct Casting {
     recent: Vec<u64>,
 }
 
-/// The lists and tables one scan's casting fills, kept from scan to scan
-/// by [`OccupancyTree::insert_point_clouds`]: a multi-threaded sequence of
-/// scans otherwise gets fresh memory for each scan from the allocator
-/// (memory-mapped, as the lists are large, and faulted in page by page),
-/// which made a 2-thread build of the indoor 0.2 m map a third slower on
-/// its first run (18-21 ms against 14 ms with `MALLOC_MMAP_THRESHOLD_`
-/// raised).
-#[derive(Default)]
-struct ScanBuffers {
-    free: Vec<u64>,
-    occupied: Vec<u64>,
-    recent: Vec<u64>,
-    sort: Vec<u64>,
-}
-
-impl ScanBuffers {
-    /// Takes back the lists of an update that has been applied.
-    fn recycle(&mut self, update: ScanUpdate) {
-        (self.free, self.occupied) = (update.free, update.occupied);
-    }
-}
-
 impl Casting {
     fn new() -> Self {
-        Self::reusing(&mut ScanBuffers::default())
-    }
-
-    /// A casting in `bufs`'s memory (its lists emptied, its filter reset).
-    fn reusing(bufs: &mut ScanBuffers) -> Self {
-        let (mut free, mut occupied) = (std::mem::take(&mut bufs.free), std::mem::take(&mut bufs.occupied));
-        free.clear();
-        occupied.clear();
-        let mut recent = std::mem::take(&mut bufs.recent);
-        recent.clear();
-        recent.resize(RECENT_SLOTS, u64::MAX);
-        Casting { free, occupied, recent }
+        Casting { free: Vec::new(), occupied: Vec::new(), recent: vec![u64::MAX; RECENT_SLOTS] }
     }
 
     /// `computeUpdate`'s work for one end point. `fan` holds the rays'
@@ -414,15 +381,9 @@ impl ScanUpdate {
     /// The update from casting output (Morton codes in any order, repeats
     /// allowed): both lists sorted and freed of repeats, then the occupied
     /// codes removed from the free ones, by merging.
-    pub fn from_codes(free: Vec<u64>, occupied: Vec<u64>) -> Self {
-        Self::from_codes_with(free, occupied, &mut Vec::new())
-    }
-
-    /// [`Self::from_codes`] sorting with `scratch`'s memory.
-    fn from_codes_with(mut free: Vec<u64>, mut occupied: Vec<u64>, scratch: &mut Vec<u64>) -> Self {
-        crate::morton::sort_codes_with(&mut occupied, scratch);
-        dedup_except(&mut occupied, &[]);
-        crate::morton::sort_codes_with(&mut free, scratch);
+    pub fn from_codes(mut free: Vec<u64>, mut occupied: Vec<u64>) -> Self {
+        sort_dedup(&mut occupied);
+        crate::morton::sort_codes(&mut free);
         dedup_except(&mut free, &occupied);
         ScanUpdate { free, occupied }
     }
@@ -558,13 +519,9 @@ impl OccupancyTree {
             changed: Condvar::new(),
             lookahead: threads.max(1) + 1,
         };
-        // buffers of applied updates, for the next casts
-        let spare: Mutex<Vec<ScanBuffers>> = Mutex::new(Vec::new());
-        let spare_buffers = || spare.lock().unwrap_or_else(|e| e.into_inner());
         let cast = |(i, (points, origin)): (usize, (P, Point3))| {
-            let mut bufs = spare_buffers().pop().unwrap_or_default();
-            let result = compute_update_with(&keys, points.as_ref(), origin, &cast_opts, &mut bufs);
-            pipeline.lock().cast.insert(i, result.map(|(update, report)| (update, report, bufs)));
+            let result = compute_update(&keys, points.as_ref(), origin, &cast_opts);
+            pipeline.lock().cast.insert(i, result);
             pipeline.changed.notify_all();
         };
         rayon::scope(|scope| {
@@ -582,10 +539,9 @@ impl OccupancyTree {
             let _stop = StopOnDrop { pipeline: &pipeline, only_on_panic: false };
             for k in 0.. {
                 let Some(result) = pipeline.next_update(k, &cast) else { return Ok(()) };
-                let (update, report, mut bufs) = result.map_err(|e| (k, e))?;
+                let (update, report) = result.map_err(|e| (k, e))?;
                 let report = self.apply_update(&update, report, opts.inner);
-                bufs.recycle(update);
-                spare_buffers().push(bufs);
+                drop(update);
                 pipeline.lock().applied = k + 1;
                 pipeline.changed.notify_all();
                 after_each(self, report);
@@ -701,9 +657,6 @@ impl OccupancyTree {
 
 type CastResult = Result<(ScanUpdate, ScanReport), ScanError>;
 
-/// A cast in the pipeline, with the buffers its update came from.
-type PipelinedCast = Result<(ScanUpdate, ScanReport, ScanBuffers), ScanError>;
-
 /// What the threads of [`OccupancyTree::insert_point_clouds`] share.
 struct Pipeline<S> {
     state: Mutex<PipelineState<S>>,
@@ -723,7 +676,7 @@ struct PipelineState<S> {
     exhausted: bool,
     stopped: bool,
     /// Cast scans waiting to be applied, by position.
-    cast: BTreeMap<usize, PipelinedCast>,
+    cast: BTreeMap<usize, CastResult>,
 }
 
 impl<S: Iterator> Pipeline<S> {
@@ -763,7 +716,7 @@ impl<S: Iterator> Pipeline<S> {
 
     /// The cast of scan `k`, casting other scans (with `cast`) while it is
     /// not ready; `None` after the last scan.
-    fn next_update(&self, k: usize, cast: &impl Fn(S::Item)) -> Option<PipelinedCast> {
+    fn next_update(&self, k: usize, cast: &impl Fn(S::Item)) -> Option<CastResult> {
         let mut s = self.lock();
         loop {
             if let Some(result) = s.cast.remove(&k) {
@@ -808,17 +761,6 @@ pub fn compute_update(
     origin: Point3,
     opts: &ScanOptions,
 ) -> Result<(ScanUpdate, ScanReport), ScanError> {
-    compute_update_with(keys, points, origin, opts, &mut ScanBuffers::default())
-}
-
-/// [`compute_update`] in `bufs`'s memory where it casts on one thread.
-fn compute_update_with(
-    keys: &KeySpace,
-    points: &[Point3],
-    origin: Point3,
-    opts: &ScanOptions,
-    bufs: &mut ScanBuffers,
-) -> CastResult {
     let mut report = ScanReport { points: points.len(), ..Default::default() };
     let origin_key = keys.key(origin);
     if let Err(source) = origin_key {
@@ -862,7 +804,7 @@ fn compute_update_with(
     let fan = RayFan::new(keys, origin).ok();
     let run = || cast_scan(keys, points, fan.as_ref(), origin, opts);
     let update = match opts.threads {
-        Some(1) => cast_serial(keys, points, fan.as_ref(), origin, opts, bufs),
+        Some(1) => cast_serial(keys, points, fan.as_ref(), origin, opts),
         None => run(),
         Some(n) => thread_pool(n)?.install(run),
     };
@@ -875,12 +817,10 @@ fn cast_serial(
     fan: Option<&RayFan>,
     origin: Point3,
     opts: &ScanOptions,
-    bufs: &mut ScanBuffers,
 ) -> ScanUpdate {
-    let mut c = Casting::reusing(bufs);
+    let mut c = Casting::new();
     c.cast_all(keys, fan, points, origin, opts);
-    bufs.recent = c.recent;
-    ScanUpdate::from_codes_with(c.free, c.occupied, &mut bufs.sort)
+    ScanUpdate::from_codes(c.free, c.occupied)
 }
 
 fn cast_scan(
@@ -892,7 +832,7 @@ fn cast_scan(
 ) -> ScanUpdate {
     let threads = rayon::current_num_threads();
     if threads == 1 {
-        return cast_serial(keys, points, fan, origin, opts, &mut ScanBuffers::default());
+        return cast_serial(keys, points, fan, origin, opts);
     }
     let chunk = points.len().div_ceil(2 * threads).max(512);
     let parts: Vec<Casting> = points
