@@ -58,8 +58,7 @@ pub(crate) fn normalize_depth(depth: u8) -> u8 {
 /// that depth (a coarse node's centre key, as `search` takes it).
 #[inline(always)]
 pub(crate) fn search_target(key: Key, depth: u8) -> (u64, u8) {
-    let depth = normalize_depth(depth);
-    let key = if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) };
+    let (key, depth) = crate::tree::search_target(key, depth);
     (MortonCode::encode_table(key).0, depth)
 }
 

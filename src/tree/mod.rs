@@ -1367,10 +1367,11 @@ fn count_leaves(a: &NodeArena, n: NodeId) -> usize {
     let first = a.first_child(n);
     (0..a.mask(n).count_ones()).map(|i| count_leaves(a, first + i)).sum()
 }
+
 /// A search's key and depth as OctoMap's `search` takes them: depth 0 (or
 /// above 16) means 16, and a coarser depth's key is its node's centre key.
 #[inline(always)]
-fn search_target(key: Key, depth: u8) -> (Key, u8) {
+pub(crate) fn search_target(key: Key, depth: u8) -> (Key, u8) {
     let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
     (if depth == TREE_DEPTH { key } else { adjust_key_to_depth(key, depth) }, depth)
 }
