@@ -6,24 +6,15 @@
 //! benchmark's query mix (half leaf centres, half uniform in the bounds);
 //! and leaf iteration warm and cold. A probe for profiling, not a
 //! benchmark of record: the recorded figures are `side_by_side`'s.
+// the side-by-side benchmark's scenes and query mix
+#[path = "../benches/common/mod.rs"]
+mod common;
+
 use octolinear::mapped::{self, MappedMap};
-use octolinear::simulate::{simulate, LidarConfig, SceneKind};
-use octolinear::{BoundsRule, OccupancyTree, Point3, ScanOptions};
+use octolinear::simulate::SceneKind;
+use octolinear::{OccupancyTree, Point3};
 use std::hint::black_box;
 use std::time::Instant;
-
-struct Rng(u64);
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-    fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * ((self.next_u64() >> 40) as f32 / (1u64 << 24) as f32)
-    }
-}
 
 fn best<T>(reps: usize, mut f: impl FnMut() -> T) -> f64 {
     (0..reps)
@@ -40,33 +31,13 @@ fn main() {
     let kind = if args.first().map(String::as_str) == Some("outdoor") { SceneKind::Outdoor } else { SceneKind::Indoor };
     let res: f64 = args.get(1).map_or(0.2, |s| s.parse().expect("RES"));
     let n: usize = args.get(2).map_or(1_000_000, |s| s.parse().expect("N"));
-    let cfg = if kind == SceneKind::Indoor { LidarConfig::indoor() } else { LidarConfig::outdoor() };
-    let scans = if kind == SceneKind::Indoor { 24 } else { 6 };
-    let graph = simulate(kind, scans, 7, &cfg).expect("simulate");
-    let mut tree = OccupancyTree::new(res).expect("resolution");
-    let clouds: Vec<_> = graph.nodes.iter().map(|n| n.graph2tree()).collect();
-    let it = clouds.iter().map(|(c, o)| (c.points.as_slice(), *o));
-    tree.insert_point_clouds(it, &ScanOptions::default(), |_, _| {}).expect("insert");
-    let mut rng = Rng(1);
-    let leaves: Vec<Point3> = tree.leaves(0).map(|l| l.center_point()).collect();
-    let b = tree.bounds(BoundsRule::CenterHalfSize);
-    let queries: Vec<Point3> = (0..n)
-        .map(|i| {
-            if i % 2 == 0 {
-                leaves[(rng.next_u64() % leaves.len() as u64) as usize]
-            } else {
-                Point3::new(
-                    rng.range(b.min[0] as f32, b.max[0] as f32),
-                    rng.range(b.min[1] as f32, b.max[1] as f32),
-                    rng.range(b.min[2] as f32, b.max[2] as f32),
-                )
-            }
-        })
-        .collect();
+    let scans = common::scans(kind, if kind == SceneKind::Indoor { 24 } else { 6 });
+    let tree = common::build(&scans, res, None);
+    let queries = common::query_points(&tree, n, 11);
     let keys: Vec<_> = queries.iter().map(|&p| tree.key(p).unwrap()).collect();
     let reps = 7;
     let ns = |s: f64| s * 1e9 / n as f64;
-    println!("{} nodes, {} leaves, {} queries", tree.size(), leaves.len(), n);
+    println!("{} nodes, {} leaves, {} queries", tree.size(), tree.num_leaves(), n);
     let t = best(reps, || convert_all(&tree, &queries));
     println!("key conversion      {:6.2} ns", ns(t));
     let t = best(reps, || convert_xor(&tree, &queries));
@@ -75,7 +46,7 @@ fn main() {
     println!("search(key)         {:6.2} ns", ns(t));
     let t = best(reps, || search_points(&tree, &queries));
     println!("search_point        {:6.2} ns", ns(t));
-    let nl = leaves.len() as f64;
+    let nl = tree.num_leaves() as f64;
     let t = best(200, || tree.leaves(0).fold((0usize, 0f64), |(n, s), l| (n + 1, s + f64::from(l.value))));
     println!("leaf fold           {:6.2} ns/leaf ({:.1} us)", t * 1e9 / nl, t * 1e6);
     let t = cold_fold(&tree);
@@ -87,7 +58,7 @@ fn main() {
     let t = best(reps, || keys.iter().filter_map(|&k| compacted.search(k, 0)).map(|f| f.value).sum::<f32>());
     println!("compacted search(key) {:6.2} ns", ns(t));
     let deep = tree.leaves(0).filter(|l| l.depth == 16).count();
-    println!("depth-16 leaves {deep} of {}", leaves.len());
+    println!("depth-16 leaves {deep} of {}", tree.num_leaves());
     for d in [9u8, 10, 11, 12, 13, 14, 15] {
         let index = octolinear::SearchIndex::at_depth(&tree, d);
         let t = best(reps, || keys.iter().filter_map(|&k| index.search(k, 0)).map(|f| f.value).sum::<f32>());
