@@ -347,7 +347,9 @@ impl StepClock {
         let s1 = !lt01 & (t1 < t2);
         let s = [s0, s1, !(s0 | s1)];
         for i in 0..3 {
-            self.t[i] += std::hint::select_unpredictable(s[i], self.dt[i], 0.0);
+            // a plain select (`select_unpredictable` would need Rust 1.88, the
+            // crate keeps 1.85)
+            self.t[i] += if s[i] { self.dt[i] } else { 0.0 };
         }
         usize::from(s1) | (usize::from(s[2]) << 1)
     }
