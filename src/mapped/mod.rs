@@ -549,7 +549,7 @@ impl<'a> MapSearchIndex<'a> {
             Some((e, d)) if e.first != 0 && d < depth => {
                 let pos = (code >> (3 * (TREE_DEPTH - 1 - d))) & 7;
                 if e.mask & (1 << pos) != 0 {
-                    let c = e.first + (u32::from(e.mask) & ((1 << pos) - 1)).count_ones();
+                    let c = e.first + (e.mask & nav::below(pos as usize)).count_ones();
                     ((Node { idx: c, label: 0 }, d + 1), depth)
                 } else if e.mask == 0 {
                     ((e.node, d), d)

@@ -88,7 +88,7 @@ fn descend_by_child<N: Nav>(nav: &N, mut node: Node, from: u8, depth: u8, code: 
 }
 
 #[inline(always)]
-fn below(pos: usize) -> u8 {
+pub(crate) fn below(pos: usize) -> u8 {
     ((1u16 << pos) - 1) as u8
 }
 

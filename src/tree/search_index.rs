@@ -204,8 +204,10 @@ impl<'t> SearchIndex<'t> {
     }
 
     #[inline(always)]
-    fn start(&self, key: Key, depth: u8) -> (NodeId, u8) {
-        self.tables.start(key, depth).unwrap_or((ROOT, 0))
+    /// Where a search for `key` (Morton `code`, at `depth`) starts: the
+    /// deepest table that answers, or else the trunk end.
+    fn start(&self, key: Key, code: u64, depth: u8) -> (NodeId, u8) {
+        self.tables.start(key, depth).unwrap_or_else(|| self.tree.trunks.start(code, depth))
     }
 
     /// `tree.search(key, depth)`: the descent of [`OccupancyTree::search`]
@@ -216,7 +218,7 @@ impl<'t> SearchIndex<'t> {
         let a = self.tree.arena()?;
         let (key, depth) = search_target(key, depth);
         let code = MortonCode::encode_table(key).0;
-        let (node, from) = self.tables.start(key, depth).unwrap_or_else(|| self.tree.trunks.start(code, depth));
+        let (node, from) = self.start(key, code, depth);
         let (node, depth, is_leaf) = descend_to(&a.parts(), node, from, depth, code)?;
         Some(found(a, node, depth, is_leaf))
     }
@@ -239,7 +241,7 @@ impl<'t> SearchIndex<'t> {
             let mut begin = [0u32; TREE_DEPTH as usize + 1];
             for (l, q) in chunk.iter().enumerate() {
                 key[l] = if depth == TREE_DEPTH { *q } else { adjust_key_to_depth(*q, depth) };
-                let (n, from) = self.start(key[l], depth);
+                let (n, from) = self.start(key[l], MortonCode::encode_table(key[l]).0, depth);
                 node[l] = n;
                 begin[from as usize] |= 1 << l;
             }
