@@ -104,6 +104,19 @@ struct Frame {
     remaining: u8,
 }
 
+impl Frame {
+    /// Takes the frame's next child: its id and packed key (the frame being
+    /// at `depth`).
+    #[inline(always)]
+    fn take_child(&mut self, depth: usize) -> (NodeId, u64) {
+        let pos = self.remaining.trailing_zeros() as usize;
+        self.remaining &= self.remaining - 1;
+        let id = self.next;
+        self.next += 1;
+        (id, packed::child(self.base, pos, depth as u8))
+    }
+}
+
 impl<'a> NodeIter<'a> {
     pub(super) fn new(tree: &'a OccupancyTree, max_depth: u8, leaves_only: bool, bbx: Option<KeyBox>) -> Self {
         Self::over(tree.arena(), tree.key_space(), max_depth, leaves_only, bbx)
@@ -166,6 +179,80 @@ impl<'a> Walk<'a> {
             extra: p.leaf_extras.get(i).copied().unwrap_or(0),
             is_leaf: true,
             keys: self.keys,
+        }
+    }
+
+    /// `fold` over every leaf below the frames of `st` (no box, no depth
+    /// limit): the general step with the top frame in locals, leaves taken
+    /// straight from their parent's mask test, and each depth-15 node's
+    /// voxels in one loop without a frame.
+    #[inline(always)]
+    fn fold_all_leaves<B>(
+        &self,
+        a: &NodeArena,
+        mut st: Stack,
+        mut acc: B,
+        mut f: impl FnMut(B, NodeItem<'a>) -> B,
+    ) -> B {
+        let p = a.parts();
+        let last = TREE_DEPTH as usize;
+        // the voxels of a depth-15 frame that `next` left open
+        if st.len == last {
+            let fr = &mut st.frames[last - 1];
+            while fr.remaining != 0 {
+                acc = f(acc, self.voxel(&p, fr));
+            }
+            st.len -= 1;
+        }
+        let mut len = st.len;
+        if len == 0 {
+            return acc;
+        }
+        let mut top = st.frames[len - 1];
+        loop {
+            // a depth-14 frame: its children lie at depth 15, their
+            // children (if any) are voxels
+            if len == last - 1 {
+                while top.remaining != 0 {
+                    let (id, packed) = top.take_child(len - 1);
+                    let mask = p.masks[id as usize];
+                    if mask == 0 {
+                        acc = f(acc, self.item(a, id, unpack(packed), TREE_DEPTH - 1, true));
+                        continue;
+                    }
+                    let mut voxels = Frame {
+                        base: child0(packed, TREE_DEPTH - 1),
+                        next: p.first_child[id as usize],
+                        remaining: mask,
+                    };
+                    while voxels.remaining != 0 {
+                        acc = f(acc, self.voxel(&p, &mut voxels));
+                    }
+                }
+            }
+            if top.remaining == 0 {
+                len -= 1;
+                if len == 0 {
+                    return acc;
+                }
+                top = st.frames[len - 1];
+                continue;
+            }
+            // frames stop at depth 14, so the child lies above depth 15, in
+            // the inner pool
+            let (id, packed) = top.take_child(len - 1);
+            let depth = len as u8;
+            let mask = p.masks[id as usize];
+            if mask == 0 {
+                acc = f(acc, self.item(a, id, unpack(packed), depth, true));
+                continue;
+            }
+            if self.prefetch {
+                a.prefetch_grandchildren(id);
+            }
+            st.frames[len - 1] = top;
+            top = Frame { base: child0(packed, depth), next: p.first_child[id as usize], remaining: mask };
+            len += 1;
         }
     }
 
@@ -241,6 +328,9 @@ impl<'a> Iterator for NodeIter<'a> {
         }
         let (walk, mut stack) = (self.walk, self.stack);
         let p = a.parts();
+        if walk.leaves_only && walk.bbx.is_none() && walk.max_depth == TREE_DEPTH {
+            return walk.fold_all_leaves(a, stack, acc, f);
+        }
         let last = TREE_DEPTH as usize;
         loop {
             // as the start of `Walk::step`, all of a group in one loop
@@ -262,7 +352,62 @@ impl<'a> Iterator for NodeIter<'a> {
 #[cfg(test)]
 mod tests {
     use crate::geometry::Point3;
+    use crate::key::Key;
     use crate::tree::{InnerNodes, OccupancyTree};
+
+    /// Leaves and nodes through `fold` equal those through `next`, from the
+    /// start and resumed, on a pruned tree with leaves at every depth from
+    /// 13 to 16 (8x8x8 and 4x4x4 blocks, whole and partial 2x2x2 groups, scattered
+    /// voxels), with and without a depth limit.
+    #[test]
+    fn fold_equals_next_on_a_pruned_tree() {
+        let mut t = OccupancyTree::new(0.1).unwrap();
+        let set = |t: &mut OccupancyTree, x: u16, y: u16, z: u16| {
+            t.set_value(Key([x, y, z]), 2.0, InnerNodes::Update);
+        };
+        for (x, y, z) in (0..512u16).map(|i| (i % 8, (i / 8) % 8, i / 64)) {
+            set(&mut t, 32768 + x, 32768 + y, 32768 + z);
+        }
+        for i in 0..64u16 {
+            set(&mut t, 32840 + (i & 3), 32840 + ((i >> 2) & 3), 32840 + (i >> 4));
+        }
+        for i in 0..8u16 {
+            set(&mut t, 32800 + (i & 1), 32760 + ((i >> 1) & 1), 32770 + (i >> 2));
+        }
+        for i in 0..5u16 {
+            set(&mut t, 32810 + (i & 1), 32750 + ((i >> 1) & 1), 32790 + (i >> 2));
+        }
+        let mut s = 7u32;
+        for _ in 0..300 {
+            s = s.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+            let r = |b: u32| 32700 + ((s >> b) % 160) as u16;
+            set(&mut t, r(1), r(9), r(17));
+        }
+        t.prune();
+        let depths: Vec<u8> = t.leaves(0).map(|l| l.depth).collect();
+        for d in 13..=16 {
+            assert!(depths.contains(&d), "no leaf at depth {d}");
+        }
+        type Items = Vec<(Key, u8, u32, bool)>;
+        for (leaves, max_depth) in [(true, 0), (true, 15), (true, 13), (false, 0), (false, 14)] {
+            let iter = || if leaves { t.leaves(max_depth) } else { t.nodes(max_depth) };
+            let all: Items = {
+                let mut it = iter();
+                std::iter::from_fn(|| it.next()).map(|n| (n.key, n.depth, n.value.to_bits(), n.is_leaf)).collect()
+            };
+            for skip in (0..=all.len()).step_by(7).chain([all.len()]) {
+                let mut it = iter();
+                for _ in 0..skip {
+                    it.next();
+                }
+                let rest = it.fold(Items::new(), |mut v, n| {
+                    v.push((n.key, n.depth, n.value.to_bits(), n.is_leaf));
+                    v
+                });
+                assert!(rest == all[skip..], "leaves {leaves}, depth {max_depth}, after {skip} items");
+            }
+        }
+    }
 
     /// `fold` (used by `collect`, `count`, `for_each`, ...) continues from
     /// wherever `next` left off, for nodes and leaves alike.
