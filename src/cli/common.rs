@@ -35,6 +35,8 @@ pub struct LoadedMap {
 }
 
 /// An occupancy map or a counting tree, as read from disk.
+// one per command run: the size difference costs nothing
+#[allow(clippy::large_enum_variant)]
 pub enum AnyMap {
     Occupancy(LoadedMap),
     Counting(CountingTree),

@@ -76,12 +76,13 @@ pub(crate) fn search_from<N: Nav>(nav: N, code: u64, depth: u8, start: (Node, u8
 #[inline(always)]
 pub(crate) fn search<N: Nav>(nav: N, extras: Extras<'_>, trunks: &Trunks<Node>, key: Key, depth: u8) -> Option<Found> {
     let (code, depth) = search_target(key, depth);
-    search_from(nav, code, depth, trunks.start(code, depth)).map(|(f, n)| Found { extra: extras.get(n), ..f })
+    search_from(nav, code, depth, trunks.start(key, code, depth)).map(|(f, n)| Found { extra: extras.get(n), ..f })
 }
 
 /// The trunks of a mapped tree; `None` when it has no root.
 pub(crate) fn trunks<N: Nav>(nav: N) -> Option<Trunks<Node>> {
-    nav.root().map(|r| Trunks::build(r, |n| nav.mask(n), |n, m, pos| nav.child(n, m, pos)))
+    let cells = usize::try_from(nav.node_budget() / crate::tree::GRID_NODES_PER_CELL).unwrap_or(usize::MAX);
+    nav.root().map(|r| Trunks::build(r, cells, |n| nav.mask(n), |n, m, pos| nav.child(n, m, pos)))
 }
 
 /// [`search`] for many keys, eight descents in lockstep so that their
@@ -114,7 +115,7 @@ pub(crate) fn search_many<N: Nav>(
         let mut ends = [depth; LANES];
         let mut ended = (1u32 << chunk.len()) - 1;
         for l in 0..chunk.len() {
-            let (node, from) = trunks.start(MortonCode::encode_table(key[l]).0, depth);
+            let (node, from) = trunks.start(key[l], MortonCode::encode_table(key[l]).0, depth);
             match nav.mask(node) {
                 Some(mask) => {
                     at[l] = (node, mask);

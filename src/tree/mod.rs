@@ -16,7 +16,7 @@ pub(crate) use cursor::{LastAnswer, PathSearch};
 pub use iter::{KeyBox, NodeItem, NodeIter};
 pub(crate) use search_index::LevelTables;
 pub use search_index::SearchIndex;
-pub(crate) use trunk::Trunks;
+pub(crate) use trunk::{Trunks, GRID_NODES_PER_CELL};
 
 use crate::geometry::Point3;
 use crate::key::{adjust_key_to_depth, Key, KeyError, KeySpace, TREE_DEPTH};
@@ -266,19 +266,21 @@ impl OccupancyTree {
     /// What [`Self::arena_mut`] does first, for changes that need the
     /// arena borrowed apart from other fields.
     fn forget_trunks(&mut self) {
-        self.trunks = Trunks::at_root(ROOT);
+        self.trunks.reset();
     }
 
     /// Derives the search starts from the current nodes (a few dozen node
-    /// visits), after a change that costs far more.
+    /// visits, and a few thousand grid cells on large maps), after a change
+    /// that costs far more. The grids get at most one cell per four nodes.
     fn refresh_trunks(&mut self) {
-        self.trunks = match &self.arena {
+        match &self.arena {
             Some(a) => {
                 let p = a.parts();
-                Trunks::build(ROOT, |n| Some(p.mask(n)), |n, _, pos| p.descend(n, pos as u64).ok())
+                let cells = self.size / trunk::GRID_NODES_PER_CELL as usize;
+                self.trunks.rebuild(cells, |n| Some(p.mask(n)), |n, _, pos| p.descend(n, pos as u64).ok());
             }
-            None => Trunks::at_root(ROOT),
-        };
+            None => self.trunks.reset(),
+        }
     }
 
     /// Replaces the content with `arena`, which has no free slots (as
@@ -618,7 +620,7 @@ impl OccupancyTree {
     /// OctoMap's `search(key, depth)`: the node at `depth` (0 means 16)
     /// containing `key`, or the deepest existing leaf above it. `None`
     /// when the path ends at an inner node lacking the needed child.
-    #[inline]
+    #[inline(always)]
     pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
         let a = self.arena.as_ref()?;
         let (id, depth, is_leaf) = self.search_id(key, depth)?;
@@ -633,7 +635,7 @@ impl OccupancyTree {
         // the table encoding (the `morton` criterion rows: about twice the
         // speed of shifts and masks) took 6% off a small-map query
         let code = MortonCode::encode_table(key).0;
-        let (node, from) = self.trunks.start(code, depth);
+        let (node, from) = self.trunks.start(key, code, depth);
         descend_to(&a.parts(), node, from, depth, code)
     }
 
@@ -653,16 +655,17 @@ impl OccupancyTree {
         let p = a.parts();
         for chunk in keys.chunks(LANES) {
             let mut code = [0u64; LANES];
-            for (c, k) in code.iter_mut().zip(chunk) {
-                let k = if depth == TREE_DEPTH { *k } else { adjust_key_to_depth(*k, depth) };
-                *c = MortonCode::encode_table(k).0;
+            let mut key = [Key::ROOT; LANES];
+            for ((c, k), q) in code.iter_mut().zip(&mut key).zip(chunk) {
+                *k = if depth == TREE_DEPTH { *q } else { adjust_key_to_depth(*q, depth) };
+                *c = MortonCode::encode_table(*k).0;
             }
             // each lane starts at its trunk end: lanes join the walk at
             // that depth; those starting at `depth` itself have arrived
             let mut node = [ROOT; LANES];
             let mut joins = [0u32; TREE_DEPTH as usize + 1];
             for l in 0..chunk.len() {
-                let (n, from) = self.trunks.start(code[l], depth);
+                let (n, from) = self.trunks.start(key[l], code[l], depth);
                 node[l] = n;
                 joins[from as usize] |= 1 << l;
             }
@@ -912,7 +915,7 @@ impl OccupancyTree {
     pub fn memory_usage(&self) -> usize {
         let arena = self.arena.as_ref().map_or(0, |a| a.usage().bytes_reserved);
         let changes = self.changes.as_ref().map_or(0, |c| c.capacity() * (std::mem::size_of::<(Key, bool)>() + 1));
-        std::mem::size_of::<Self>() + arena + changes
+        std::mem::size_of::<Self>() + arena + changes + self.trunks.bytes()
     }
 
     /// Slot statistics of the arena.

@@ -207,7 +207,7 @@ impl<'t> SearchIndex<'t> {
     /// Where a search for `key` (Morton `code`, at `depth`) starts: the
     /// deepest table that answers, or else the trunk end.
     fn start(&self, key: Key, code: u64, depth: u8) -> (NodeId, u8) {
-        self.tables.start(key, depth).unwrap_or_else(|| self.tree.trunks.start(code, depth))
+        self.tables.start(key, depth).unwrap_or_else(|| self.tree.trunks.start(key, code, depth))
     }
 
     /// `tree.search(key, depth)`: the descent of [`OccupancyTree::search`]

@@ -10,32 +10,91 @@
 //! chain's end is the deepest one that covers all of its root child's
 //! content. Used by the arena tree and the mapped view alike.
 
-use crate::key::TREE_DEPTH;
+use crate::key::{Key, TREE_DEPTH};
 
-/// Per child of the root, the end of its chain of single-child nodes.
-#[derive(Clone, Copy, Debug)]
+/// Per child of the root, the end of its chain of single-child nodes, and
+/// below each end a grid of the next levels.
+///
+/// The grid replaces the first few steps below the trunk end by one load:
+/// for every path of `grid_levels` steps from the end (the key's bits of
+/// those levels, axis by axis, give the cell) it holds the deepest node on
+/// that path and its depth. Where a path ends early (unknown space, a
+/// coarse leaf) the cell holds the node it ends at, so the descent from the
+/// cell finds what the descent from the end would. The cell is found from
+/// the key alone, without its Morton code, which keeps the encoding off a
+/// point query's chain of dependent loads.
+#[derive(Clone, Debug)]
 pub(crate) struct Trunks<N> {
     root: N,
     /// The Morton code bits of the path to the end (the rest zero), its
     /// depth in the top byte.
     ends: [u64; 8],
     nodes: [N; 8],
+    /// Levels each grid spans (0: no grids).
+    grid_levels: u8,
+    /// Per child of the root, where its grid starts in `cells`
+    /// ([`NO_GRID`]: none).
+    grid_first: [u32; 8],
+    cells: Vec<Cell<N>>,
 }
 
-const DEPTH_SHIFT: u32 = 56;
+/// A grid cell: the deepest node on its path, and that node's depth.
+#[derive(Clone, Copy, Debug, Default)]
+struct Cell<N> {
+    node: N,
+    depth: u8,
+}
 
-impl<N: Copy> Trunks<N> {
+/// Tree nodes per grid cell at most: the grids add at most a quarter of a
+/// cell (2 bytes in the arena tree) per node.
+pub(crate) const GRID_NODES_PER_CELL: u64 = 4;
+
+const DEPTH_SHIFT: u32 = 56;
+const NO_GRID: u32 = u32::MAX;
+/// Levels a grid spans at most (4,096 cells).
+const MAX_GRID_LEVELS: u8 = 4;
+
+impl<N: Copy + Default> Trunks<N> {
     /// Every search starts at `root`.
     pub fn at_root(root: N) -> Self {
-        Trunks { root, ends: [0; 8], nodes: [root; 8] }
+        Trunks { root, ends: [0; 8], nodes: [root; 8], grid_levels: 0, grid_first: [NO_GRID; 8], cells: Vec::new() }
+    }
+
+    /// Makes every search start at the root again, keeping the grids'
+    /// storage for the next [`Self::rebuild`].
+    pub fn reset(&mut self) {
+        self.ends = [0; 8];
+        self.nodes = [self.root; 8];
+        self.grid_levels = 0;
+        self.grid_first = [NO_GRID; 8];
+        self.cells.clear();
     }
 
     /// Follows the chains below `root`, given a node's child mask and its
     /// child at a position; `None` from either (a corrupted mapped file)
-    /// ends a chain where it is.
-    pub fn build(root: N, mask: impl Fn(N) -> Option<u8>, child: impl Fn(N, u8, usize) -> Option<N>) -> Self {
+    /// ends a chain where it is. Grids below the ends get at most
+    /// `max_cells` cells in all.
+    pub fn build(
+        root: N,
+        max_cells: usize,
+        mask: impl Fn(N) -> Option<u8>,
+        child: impl Fn(N, u8, usize) -> Option<N>,
+    ) -> Self {
         let mut t = Self::at_root(root);
-        let Some(root_mask) = mask(root) else { return t };
+        t.rebuild(max_cells, mask, child);
+        t
+    }
+
+    /// [`Self::build`] into this value's storage.
+    pub fn rebuild(
+        &mut self,
+        max_cells: usize,
+        mask: impl Fn(N) -> Option<u8>,
+        child: impl Fn(N, u8, usize) -> Option<N>,
+    ) {
+        self.reset();
+        let root = self.root;
+        let Some(root_mask) = mask(root) else { return };
         for pos in 0..8 {
             let Some(mut node) = (root_mask & (1 << pos) != 0).then(|| child(root, root_mask, pos)).flatten() else {
                 continue;
@@ -48,10 +107,70 @@ impl<N: Copy> Trunks<N> {
                 prefix |= (p as u64) << (3 * (TREE_DEPTH - 1 - depth));
                 (node, depth) = (c, depth + 1);
             }
-            t.ends[pos] = prefix | (u64::from(depth) << DEPTH_SHIFT);
-            t.nodes[pos] = node;
+            self.ends[pos] = prefix | (u64::from(depth) << DEPTH_SHIFT);
+            self.nodes[pos] = node;
         }
-        t
+        self.build_grids(max_cells, &mask, &child);
+    }
+
+    /// The grids below the trunk ends: as many levels as `max_cells` cells
+    /// allow for all ends (up to [`MAX_GRID_LEVELS`], and not below depth
+    /// 16).
+    fn build_grids(
+        &mut self,
+        max_cells: usize,
+        mask: &impl Fn(N) -> Option<u8>,
+        child: &impl Fn(N, u8, usize) -> Option<N>,
+    ) {
+        // the root children whose trunk ends at least `k` levels above 16
+        let ends: [u8; 8] = std::array::from_fn(|i| self.end_depth(i));
+        let gridded = |k: u8| -> Vec<usize> { (0..8).filter(|&i| ends[i] > 0 && ends[i] + k <= TREE_DEPTH).collect() };
+        let levels = (1..=MAX_GRID_LEVELS)
+            .rev()
+            .find(|&k| !gridded(k).is_empty() && gridded(k).len() << (3 * k) <= max_cells)
+            .unwrap_or(0);
+        if levels == 0 {
+            return;
+        }
+        let k = u32::from(levels);
+        // each grid's cells in Morton order, level by level
+        let (mut level, mut next) = (Vec::new(), Vec::new());
+        for i in gridded(levels) {
+            let end = self.end_depth(i);
+            level.clear();
+            level.push(Cell { node: self.nodes[i], depth: end });
+            for l in 0..levels {
+                next.clear();
+                for c in &level {
+                    // a cell still on its path (at the level's depth) may
+                    // step to a child; one whose path ended stays
+                    let m = if c.depth == end + l { mask(c.node).unwrap_or(0) } else { 0 };
+                    for pos in 0..8 {
+                        let step = (m & (1 << pos) != 0).then(|| child(c.node, m, pos)).flatten();
+                        next.push(step.map_or(*c, |node| Cell { node, depth: c.depth + 1 }));
+                    }
+                }
+                std::mem::swap(&mut level, &mut next);
+            }
+            // stored by the key bits of the grid's levels, x, y, z apart
+            let first = self.cells.len();
+            self.grid_first[i] = first as u32;
+            self.cells.resize(first + level.len(), Cell::default());
+            for (morton, c) in level.iter().enumerate() {
+                let axis = |a: u32| (0..k).fold(0, |v, b| v | (((morton >> (3 * b + a)) & 1) << b));
+                self.cells[first + (axis(0) | (axis(1) << k) | (axis(2) << (2 * k)))] = *c;
+            }
+        }
+        self.grid_levels = levels;
+    }
+
+    fn end_depth(&self, i: usize) -> u8 {
+        (self.ends[i] >> DEPTH_SHIFT) as u8
+    }
+
+    /// Heap bytes of the grids.
+    pub fn bytes(&self) -> usize {
+        self.cells.capacity() * std::mem::size_of::<Cell<N>>()
     }
 
     /// The depth of the shallowest chain end below the root (0 when the
@@ -62,20 +181,38 @@ impl<N: Copy> Trunks<N> {
         present.min().unwrap_or(0)
     }
 
-    /// The node a search for `code` (a Morton code, at `depth`) can start
-    /// from, and its depth.
+    /// The node a search for `key` (whose Morton code is `code`) at `depth`
+    /// can start from, and its depth: the cell of its trunk's grid, else
+    /// the trunk end, else the root.
     #[inline(always)]
-    pub fn start(&self, code: u64, depth: u8) -> (N, u8) {
-        let i = (code >> (3 * (TREE_DEPTH - 1))) as usize & 7;
+    pub fn start(&self, key: Key, code: u64, depth: u8) -> (N, u8) {
+        let [x, y, z] = key.0.map(u32::from);
+        // the root child from the key's top bits, not from `code`
+        let i = ((x >> 15) | ((y >> 15) << 1) | ((z >> 15) << 2)) as usize;
+        if !self.on_trunk(i, code, depth) {
+            return (self.root, 0);
+        }
+        let end = self.end_depth(i);
+        let (first, k) = (self.grid_first[i], u32::from(self.grid_levels));
+        if first == NO_GRID || u32::from(end) + k > u32::from(depth) {
+            return (self.nodes[i], end);
+        }
+        let shift = u32::from(TREE_DEPTH - end) - k;
+        let m = (1 << k) - 1;
+        let cell = ((x >> shift) & m) | (((y >> shift) & m) << k) | (((z >> shift) & m) << (2 * k));
+        let c = self.cells[first as usize + cell as usize];
+        (c.node, c.depth)
+    }
+
+    /// Does the search for `code` at `depth` pass the end of root child
+    /// `i`'s chain?
+    #[inline(always)]
+    fn on_trunk(&self, i: usize, code: u64, depth: u8) -> bool {
         let end = self.ends[i];
         let end_depth = (end >> DEPTH_SHIFT) as u8;
         let shift = 3 * u32::from(TREE_DEPTH - end_depth);
         // the prefix bits without the depth byte
-        if end_depth <= depth && ((code ^ end) & ((1 << DEPTH_SHIFT) - 1)) >> shift == 0 {
-            (self.nodes[i], end_depth)
-        } else {
-            (self.root, 0)
-        }
+        end_depth <= depth && ((code ^ end) & ((1 << DEPTH_SHIFT) - 1)) >> shift == 0
     }
 }
 
@@ -86,37 +223,73 @@ mod tests {
     use crate::morton::MortonCode;
     use crate::OccupancyTree;
 
-    /// Starting at the trunk gives what starting at the root gives, for keys
-    /// inside, beside and far from the mapped region, at every depth.
+    /// A start is on the key's path, at most `depth` deep; with grids it is
+    /// the deepest node on the path down to the grid's last level (or the
+    /// trunk end when the search stops above that level). Keys inside,
+    /// beside and far from the mapped region, at every depth, for trees
+    /// without and with grids of 1 to 4 levels.
     #[test]
-    fn searches_from_the_trunk_match_searches_from_the_root() {
+    fn starts_lie_on_the_path_and_grids_reach_its_deepest_node() {
         let mut tree = OccupancyTree::new(0.1).unwrap();
         let mut keys = Vec::new();
-        for (x, y, z) in
-            [(32768u16, 32768u16, 32768u16), (32770, 32760, 32769), (32700, 32800, 32790), (40000, 1, 65535)]
-        {
-            keys.push(Key([x, y, z]));
+        let mut s = 11u32;
+        let mut rand = |n: u32| {
+            s = s.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+            (s >> 8) % n
+        };
+        for _ in 0..400 {
+            let c = |r: u32| (32700 + r) as u16;
+            keys.push(Key([c(rand(140)), c(rand(140)), c(rand(140))]));
         }
-        for k in &keys[..3] {
+        for k in &keys[..200] {
             tree.update_occupancy(*k, true, crate::InnerNodes::Update);
         }
+        // a whole 8x8x8 block, which prunes to one depth-13 leaf
+        for i in 0..512u16 {
+            let k = Key([32800 + (i & 7), 32808 + ((i >> 3) & 7), 32816 + (i >> 6)]);
+            tree.update_occupancy(k, true, crate::InnerNodes::Update);
+            tree.update_occupancy(k, true, crate::InnerNodes::Update);
+        }
+        tree.prune();
+        keys.extend([Key([32803, 32810, 32820]), Key([0, 0, 0]), Key([40000, 1, 65535]), Key([32767, 32767, 32767])]);
         let a = tree.arena().unwrap();
         let p = a.parts();
-        let t = Trunks::build(crate::tree::ROOT, |n| Some(p.mask(n)), |n, _, pos| p.descend(n, pos as u64).ok());
-        assert!(t.ends.iter().any(|e| e >> DEPTH_SHIFT > 8), "{t:?}");
-        for k in keys.iter().chain([Key([32769, 32768, 32768]), Key([0, 0, 0]), Key([32767, 32767, 32767])].iter()) {
-            let code = MortonCode::encode(*k).0;
-            for depth in 0..=TREE_DEPTH {
-                let (node, d) = t.start(code, depth);
-                // the start is on the key's path: descending from the root
-                // `d` levels reaches it
-                let mut n = crate::tree::ROOT;
-                for level in 0..d {
-                    n = p.descend(n, MortonCode(code).child_index(level) as u64).expect("on the path");
+        let walk = |code: u64, levels: u8| {
+            // the root's descent along `code`: the node at `levels`, or where it stops
+            let (mut n, mut d) = (crate::tree::ROOT, 0);
+            while d < levels {
+                let Ok(c) = p.descend(n, MortonCode(code).child_index(d) as u64) else { break };
+                (n, d) = (c, d + 1);
+            }
+            (n, d)
+        };
+        let mut grid_levels = Vec::new();
+        for cells in [0, 64, 512, 4096, 1 << 20] {
+            let t =
+                Trunks::build(crate::tree::ROOT, cells, |n| Some(p.mask(n)), |n, _, pos| p.descend(n, pos as u64).ok());
+            assert!(t.ends.iter().any(|e| e >> DEPTH_SHIFT > 8), "{t:?}");
+            grid_levels.push(t.grid_levels);
+            let k = t.grid_levels;
+            for key in &keys {
+                let code = MortonCode::encode(*key).0;
+                let i = code as usize >> 45 & 7;
+                for depth in 0..=TREE_DEPTH {
+                    let (node, d) = t.start(*key, code, depth);
+                    assert!(d <= depth, "{key} depth {depth}");
+                    assert_eq!(walk(code, d), (node, d), "{key} depth {depth}: not on the path");
+                    let end = t.end_depth(i);
+                    let on_trunk = end > 0 && walk(code, end).1 == end && t.nodes[i] == walk(code, end).0;
+                    let want = if !on_trunk || end > depth {
+                        0
+                    } else if t.grid_first[i] != NO_GRID && end + k <= depth {
+                        walk(code, end + k).1
+                    } else {
+                        end
+                    };
+                    assert_eq!(d, want, "{key} depth {depth}, {k} grid levels");
                 }
-                assert_eq!(n, node, "{k} depth {depth}");
-                assert!(d <= depth);
             }
         }
+        assert_eq!(grid_levels, [0, 1, 2, 3, 4]);
     }
 }
