@@ -309,7 +309,7 @@ impl<'a> MapView<'a> {
     /// `depth` containing `key`, or the deepest existing leaf above it;
     /// `None` when the path ends at an inner node lacking the child.
     /// `Found::extra` holds the node's colour or stamp, as the tree's.
-    #[inline]
+    #[inline(always)]
     pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
         let trunks = self.trunks()?;
         with_nav!(self.nav, |nav| query::search(nav, self.extras, trunks, key, depth))
