@@ -558,7 +558,7 @@ impl<'a> MapSearchIndex<'a> {
                 }
             }
             Some((e, d)) => ((e.node, d), depth),
-            None => (trunks.start(key, code, depth), depth),
+            None => (with_nav!(self.view.nav, |nav| query::trunk_start(nav, trunks, key, code, depth)), depth),
         };
         with_nav!(self.view.nav, |nav| query::search_from(nav, code, depth, start)
             .map(|(f, n)| Found { extra: self.view.extras.get(n), ..f }))

@@ -76,7 +76,15 @@ pub(crate) fn search_from<N: Nav>(nav: N, code: u64, depth: u8, start: (Node, u8
 #[inline(always)]
 pub(crate) fn search<N: Nav>(nav: N, extras: Extras<'_>, trunks: &Trunks<Node>, key: Key, depth: u8) -> Option<Found> {
     let (code, depth) = search_target(key, depth);
-    search_from(nav, code, depth, trunks.start(key, code, depth)).map(|(f, n)| Found { extra: extras.get(n), ..f })
+    search_from(nav, code, depth, trunk_start(nav, trunks, key, code, depth))
+        .map(|(f, n)| Found { extra: extras.get(n), ..f })
+}
+
+/// Where a search for `key` (Morton `code`, at `depth`) starts; see
+/// [`Trunks::start`].
+#[inline(always)]
+pub(crate) fn trunk_start<N: Nav>(nav: N, trunks: &Trunks<Node>, key: Key, code: u64, depth: u8) -> (Node, u8) {
+    trunks.start(key, code, depth, |n| nav.mask(n), |n, m, pos| nav.child(n, m, pos))
 }
 
 /// The trunks of a mapped tree; `None` when it has no root.
@@ -115,7 +123,7 @@ pub(crate) fn search_many<N: Nav>(
         let mut ends = [depth; LANES];
         let mut ended = (1u32 << chunk.len()) - 1;
         for l in 0..chunk.len() {
-            let (node, from) = trunks.start(key[l], MortonCode::encode_table(key[l]).0, depth);
+            let (node, from) = trunk_start(nav, trunks, key[l], MortonCode::encode_table(key[l]).0, depth);
             match nav.mask(node) {
                 Some(mask) => {
                     at[l] = (node, mask);

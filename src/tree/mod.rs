@@ -270,17 +270,24 @@ impl OccupancyTree {
     }
 
     /// Derives the search starts from the current nodes (a few dozen node
-    /// visits, and a few thousand grid cells on large maps), after a change
-    /// that costs far more. The grids get at most one cell per four nodes.
+    /// visits), after a change that costs far more. Their grids, at most
+    /// one cell per four nodes, wait for the first search.
     fn refresh_trunks(&mut self) {
-        match &self.arena {
+        self.trunks = match &self.arena {
             Some(a) => {
                 let p = a.parts();
                 let cells = self.size / trunk::GRID_NODES_PER_CELL as usize;
-                self.trunks.rebuild(cells, |n| Some(p.mask(n)), |n, _, pos| p.descend(n, pos as u64).ok());
+                Trunks::build(ROOT, cells, |n| Some(p.mask(n)), |n, _, pos| p.descend(n, pos as u64).ok())
             }
-            None => self.trunks.reset(),
-        }
+            None => Trunks::at_root(ROOT),
+        };
+    }
+
+    /// Where a search for `key` (Morton `code`, at `depth`) starts; see
+    /// [`Trunks::start`].
+    #[inline(always)]
+    fn start(&self, p: &Parts<'_>, key: Key, code: u64, depth: u8) -> (NodeId, u8) {
+        self.trunks.start(key, code, depth, |n| Some(p.mask(n)), |n, _, pos| p.descend(n, pos as u64).ok())
     }
 
     /// Replaces the content with `arena`, which has no free slots (as
@@ -635,8 +642,9 @@ impl OccupancyTree {
         // the table encoding (the `morton` criterion rows: about twice the
         // speed of shifts and masks) took 6% off a small-map query
         let code = MortonCode::encode_table(key).0;
-        let (node, from) = self.trunks.start(key, code, depth);
-        descend_to(&a.parts(), node, from, depth, code)
+        let p = a.parts();
+        let (node, from) = self.start(&p, key, code, depth);
+        descend_to(&p, node, from, depth, code)
     }
 
     /// [`Self::search`] for many keys at once, answers in `out` (cleared
@@ -665,7 +673,7 @@ impl OccupancyTree {
             let mut node = [ROOT; LANES];
             let mut joins = [0u32; TREE_DEPTH as usize + 1];
             for l in 0..chunk.len() {
-                let (n, from) = self.trunks.start(key[l], code[l], depth);
+                let (n, from) = self.start(&p, key[l], code[l], depth);
                 node[l] = n;
                 joins[from as usize] |= 1 << l;
             }

@@ -10,7 +10,7 @@
 //! ids move on structural changes). Answers are exactly
 //! [`OccupancyTree::search`]'s.
 
-use super::{descend_to, search_target, Found, NodeArena, NodeId, OccupancyTree, ROOT};
+use super::{descend_to, search_target, Found, NodeArena, NodeId, OccupancyTree, Parts, ROOT};
 use crate::key::{adjust_key_to_depth, Key, TREE_DEPTH};
 use crate::morton::MortonCode;
 
@@ -206,8 +206,8 @@ impl<'t> SearchIndex<'t> {
     #[inline(always)]
     /// Where a search for `key` (Morton `code`, at `depth`) starts: the
     /// deepest table that answers, or else the trunk end.
-    fn start(&self, key: Key, code: u64, depth: u8) -> (NodeId, u8) {
-        self.tables.start(key, depth).unwrap_or_else(|| self.tree.trunks.start(key, code, depth))
+    fn start(&self, p: &Parts<'_>, key: Key, code: u64, depth: u8) -> (NodeId, u8) {
+        self.tables.start(key, depth).unwrap_or_else(|| self.tree.start(p, key, code, depth))
     }
 
     /// `tree.search(key, depth)`: the descent of [`OccupancyTree::search`]
@@ -218,8 +218,9 @@ impl<'t> SearchIndex<'t> {
         let a = self.tree.arena()?;
         let (key, depth) = search_target(key, depth);
         let code = MortonCode::encode_table(key).0;
-        let (node, from) = self.start(key, code, depth);
-        let (node, depth, is_leaf) = descend_to(&a.parts(), node, from, depth, code)?;
+        let p = a.parts();
+        let (node, from) = self.start(&p, key, code, depth);
+        let (node, depth, is_leaf) = descend_to(&p, node, from, depth, code)?;
         Some(found(a, node, depth, is_leaf))
     }
 
@@ -234,6 +235,7 @@ impl<'t> SearchIndex<'t> {
             return;
         };
         let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
+        let p = a.parts();
         for chunk in keys.chunks(LANES) {
             let mut key = [Key::ROOT; LANES];
             let mut node = [ROOT; LANES];
@@ -241,7 +243,7 @@ impl<'t> SearchIndex<'t> {
             let mut begin = [0u32; TREE_DEPTH as usize + 1];
             for (l, q) in chunk.iter().enumerate() {
                 key[l] = if depth == TREE_DEPTH { *q } else { adjust_key_to_depth(*q, depth) };
-                let (n, from) = self.start(key[l], MortonCode::encode_table(key[l]).0, depth);
+                let (n, from) = self.start(&p, key[l], MortonCode::encode_table(key[l]).0, depth);
                 node[l] = n;
                 begin[from as usize] |= 1 << l;
             }

@@ -11,18 +11,21 @@
 //! content. Used by the arena tree and the mapped view alike.
 
 use crate::key::{Key, TREE_DEPTH};
+use std::sync::OnceLock;
 
 /// Per child of the root, the end of its chain of single-child nodes, and
 /// below each end a grid of the next levels.
 ///
 /// The grid replaces the first few steps below the trunk end by one load:
-/// for every path of `grid_levels` steps from the end (the key's bits of
-/// those levels, axis by axis, give the cell) it holds the deepest node on
-/// that path and its depth. Where a path ends early (unknown space, a
-/// coarse leaf) the cell holds the node it ends at, so the descent from the
-/// cell finds what the descent from the end would. The cell is found from
-/// the key alone, without its Morton code, which keeps the encoding off a
-/// point query's chain of dependent loads.
+/// for every path of `levels` steps from the end (the key's bits of those
+/// levels, axis by axis, give the cell) it holds the deepest node on that
+/// path and its depth. Where a path ends early (unknown space, a coarse
+/// leaf) the cell holds the node it ends at, so the descent from the cell
+/// finds what the descent from the end would. The cell is found from the
+/// key alone, without its Morton code, which keeps the encoding off a point
+/// query's chain of dependent loads. The grids are built by the first
+/// search that needs them, so work that only changes the tree (a scan
+/// after another) never pays for them.
 #[derive(Clone, Debug)]
 pub(crate) struct Trunks<N> {
     root: N,
@@ -30,11 +33,18 @@ pub(crate) struct Trunks<N> {
     /// depth in the top byte.
     ends: [u64; 8],
     nodes: [N; 8],
+    /// How many cells the grids may have in all.
+    max_cells: usize,
+    grids: OnceLock<Grids<N>>,
+}
+
+#[derive(Clone, Debug)]
+struct Grids<N> {
     /// Levels each grid spans (0: no grids).
-    grid_levels: u8,
+    levels: u8,
     /// Per child of the root, where its grid starts in `cells`
     /// ([`NO_GRID`]: none).
-    grid_first: [u32; 8],
+    first: [u32; 8],
     cells: Vec<Cell<N>>,
 }
 
@@ -57,23 +67,18 @@ const MAX_GRID_LEVELS: u8 = 4;
 impl<N: Copy + Default> Trunks<N> {
     /// Every search starts at `root`.
     pub fn at_root(root: N) -> Self {
-        Trunks { root, ends: [0; 8], nodes: [root; 8], grid_levels: 0, grid_first: [NO_GRID; 8], cells: Vec::new() }
+        Trunks { root, ends: [0; 8], nodes: [root; 8], max_cells: 0, grids: OnceLock::new() }
     }
 
-    /// Makes every search start at the root again, keeping the grids'
-    /// storage for the next [`Self::rebuild`].
+    /// Makes every search start at the root again.
     pub fn reset(&mut self) {
-        self.ends = [0; 8];
-        self.nodes = [self.root; 8];
-        self.grid_levels = 0;
-        self.grid_first = [NO_GRID; 8];
-        self.cells.clear();
+        *self = Self::at_root(self.root);
     }
 
     /// Follows the chains below `root`, given a node's child mask and its
     /// child at a position; `None` from either (a corrupted mapped file)
-    /// ends a chain where it is. Grids below the ends get at most
-    /// `max_cells` cells in all.
+    /// ends a chain where it is. The grids below the ends, built later, get
+    /// at most `max_cells` cells in all.
     pub fn build(
         root: N,
         max_cells: usize,
@@ -81,20 +86,8 @@ impl<N: Copy + Default> Trunks<N> {
         child: impl Fn(N, u8, usize) -> Option<N>,
     ) -> Self {
         let mut t = Self::at_root(root);
-        t.rebuild(max_cells, mask, child);
-        t
-    }
-
-    /// [`Self::build`] into this value's storage.
-    pub fn rebuild(
-        &mut self,
-        max_cells: usize,
-        mask: impl Fn(N) -> Option<u8>,
-        child: impl Fn(N, u8, usize) -> Option<N>,
-    ) {
-        self.reset();
-        let root = self.root;
-        let Some(root_mask) = mask(root) else { return };
+        t.max_cells = max_cells;
+        let Some(root_mask) = mask(root) else { return t };
         for pos in 0..8 {
             let Some(mut node) = (root_mask & (1 << pos) != 0).then(|| child(root, root_mask, pos)).flatten() else {
                 continue;
@@ -107,36 +100,32 @@ impl<N: Copy + Default> Trunks<N> {
                 prefix |= (p as u64) << (3 * (TREE_DEPTH - 1 - depth));
                 (node, depth) = (c, depth + 1);
             }
-            self.ends[pos] = prefix | (u64::from(depth) << DEPTH_SHIFT);
-            self.nodes[pos] = node;
+            t.ends[pos] = prefix | (u64::from(depth) << DEPTH_SHIFT);
+            t.nodes[pos] = node;
         }
-        self.build_grids(max_cells, &mask, &child);
+        t
     }
 
     /// The grids below the trunk ends: as many levels as `max_cells` cells
     /// allow for all ends (up to [`MAX_GRID_LEVELS`], and not below depth
     /// 16).
-    fn build_grids(
-        &mut self,
-        max_cells: usize,
-        mask: &impl Fn(N) -> Option<u8>,
-        child: &impl Fn(N, u8, usize) -> Option<N>,
-    ) {
-        // the root children whose trunk ends at least `k` levels above 16
+    #[cold]
+    fn build_grids(&self, mask: impl Fn(N) -> Option<u8>, child: impl Fn(N, u8, usize) -> Option<N>) -> Grids<N> {
+        let mut g = Grids { levels: 0, first: [NO_GRID; 8], cells: Vec::new() };
         let ends: [u8; 8] = std::array::from_fn(|i| self.end_depth(i));
+        // the root children whose trunk ends at least `k` levels above 16
         let gridded = |k: u8| -> Vec<usize> { (0..8).filter(|&i| ends[i] > 0 && ends[i] + k <= TREE_DEPTH).collect() };
-        let levels = (1..=MAX_GRID_LEVELS)
+        let Some(levels) = (1..=MAX_GRID_LEVELS)
             .rev()
-            .find(|&k| !gridded(k).is_empty() && gridded(k).len() << (3 * k) <= max_cells)
-            .unwrap_or(0);
-        if levels == 0 {
-            return;
-        }
+            .find(|&k| !gridded(k).is_empty() && gridded(k).len() << (3 * k) <= self.max_cells)
+        else {
+            return g;
+        };
         let k = u32::from(levels);
         // each grid's cells in Morton order, level by level
         let (mut level, mut next) = (Vec::new(), Vec::new());
         for i in gridded(levels) {
-            let end = self.end_depth(i);
+            let end = ends[i];
             level.clear();
             level.push(Cell { node: self.nodes[i], depth: end });
             for l in 0..levels {
@@ -153,24 +142,25 @@ impl<N: Copy + Default> Trunks<N> {
                 std::mem::swap(&mut level, &mut next);
             }
             // stored by the key bits of the grid's levels, x, y, z apart
-            let first = self.cells.len();
-            self.grid_first[i] = first as u32;
-            self.cells.resize(first + level.len(), Cell::default());
+            let first = g.cells.len();
+            g.first[i] = first as u32;
+            g.cells.resize(first + level.len(), Cell::default());
             for (morton, c) in level.iter().enumerate() {
                 let axis = |a: u32| (0..k).fold(0, |v, b| v | (((morton >> (3 * b + a)) & 1) << b));
-                self.cells[first + (axis(0) | (axis(1) << k) | (axis(2) << (2 * k)))] = *c;
+                g.cells[first + (axis(0) | (axis(1) << k) | (axis(2) << (2 * k)))] = *c;
             }
         }
-        self.grid_levels = levels;
+        g.levels = levels;
+        g
     }
 
     fn end_depth(&self, i: usize) -> u8 {
         (self.ends[i] >> DEPTH_SHIFT) as u8
     }
 
-    /// Heap bytes of the grids.
+    /// Heap bytes of the grids (0 until a search has built them).
     pub fn bytes(&self) -> usize {
-        self.cells.capacity() * std::mem::size_of::<Cell<N>>()
+        self.grids.get().map_or(0, |g| g.cells.capacity() * std::mem::size_of::<Cell<N>>())
     }
 
     /// The depth of the shallowest chain end below the root (0 when the
@@ -183,9 +173,17 @@ impl<N: Copy + Default> Trunks<N> {
 
     /// The node a search for `key` (whose Morton code is `code`) at `depth`
     /// can start from, and its depth: the cell of its trunk's grid, else
-    /// the trunk end, else the root.
+    /// the trunk end, else the root. `mask` and `child` (as for
+    /// [`Self::build`]) build the grids when this is the first search.
     #[inline(always)]
-    pub fn start(&self, key: Key, code: u64, depth: u8) -> (N, u8) {
+    pub fn start(
+        &self,
+        key: Key,
+        code: u64,
+        depth: u8,
+        mask: impl Fn(N) -> Option<u8>,
+        child: impl Fn(N, u8, usize) -> Option<N>,
+    ) -> (N, u8) {
         let [x, y, z] = key.0.map(u32::from);
         // the root child from the key's top bits, not from `code`
         let i = ((x >> 15) | ((y >> 15) << 1) | ((z >> 15) << 2)) as usize;
@@ -193,14 +191,18 @@ impl<N: Copy + Default> Trunks<N> {
             return (self.root, 0);
         }
         let end = self.end_depth(i);
-        let (first, k) = (self.grid_first[i], u32::from(self.grid_levels));
+        if end == 0 {
+            return (self.root, 0);
+        }
+        let g = self.grids.get_or_init(|| self.build_grids(mask, child));
+        let (first, k) = (g.first[i], u32::from(g.levels));
         if first == NO_GRID || u32::from(end) + k > u32::from(depth) {
             return (self.nodes[i], end);
         }
         let shift = u32::from(TREE_DEPTH - end) - k;
         let m = (1 << k) - 1;
         let cell = ((x >> shift) & m) | (((y >> shift) & m) << k) | (((z >> shift) & m) << (2 * k));
-        let c = self.cells[first as usize + cell as usize];
+        let c = g.cells[first as usize + cell as usize];
         (c.node, c.depth)
     }
 
@@ -268,20 +270,22 @@ mod tests {
             let t =
                 Trunks::build(crate::tree::ROOT, cells, |n| Some(p.mask(n)), |n, _, pos| p.descend(n, pos as u64).ok());
             assert!(t.ends.iter().any(|e| e >> DEPTH_SHIFT > 8), "{t:?}");
-            grid_levels.push(t.grid_levels);
-            let k = t.grid_levels;
+            let (mask, child) = (|n| Some(p.mask(n)), |n, _, pos: usize| p.descend(n, pos as u64).ok());
+            let g = t.grids.get_or_init(|| t.build_grids(mask, child));
+            grid_levels.push(g.levels);
+            let k = g.levels;
             for key in &keys {
                 let code = MortonCode::encode(*key).0;
                 let i = code as usize >> 45 & 7;
                 for depth in 0..=TREE_DEPTH {
-                    let (node, d) = t.start(*key, code, depth);
+                    let (node, d) = t.start(*key, code, depth, mask, child);
                     assert!(d <= depth, "{key} depth {depth}");
                     assert_eq!(walk(code, d), (node, d), "{key} depth {depth}: not on the path");
                     let end = t.end_depth(i);
                     let on_trunk = end > 0 && walk(code, end).1 == end && t.nodes[i] == walk(code, end).0;
                     let want = if !on_trunk || end > depth {
                         0
-                    } else if t.grid_first[i] != NO_GRID && end + k <= depth {
+                    } else if g.first[i] != NO_GRID && end + k <= depth {
                         walk(code, end + k).1
                     } else {
                         end

@@ -1,0 +1,130 @@
+//! One job per run on the side-by-side benchmark's scenes and query mix, for
+//! comparing two builds (run their binaries alternately) and for callgrind:
+//! `cargo run --release --example ab_probe -- indoor|outdoor RES JOB [compact]`.
+//!
+//! * `time`: fastest of 9 passes over 1M queries, in ns per query: search by
+//!   key and by point on the tree, by key and by point on the mapped view.
+//! * `leaves`: eight rounds of OctoMap's leaf walk followed by ours twice (as
+//!   the benchmark alternates them), then the spread of 200 of ours back to
+//!   back (the branch predictor learns a walk that repeats).
+//! * `fold`, `search`, `mapped`: the leaf fold 100 times, or 200k searches
+//!   twice, and nothing else timed; for `valgrind --tool=callgrind
+//!   --toggle-collect='*ab_probe::fold*'` (or `*ab_probe::by_key*`,
+//!   `*ab_probe::view_by_key*`).
+//! * `depths`: how deep the queries' answers lie (the last entry: no answer).
+//!
+//! `compact` compacts the tree first. A probe, not a benchmark of record.
+#[path = "../benches/common/mod.rs"]
+mod common;
+
+use octolinear::mapped::{self, MapView, MappedMap};
+use octolinear::simulate::SceneKind;
+use octolinear::{Key, OccupancyTree, Point3};
+use octolinear_oracle::{OracleTree, ScanBatch};
+use std::hint::black_box;
+use std::time::Instant;
+
+#[inline(never)]
+fn by_key(t: &OccupancyTree, keys: &[Key]) -> f32 {
+    keys.iter().filter_map(|&k| t.search(k, 0)).map(|f| f.value).sum()
+}
+
+#[inline(never)]
+fn by_point(t: &OccupancyTree, points: &[Point3]) -> f32 {
+    points.iter().filter_map(|&p| t.search_point(p, 0).ok().flatten()).map(|f| f.value).sum()
+}
+
+#[inline(never)]
+fn view_by_key(v: &MapView<'_>, keys: &[Key]) -> f32 {
+    keys.iter().filter_map(|&k| v.search(k, 0)).map(|f| f.value).sum()
+}
+
+#[inline(never)]
+fn view_by_point(v: &MapView<'_>, points: &[Point3]) -> f32 {
+    points.iter().filter_map(|&p| v.search_point(p, 0).ok().flatten()).map(|f| f.value).sum()
+}
+
+#[inline(never)]
+fn fold(t: &OccupancyTree) -> (usize, f64) {
+    t.leaves(0).fold((0, 0f64), |(n, s), l| (n + 1, s + f64::from(l.value)))
+}
+
+/// Microseconds of one run of `f`, and its result.
+fn micros<T>(f: impl FnOnce() -> T) -> (f64, T) {
+    let t = Instant::now();
+    let r = black_box(f());
+    (t.elapsed().as_secs_f64() * 1e6, r)
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.len() < 3 {
+        eprintln!("ab_probe indoor|outdoor RES time|leaves|fold|search|mapped|depths [compact]");
+        std::process::exit(2);
+    }
+    let kind = if args[0] == "outdoor" { SceneKind::Outdoor } else { SceneKind::Indoor };
+    let res: f64 = args[1].parse().expect("RES");
+    let scans = common::scans(kind, if kind == SceneKind::Indoor { 24 } else { 6 });
+    let mut tree = common::build(&scans, res, None);
+    if args.get(3).map(String::as_str) == Some("compact") {
+        tree.compact();
+    }
+    let n = if args[2] == "time" { 1_000_000 } else { 200_000 };
+    let points = common::query_points(&tree, n, 11);
+    let keys: Vec<Key> = points.iter().map(|&p| tree.key(p).expect("in the map")).collect();
+    let bytes = mapped::to_bytes(&tree, Default::default()).expect("olm");
+    let map = MappedMap::new(bytes).expect("view");
+    let view = map.view();
+    match args[2].as_str() {
+        "time" => {
+            let best = |f: &dyn Fn() -> f32| (0..9).map(|_| micros(f).0 * 1e3 / n as f64).fold(f64::MAX, f64::min);
+            println!(
+                "ns per query: tree by key {:6.2}, by point {:6.2}; mapped by key {:6.2}, by point {:6.2}",
+                best(&|| by_key(&tree, &keys)),
+                best(&|| by_point(&tree, &points)),
+                best(&|| view_by_key(&view, &keys)),
+                best(&|| view_by_point(&view, &points)),
+            );
+        }
+        "leaves" => {
+            let mut batch = ScanBatch::new();
+            for (cloud, origin) in &scans {
+                let v: Vec<[f32; 3]> = cloud.iter().map(|p| p.to_array()).collect();
+                batch.push(&v, origin.to_array());
+            }
+            let mut om = OracleTree::new(res).expect("oracle");
+            om.insert_scans(&batch, -1.0, false, false).expect("insert");
+            for _ in 0..8 {
+                let (theirs, a) = micros(|| om.bench_leaf_sum(0));
+                let (after, b) = micros(|| fold(&tree));
+                let (again, _) = micros(|| fold(&tree));
+                assert_eq!(a, b, "the walks disagree");
+                println!("OctoMap {theirs:7.1} us, then ours {after:6.1} us, ours again {again:6.1} us");
+            }
+            let mut v: Vec<f64> = (0..200).map(|_| micros(|| fold(&tree)).0).collect();
+            v.sort_by(f64::total_cmp);
+            println!("ours back to back: min {:.1}, median {:.1}, max {:.1} us", v[0], v[100], v[199]);
+        }
+        "fold" => {
+            for _ in 0..100 {
+                black_box(fold(&tree));
+            }
+        }
+        "search" => {
+            black_box(by_key(&tree, &keys));
+            black_box(by_key(&tree, &keys));
+        }
+        "mapped" => {
+            black_box(view_by_key(&view, &keys));
+            black_box(view_by_key(&view, &keys));
+        }
+        "depths" => {
+            let mut hist = [0usize; 18];
+            for &k in &keys {
+                hist[tree.search(k, 0).map_or(17, |f| usize::from(f.depth))] += 1;
+            }
+            println!("answers at depths 0..=16, then none: {hist:?}");
+        }
+        job => panic!("unknown job {job}"),
+    }
+}
