@@ -64,9 +64,9 @@ impl TreeKind {
 }
 
 /// A tree read from an `.ot` file.
-// the occupancy variant (about 1 KB inline: key tables and search starts)
-// is what nearly every file holds; boxing it would cost every read an
-// allocation and every use an indirection
+// the occupancy variant (about 1 KB inline: the arena's vectors, node sizes,
+// search starts) is what nearly every file holds; boxing it would cost every
+// read an allocation and every use an indirection
 #[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug)]
 pub enum AnyTree {

@@ -409,7 +409,7 @@ mod tests {
         }
     }
 
-    /// `fold` (used by `collect`, `count`, `for_each`, ...) continues from
+    /// `fold` (used by `count`, `for_each`, `sum`, ...) continues from
     /// wherever `next` left off, for nodes and leaves alike.
     #[test]
     fn fold_resumes_where_next_stopped() {

@@ -276,7 +276,7 @@ impl OccupancyTree {
         self.trunks = match &self.arena {
             Some(a) => {
                 let p = a.parts();
-                let cells = self.size / trunk::GRID_NODES_PER_CELL as usize;
+                let cells = self.size / GRID_NODES_PER_CELL as usize;
                 Trunks::build(ROOT, cells, |n| Some(p.mask(n)), |n, _, pos| p.descend(n, pos as u64).ok())
             }
             None => Trunks::at_root(ROOT),
