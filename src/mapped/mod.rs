@@ -550,18 +550,21 @@ impl<'a> MapSearchIndex<'a> {
                 let pos = (code >> (3 * (TREE_DEPTH - 1 - d))) & 7;
                 if e.mask & (1 << pos) != 0 {
                     let c = e.first + (e.mask & nav::below(pos as usize)).count_ones();
-                    ((Node { idx: c, label: 0 }, d + 1), depth)
+                    (Some((Node { idx: c, label: 0 }, d + 1)), depth)
                 } else if e.mask == 0 {
-                    ((e.node, d), d)
+                    (Some((e.node, d)), d)
                 } else {
                     return None;
                 }
             }
-            Some((e, d)) => ((e.node, d), depth),
-            None => (with_nav!(self.view.nav, |nav| query::trunk_start(nav, trunks, key, code, depth)), depth),
+            Some((e, d)) => (Some((e.node, d)), depth),
+            // no table answers: the trunk's grid, in the same layout dispatch
+            None => (None, depth),
         };
-        with_nav!(self.view.nav, |nav| query::search_from(nav, code, depth, start)
-            .map(|(f, n)| Found { extra: self.view.extras.get(n), ..f }))
+        with_nav!(self.view.nav, |nav| {
+            let start = start.unwrap_or_else(|| query::trunk_start(nav, trunks, key, code, depth));
+            query::search_from(nav, code, depth, start).map(|(f, n)| Found { extra: self.view.extras.get(n), ..f })
+        })
     }
 }
 

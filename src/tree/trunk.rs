@@ -115,10 +115,10 @@ impl<N: Copy + Default> Trunks<N> {
         let ends: [u8; 8] = std::array::from_fn(|i| self.end_depth(i));
         // the root children whose trunk ends at least `k` levels above 16
         let gridded = |k: u8| -> Vec<usize> { (0..8).filter(|&i| ends[i] > 0 && ends[i] + k <= TREE_DEPTH).collect() };
-        let Some(levels) = (1..=MAX_GRID_LEVELS)
-            .rev()
-            .find(|&k| !gridded(k).is_empty() && gridded(k).len() << (3 * k) <= self.max_cells)
-        else {
+        let Some(levels) = (1..=MAX_GRID_LEVELS).rev().find(|&k| {
+            let n = gridded(k).len();
+            n > 0 && n << (3 * k) <= self.max_cells
+        }) else {
             return g;
         };
         let k = u32::from(levels);
@@ -191,9 +191,6 @@ impl<N: Copy + Default> Trunks<N> {
             return (self.root, 0);
         }
         let end = self.end_depth(i);
-        if end == 0 {
-            return (self.root, 0);
-        }
         let g = self.grids.get_or_init(|| self.build_grids(mask, child));
         let (first, k) = (g.first[i], u32::from(g.levels));
         if first == NO_GRID || u32::from(end) + k > u32::from(depth) {
@@ -207,14 +204,14 @@ impl<N: Copy + Default> Trunks<N> {
     }
 
     /// Does the search for `code` at `depth` pass the end of root child
-    /// `i`'s chain?
+    /// `i`'s chain (which exists)?
     #[inline(always)]
     fn on_trunk(&self, i: usize, code: u64, depth: u8) -> bool {
         let end = self.ends[i];
         let end_depth = (end >> DEPTH_SHIFT) as u8;
         let shift = 3 * u32::from(TREE_DEPTH - end_depth);
         // the prefix bits without the depth byte
-        end_depth <= depth && ((code ^ end) & ((1 << DEPTH_SHIFT) - 1)) >> shift == 0
+        end_depth > 0 && end_depth <= depth && ((code ^ end) & ((1 << DEPTH_SHIFT) - 1)) >> shift == 0
     }
 }
 
