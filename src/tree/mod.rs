@@ -4,6 +4,7 @@ mod arena;
 mod counting;
 mod cursor;
 mod iter;
+mod level_index;
 mod search_index;
 mod trunk;
 
@@ -14,6 +15,7 @@ pub use arena::{ArenaUsage, NodeArena, NodeId};
 pub use counting::CountingTree;
 pub(crate) use cursor::{LastAnswer, PathSearch};
 pub use iter::{KeyBox, NodeItem, NodeIter};
+use level_index::{LevelSlot, Reach};
 pub(crate) use search_index::LevelTables;
 pub use search_index::SearchIndex;
 pub(crate) use trunk::{Trunks, GRID_NODES_PER_CELL};
@@ -154,6 +156,9 @@ pub struct OccupancyTree {
     /// Where searches start ([`Trunks`]): derived after bulk changes,
     /// reset to the root by any other change (see [`Self::arena_mut`]).
     trunks: Trunks<NodeId>,
+    /// Breadth-first navigation for searches of large trees; armed and
+    /// dropped with the trunks.
+    levels: LevelSlot,
 }
 
 /// When the arena is re-laid (see [`OccupancyTree::compact`]) to give back
@@ -198,6 +203,7 @@ impl OccupancyTree {
             clock: Clock::System,
             compaction: Compaction::default(),
             trunks: Trunks::at_root(ROOT),
+            levels: LevelSlot::off(),
         })
     }
 
@@ -267,12 +273,14 @@ impl OccupancyTree {
     /// arena borrowed apart from other fields.
     fn forget_trunks(&mut self) {
         self.trunks.reset();
+        self.levels = LevelSlot::off();
     }
 
     /// Derives the search starts from the current nodes (a few dozen node
     /// visits), after a change that costs far more. Their grids, at most
     /// one cell per four nodes, wait for the first search.
     fn refresh_trunks(&mut self) {
+        self.levels = LevelSlot::armed(self.size);
         self.trunks = match &self.arena {
             Some(a) => {
                 let p = a.parts();
@@ -314,7 +322,7 @@ impl OccupancyTree {
     /// clamping the result. Returns the value of the node holding the voxel
     /// afterwards (a coarser node when the update pruned it).
     pub fn update(&mut self, key: Key, delta: f32, inner: InnerNodes) -> f32 {
-        if let Some(found) = self.search(key, 0) {
+        if let Some(found) = self.search_arena(key, 0) {
             if self.sensor.is_saturated(found.value, delta) {
                 return found.value;
             }
@@ -630,6 +638,26 @@ impl OccupancyTree {
     #[inline(always)]
     pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
         let a = self.arena.as_ref()?;
+        if depth == 0 || depth >= TREE_DEPTH {
+            let p = a.parts();
+            if let Some(index) = self.levels.get(&p, self.size) {
+                match index.search(key, MortonCode::encode_table(key).0) {
+                    Reach::Voxel(id) => {
+                        return Some(Found { value: a.value(id), depth: TREE_DEPTH, is_leaf: true, extra: a.extra(id) })
+                    }
+                    Reach::Unknown => return None,
+                    Reach::Coarse => {}
+                }
+            }
+        }
+        self.search_arena(key, depth)
+    }
+
+    /// [`Self::search`] in the arena alone: for changes, which would drop
+    /// the index they built.
+    #[inline(always)]
+    fn search_arena(&self, key: Key, depth: u8) -> Option<Found> {
+        let a = self.arena.as_ref()?;
         let (id, depth, is_leaf) = self.search_id(key, depth)?;
         Some(Found { value: a.value(id), depth, is_leaf, extra: a.extra(id) })
     }
@@ -923,7 +951,7 @@ impl OccupancyTree {
     pub fn memory_usage(&self) -> usize {
         let arena = self.arena.as_ref().map_or(0, |a| a.usage().bytes_reserved);
         let changes = self.changes.as_ref().map_or(0, |c| c.capacity() * (std::mem::size_of::<(Key, bool)>() + 1));
-        std::mem::size_of::<Self>() + arena + changes + self.trunks.bytes()
+        std::mem::size_of::<Self>() + arena + changes + self.trunks.bytes() + self.levels.bytes()
     }
 
     /// Slot statistics of the arena.

@@ -1,0 +1,304 @@
+//! A breadth-first copy of a large tree's navigation above depth 16, for
+//! one-at-a-time searches.
+//!
+//! A random point query on a large map is a chain of dependent cache
+//! misses, one per level below the trunk grid. In the arena the nodes of
+//! every level are spread over all of its `masks` and `first_child`
+//! arrays (five bytes per inner node), so each level misses. Here the
+//! nodes above depth 16 are laid out level by level, their masks eight to
+//! a word with one `u32` per word saying where the word's first child lies
+//! (the children of the nodes before it, counted): 1.5 bytes per inner
+//! node, and a level's nodes side by side, so the upper levels stay in
+//! cache. The depth-15 nodes keep their arena first child, which leads
+//! straight to the voxel's value in the arena's leaf pool.
+//!
+//! It holds no values, so value changes leave it valid; any structural
+//! change drops it with the trunks, and the next search builds it again.
+//! Answers above depth 16 (pruned leaves) are left to the arena's descent.
+
+use super::arena::{in_leaf_pool, NodeId, Parts, LEAF_POOL};
+use super::trunk::{Trunks, GRID_NODES_PER_CELL};
+use super::ROOT;
+use crate::key::{Key, TREE_DEPTH};
+use std::sync::OnceLock;
+
+/// Trees of fewer nodes get no index: their arena fits in the second-level
+/// cache, where the index's longer steps would only cost time.
+pub(crate) const LEVEL_INDEX_MIN_NODES: usize = 1 << 20;
+
+/// The deepest level with inner nodes.
+const LAST_INNER: u8 = TREE_DEPTH - 1;
+
+#[derive(Clone, Debug)]
+pub(crate) struct LevelIndex {
+    /// Child masks of the nodes above depth 16, breadth-first, in each
+    /// level by Morton code: node `i`'s is byte `i & 7` of word `i >> 3`.
+    words: Vec<u64>,
+    /// Per word: the index of the first child of its nodes (one plus the
+    /// children of all nodes before it).
+    first: Vec<u32>,
+    /// Index of the first depth-15 node.
+    deepest: u32,
+    /// The nodes above depth 16: the children of the depth-15 ones are
+    /// numbered on from here.
+    nodes: u32,
+    /// Per depth-15 node, from `deepest` on: the arena id of its first
+    /// child; empty when the leaf pool holds the voxels in that numbering.
+    leaf_first: Vec<NodeId>,
+    /// Search starts, on index ids (arena ids for the voxels).
+    trunks: Trunks<u32>,
+}
+
+/// Where a search through the index ends.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Reach {
+    /// The voxel, by arena id.
+    Voxel(NodeId),
+    /// Unknown space: the path ends at an inner node lacking the child.
+    Unknown,
+    /// A leaf above depth 16, which the arena's descent finds.
+    Coarse,
+}
+
+impl LevelIndex {
+    /// The index of the arena's nodes (`size` of them, OctoMap's count).
+    pub fn build(p: &Parts<'_>, size: usize) -> Self {
+        let mut masks: Vec<u8> = Vec::new();
+        let mut leaf_first = Vec::new();
+        let mut deepest = None;
+        let (mut level, mut next) = (vec![ROOT], Vec::new());
+        for depth in 0..=LAST_INNER {
+            if level.is_empty() {
+                break;
+            }
+            if depth == LAST_INNER {
+                deepest = Some(masks.len());
+            }
+            next.clear();
+            for &n in &level {
+                let m = p.masks[n as usize];
+                masks.push(m);
+                let first = p.first_child[n as usize];
+                if depth == LAST_INNER {
+                    leaf_first.push(first);
+                } else {
+                    next.extend((0..m.count_ones()).map(|k| first + k));
+                }
+            }
+            std::mem::swap(&mut level, &mut next);
+        }
+        let deepest = deepest.unwrap_or(masks.len()) as u32;
+        // a leaf pool in breadth-first order (a compacted or loaded tree)
+        // needs no first children: a voxel's place is its index's rank
+        let nodes = masks.len() as u32;
+        let mut next_leaf = LEAF_POOL;
+        let ranked = masks[deepest as usize..].iter().zip(&leaf_first).all(|(&m, &f)| {
+            let ok = m == 0 || f == next_leaf;
+            next_leaf += u32::from(m).count_ones();
+            ok
+        });
+        if ranked {
+            leaf_first = Vec::new();
+        } else {
+            leaf_first.shrink_to_fit();
+        }
+        let mut words = Vec::with_capacity(masks.len().div_ceil(8));
+        let mut first = Vec::with_capacity(words.capacity());
+        let mut children = 1u32;
+        for chunk in masks.chunks(8) {
+            let mut bytes = [0u8; 8];
+            bytes[..chunk.len()].copy_from_slice(chunk);
+            let w = u64::from_le_bytes(bytes);
+            words.push(w);
+            first.push(children);
+            children += w.count_ones();
+        }
+        let mut index = LevelIndex { words, first, deepest, nodes, leaf_first, trunks: Trunks::at_root(0) };
+        let cells = size / GRID_NODES_PER_CELL as usize;
+        index.trunks = Trunks::build(0, cells, |n| Some(index.mask(n)), |n, m, pos| Some(index.child(n, m, pos)));
+        index
+    }
+
+    /// Heap bytes held.
+    pub fn bytes(&self) -> usize {
+        8 * self.words.capacity() + 4 * self.first.capacity() + 4 * self.leaf_first.capacity() + self.trunks.bytes()
+    }
+
+    #[inline(always)]
+    fn mask(&self, n: u32) -> u8 {
+        if in_leaf_pool(n) {
+            0
+        } else {
+            (self.words[(n >> 3) as usize] >> (8 * (n & 7))) as u8
+        }
+    }
+
+    /// Child `pos` (present in `m`, `n`'s mask) of index node `n`.
+    #[inline(always)]
+    fn child(&self, n: u32, m: u8, pos: usize) -> u32 {
+        if n >= self.deepest && !self.leaf_first.is_empty() {
+            return self.leaf_first[(n - self.deepest) as usize] + (u32::from(m) & ((1 << pos) - 1)).count_ones();
+        }
+        let w = (n >> 3) as usize;
+        let bit = 8 * (n & 7) + pos as u32;
+        let c = self.first[w] + (self.words[w] & ((1 << bit) - 1)).count_ones();
+        if n >= self.deepest {
+            LEAF_POOL | (c - self.nodes)
+        } else {
+            c
+        }
+    }
+
+    /// A full-depth search for `key` (Morton `code`).
+    #[inline(always)]
+    pub fn search(&self, key: Key, code: u64) -> Reach {
+        let (mut i, from) =
+            self.trunks.start(key, code, TREE_DEPTH, |n| Some(self.mask(n)), |n, m, pos| Some(self.child(n, m, pos)));
+        if from == TREE_DEPTH {
+            return Reach::Voxel(i);
+        }
+        // one word and its first-child entry per level: the chain of
+        // dependent steps is a load, a shift, a popcount and an add
+        let mut positions = (code << (64 - 3 * u32::from(TREE_DEPTH))) << (3 * u32::from(from));
+        for _ in from..LAST_INNER {
+            let w = (i >> 3) as usize;
+            let word = self.words[w];
+            let bit = 8 * (i & 7) + (positions >> 61) as u32;
+            positions <<= 3;
+            if word & (1 << bit) == 0 {
+                return self.ended((word >> (8 * (i & 7))) as u8);
+            }
+            i = self.first[w] + (word & ((1 << bit) - 1)).count_ones();
+        }
+        let m = self.mask(i);
+        let pos = (code & 7) as usize;
+        if m & (1 << pos) == 0 {
+            return self.ended(m);
+        }
+        Reach::Voxel(self.child(i, m, pos))
+    }
+
+    #[inline(always)]
+    fn ended(&self, mask: u8) -> Reach {
+        if mask == 0 {
+            Reach::Coarse
+        } else {
+            Reach::Unknown
+        }
+    }
+}
+
+/// The tree's index, if it has one: none while the tree is changing (after
+/// any change until the trunks are derived again) or when it is small;
+/// otherwise built by the first search that can use it.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct LevelSlot(Option<OnceLock<LevelIndex>>);
+
+impl LevelSlot {
+    /// No index until [`Self::armed`].
+    pub fn off() -> Self {
+        LevelSlot(None)
+    }
+
+    /// An index built on demand, for a tree of `size` nodes.
+    pub fn armed(size: usize) -> Self {
+        LevelSlot((size >= LEVEL_INDEX_MIN_NODES).then(OnceLock::new))
+    }
+
+    #[inline(always)]
+    pub fn get(&self, p: &Parts<'_>, size: usize) -> Option<&LevelIndex> {
+        Some(self.0.as_ref()?.get_or_init(|| LevelIndex::build(p, size)))
+    }
+
+    pub fn bytes(&self) -> usize {
+        self.0.as_ref().and_then(OnceLock::get).map_or(0, LevelIndex::bytes)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::morton::MortonCode;
+    use crate::{InnerNodes, OccupancyTree};
+
+    /// A tree with voxels in random order, a pruned depth-13 leaf and a
+    /// pruned depth-15 leaf; keys on its voxels, beside them and far away.
+    fn tree_and_keys() -> (OccupancyTree, Vec<Key>) {
+        let mut tree = OccupancyTree::new(0.1).unwrap();
+        let mut s = 7u32;
+        let mut rand = |n: u32| {
+            s = s.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+            (s >> 8) % n
+        };
+        let mut keys = Vec::new();
+        for _ in 0..3000 {
+            let c = |r: u32| (32600 + r) as u16;
+            keys.push(Key([c(rand(300)), c(rand(300)), c(rand(60))]));
+        }
+        for (i, k) in keys.iter().enumerate() {
+            tree.update_occupancy(*k, i % 3 != 0, InnerNodes::Update);
+        }
+        for i in 0..512u16 {
+            let k = Key([32640 + (i & 7), 32648 + ((i >> 3) & 7), 32616 + (i >> 6)]);
+            tree.set_value(k, 2.0, InnerNodes::Update);
+        }
+        for i in 0..8u16 {
+            tree.set_value(Key([32900 + (i & 1), 32902 + ((i >> 1) & 1), 32604 + (i >> 2)]), -1.5, InnerNodes::Update);
+        }
+        tree.prune();
+        let probes: Vec<Key> = keys.iter().map(|k| Key(k.0.map(|c| c + 1))).collect();
+        keys.extend(probes);
+        keys.extend([Key([32643, 32650, 32620]), Key([32901, 32903, 32605]), Key([0, 0, 0]), Key([40000, 1, 65535])]);
+        (tree, keys)
+    }
+
+    /// The index's answer is the arena descent's: the same voxel, unknown
+    /// space where the arena finds nothing, a coarse leaf where it finds
+    /// one above depth 16.
+    fn agrees(tree: &OccupancyTree, keys: &[Key]) -> LevelIndex {
+        let a = tree.arena().unwrap();
+        let index = LevelIndex::build(&a.parts(), tree.size());
+        let mut reached = [0; 3];
+        for &key in keys {
+            let got = index.search(key, MortonCode::encode(key).0);
+            let want = tree.search_id(key, 0);
+            match (got, want) {
+                (Reach::Voxel(id), Some((n, TREE_DEPTH, true))) => assert_eq!(id, n, "{key}"),
+                (Reach::Unknown, None) => {}
+                (Reach::Coarse, Some((_, d, true))) if d < TREE_DEPTH => {}
+                _ => panic!("{key}: index {got:?}, arena {want:?}"),
+            }
+            reached[match got {
+                Reach::Voxel(_) => 0,
+                Reach::Unknown => 1,
+                Reach::Coarse => 2,
+            }] += 1;
+        }
+        assert!(reached.iter().all(|&n| n > 0), "{reached:?}");
+        index
+    }
+
+    #[test]
+    fn the_index_finds_what_the_arena_finds_as_built_and_compacted() {
+        let (mut tree, keys) = tree_and_keys();
+        let index = agrees(&tree, &keys);
+        assert!(!index.leaf_first.is_empty(), "as built, the voxels are not in breadth-first order");
+        tree.compact();
+        let index = agrees(&tree, &keys);
+        assert!(index.leaf_first.is_empty(), "compacted, the voxels are found by rank");
+    }
+
+    /// `OccupancyTree::search` through the index gives the arena's
+    /// answers, values and all, and a change drops the index.
+    #[test]
+    fn search_through_the_index_matches_the_arena() {
+        let (mut tree, keys) = tree_and_keys();
+        tree.levels = LevelSlot(Some(OnceLock::new()));
+        for &k in &keys {
+            assert_eq!(tree.search(k, 0), tree.search_arena(k, 0), "{k}");
+        }
+        assert!(tree.levels.bytes() > 0);
+        tree.update_occupancy(keys[0], true, InnerNodes::Update);
+        assert_eq!(tree.levels.bytes(), 0);
+    }
+}
