@@ -16,10 +16,11 @@
 //! change drops it with the trunks, and the next search builds it again.
 //! Answers above depth 16 (pruned leaves) are left to the arena's descent.
 
-use super::arena::{in_leaf_pool, NodeId, Parts, LEAF_POOL};
+use super::arena::{in_leaf_pool, leaf_index, NodeId, Parts, LEAF_POOL};
 use super::trunk::{Trunks, GRID_NODES_PER_CELL};
 use super::ROOT;
 use crate::key::{Key, TREE_DEPTH};
+use hashbrown::HashMap;
 use std::sync::OnceLock;
 
 /// Trees of fewer nodes get no index: their arena fits in the second-level
@@ -42,18 +43,36 @@ pub(crate) struct LevelIndex {
     /// The nodes above depth 16: the children of the depth-15 ones are
     /// numbered on from here.
     nodes: u32,
-    /// Per depth-15 node, from `deepest` on: the arena id of its first
-    /// child; empty when the leaf pool holds the voxels in that numbering.
-    leaf_first: Vec<NodeId>,
+    /// Where the voxels' values are.
+    voxels: Voxels,
     /// Search starts, on index ids (arena ids for the voxels).
     trunks: Trunks<u32>,
 }
 
+/// How the index finds a voxel's value.
+#[derive(Clone, Debug)]
+enum Voxels {
+    /// Per depth-15 node, from `deepest` on, the arena id of its first
+    /// child (a leaf pool in the order the tree was built).
+    FirstChild(Vec<NodeId>),
+    /// The leaf pool holds the voxels in the index's numbering (after
+    /// `compact()`, or in a tree read from a file): a voxel's arena id is
+    /// its number.
+    Ranked,
+    /// Per voxel in the index's numbering, its value's place in `values`:
+    /// a plain tree's voxels take few distinct values (16–246 on the bench
+    /// maps), and one byte a voxel is a quarter of the leaf pool to miss
+    /// in.
+    Palette { codes: Vec<u8>, values: Vec<f32> },
+}
+
 /// Where a search through the index ends.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum Reach {
     /// The voxel, by arena id.
     Voxel(NodeId),
+    /// The voxel's value (a plain tree's voxel: no extra).
+    Value(f32),
     /// Unknown space: the path ends at an inner node lacking the child.
     Unknown,
     /// A leaf above depth 16, which the arena's descent finds.
@@ -88,20 +107,8 @@ impl LevelIndex {
             std::mem::swap(&mut level, &mut next);
         }
         let deepest = deepest.unwrap_or(masks.len()) as u32;
-        // a leaf pool in breadth-first order (a compacted or loaded tree)
-        // needs no first children: a voxel's place is its index's rank
         let nodes = masks.len() as u32;
-        let mut next_leaf = LEAF_POOL;
-        let ranked = masks[deepest as usize..].iter().zip(&leaf_first).all(|(&m, &f)| {
-            let ok = m == 0 || f == next_leaf;
-            next_leaf += u32::from(m).count_ones();
-            ok
-        });
-        if ranked {
-            leaf_first = Vec::new();
-        } else {
-            leaf_first.shrink_to_fit();
-        }
+        let voxels = Voxels::new(p, &masks[deepest as usize..], leaf_first);
         let mut words = Vec::with_capacity(masks.len().div_ceil(8));
         let mut first = Vec::with_capacity(words.capacity());
         let mut children = 1u32;
@@ -113,7 +120,7 @@ impl LevelIndex {
             first.push(children);
             children += w.count_ones();
         }
-        let mut index = LevelIndex { words, first, deepest, nodes, leaf_first, trunks: Trunks::at_root(0) };
+        let mut index = LevelIndex { words, first, deepest, nodes, voxels, trunks: Trunks::at_root(0) };
         let cells = size / GRID_NODES_PER_CELL as usize;
         index.trunks = Trunks::build(0, cells, |n| Some(index.mask(n)), |n, m, pos| Some(index.child(n, m, pos)));
         index
@@ -121,7 +128,12 @@ impl LevelIndex {
 
     /// Heap bytes held.
     pub fn bytes(&self) -> usize {
-        8 * self.words.capacity() + 4 * self.first.capacity() + 4 * self.leaf_first.capacity() + self.trunks.bytes()
+        let voxels = match &self.voxels {
+            Voxels::FirstChild(f) => 4 * f.capacity(),
+            Voxels::Ranked => 0,
+            Voxels::Palette { codes, values } => codes.capacity() + 4 * values.capacity(),
+        };
+        8 * self.words.capacity() + 4 * self.first.capacity() + voxels + self.trunks.bytes()
     }
 
     #[inline(always)]
@@ -136,8 +148,10 @@ impl LevelIndex {
     /// Child `pos` (present in `m`, `n`'s mask) of index node `n`.
     #[inline(always)]
     fn child(&self, n: u32, m: u8, pos: usize) -> u32 {
-        if n >= self.deepest && !self.leaf_first.is_empty() {
-            return self.leaf_first[(n - self.deepest) as usize] + (u32::from(m) & ((1 << pos) - 1)).count_ones();
+        if n >= self.deepest {
+            if let Voxels::FirstChild(f) = &self.voxels {
+                return f[(n - self.deepest) as usize] + (u32::from(m) & ((1 << pos) - 1)).count_ones();
+            }
         }
         let w = (n >> 3) as usize;
         let bit = 8 * (n & 7) + pos as u32;
@@ -155,7 +169,7 @@ impl LevelIndex {
         let (mut i, from) =
             self.trunks.start(key, code, TREE_DEPTH, |n| Some(self.mask(n)), |n, m, pos| Some(self.child(n, m, pos)));
         if from == TREE_DEPTH {
-            return Reach::Voxel(i);
+            return self.voxel(i);
         }
         // one word and its first-child entry per level: the chain of
         // dependent steps is a load, a shift, a popcount and an add
@@ -175,7 +189,16 @@ impl LevelIndex {
         if m & (1 << pos) == 0 {
             return self.ended(m);
         }
-        Reach::Voxel(self.child(i, m, pos))
+        self.voxel(self.child(i, m, pos))
+    }
+
+    /// The voxel numbered `v` (with [`LEAF_POOL`] set).
+    #[inline(always)]
+    fn voxel(&self, v: u32) -> Reach {
+        match &self.voxels {
+            Voxels::Palette { codes, values } => Reach::Value(values[usize::from(codes[leaf_index(v)])]),
+            _ => Reach::Voxel(v),
+        }
     }
 
     #[inline(always)]
@@ -185,6 +208,52 @@ impl LevelIndex {
         } else {
             Reach::Unknown
         }
+    }
+}
+
+impl Voxels {
+    /// For the depth-15 nodes' `masks` and arena first children: a palette
+    /// when the tree has no extras and at most 256 voxel values, else the
+    /// rank when the leaf pool is in the index's numbering, else the first
+    /// children.
+    fn new(p: &Parts<'_>, masks: &[u8], leaf_first: Vec<NodeId>) -> Self {
+        let voxels =
+            || masks.iter().zip(&leaf_first).flat_map(|(&m, &f)| (0..m.count_ones()).map(move |k| leaf_index(f + k)));
+        if p.extras.is_empty() && p.leaf_extras.is_empty() {
+            let mut values: Vec<f32> = Vec::new();
+            let mut place: HashMap<u32, u8> = HashMap::new();
+            let mut last = None;
+            let codes: Option<Vec<u8>> = voxels()
+                .map(|l| {
+                    let v = p.leaf_values[l];
+                    if let Some((bits, code)) = last {
+                        if bits == v.to_bits() {
+                            return Some(code);
+                        }
+                    }
+                    let code = match place.get(&v.to_bits()) {
+                        Some(&c) => c,
+                        None => {
+                            let c = u8::try_from(values.len()).ok()?;
+                            values.push(v);
+                            place.insert(v.to_bits(), c);
+                            c
+                        }
+                    };
+                    last = Some((v.to_bits(), code));
+                    Some(code)
+                })
+                .collect();
+            if let Some(codes) = codes {
+                return Voxels::Palette { codes, values };
+            }
+        }
+        if voxels().enumerate().all(|(k, l)| k == l) {
+            return Voxels::Ranked;
+        }
+        let mut leaf_first = leaf_first;
+        leaf_first.shrink_to_fit();
+        Voxels::FirstChild(leaf_first)
     }
 }
 
@@ -223,7 +292,7 @@ mod tests {
 
     /// A tree with voxels in random order, a pruned depth-13 leaf and a
     /// pruned depth-15 leaf; keys on its voxels, beside them and far away.
-    fn tree_and_keys() -> (OccupancyTree, Vec<Key>) {
+    fn tree_and_keys(distinct_values: bool) -> (OccupancyTree, Vec<Key>) {
         let mut tree = OccupancyTree::new(0.1).unwrap();
         let mut s = 7u32;
         let mut rand = |n: u32| {
@@ -236,7 +305,12 @@ mod tests {
             keys.push(Key([c(rand(300)), c(rand(300)), c(rand(60))]));
         }
         for (i, k) in keys.iter().enumerate() {
-            tree.update_occupancy(*k, i % 3 != 0, InnerNodes::Update);
+            if distinct_values {
+                // more values than a palette holds
+                tree.set_value(*k, i as f32 / 1024.0, InnerNodes::Update);
+            } else {
+                tree.update_occupancy(*k, i % 3 != 0, InnerNodes::Update);
+            }
         }
         for i in 0..512u16 {
             let k = Key([32640 + (i & 7), 32648 + ((i >> 3) & 7), 32616 + (i >> 6)]);
@@ -264,12 +338,15 @@ mod tests {
             let want = tree.search_id(key, 0);
             match (got, want) {
                 (Reach::Voxel(id), Some((n, TREE_DEPTH, true))) => assert_eq!(id, n, "{key}"),
+                (Reach::Value(v), Some((n, TREE_DEPTH, true))) => {
+                    assert_eq!(v.to_bits(), a.value(n).to_bits(), "{key}")
+                }
                 (Reach::Unknown, None) => {}
                 (Reach::Coarse, Some((_, d, true))) if d < TREE_DEPTH => {}
                 _ => panic!("{key}: index {got:?}, arena {want:?}"),
             }
             reached[match got {
-                Reach::Voxel(_) => 0,
+                Reach::Voxel(_) | Reach::Value(_) => 0,
                 Reach::Unknown => 1,
                 Reach::Coarse => 2,
             }] += 1;
@@ -278,27 +355,37 @@ mod tests {
         index
     }
 
+    /// All three ways to a voxel's value: the palette (a plain tree with
+    /// few values, as built and compacted), the arena's first children (as
+    /// built, many values) and the rank (compacted, many values).
     #[test]
     fn the_index_finds_what_the_arena_finds_as_built_and_compacted() {
-        let (mut tree, keys) = tree_and_keys();
-        let index = agrees(&tree, &keys);
-        assert!(!index.leaf_first.is_empty(), "as built, the voxels are not in breadth-first order");
-        tree.compact();
-        let index = agrees(&tree, &keys);
-        assert!(index.leaf_first.is_empty(), "compacted, the voxels are found by rank");
+        let kind = |index: &LevelIndex| match index.voxels {
+            Voxels::FirstChild(_) => "first child",
+            Voxels::Ranked => "rank",
+            Voxels::Palette { .. } => "palette",
+        };
+        for (distinct, as_built, compacted) in [(false, "palette", "palette"), (true, "first child", "rank")] {
+            let (mut tree, keys) = tree_and_keys(distinct);
+            assert_eq!(kind(&agrees(&tree, &keys)), as_built);
+            tree.compact();
+            assert_eq!(kind(&agrees(&tree, &keys)), compacted);
+        }
     }
 
     /// `OccupancyTree::search` through the index gives the arena's
     /// answers, values and all, and a change drops the index.
     #[test]
     fn search_through_the_index_matches_the_arena() {
-        let (mut tree, keys) = tree_and_keys();
-        tree.levels = LevelSlot(Some(OnceLock::new()));
-        for &k in &keys {
-            assert_eq!(tree.search(k, 0), tree.search_arena(k, 0), "{k}");
+        for distinct in [false, true] {
+            let (mut tree, keys) = tree_and_keys(distinct);
+            tree.levels = LevelSlot(Some(OnceLock::new()));
+            for &k in &keys {
+                assert_eq!(tree.search(k, 0), tree.search_arena(k, 0), "{k}");
+            }
+            assert!(tree.levels.bytes() > 0);
+            tree.update_occupancy(keys[0], true, InnerNodes::Update);
+            assert_eq!(tree.levels.bytes(), 0);
         }
-        assert!(tree.levels.bytes() > 0);
-        tree.update_occupancy(keys[0], true, InnerNodes::Update);
-        assert_eq!(tree.levels.bytes(), 0);
     }
 }

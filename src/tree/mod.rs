@@ -645,6 +645,7 @@ impl OccupancyTree {
                     Reach::Voxel(id) => {
                         return Some(Found { value: a.value(id), depth: TREE_DEPTH, is_leaf: true, extra: a.extra(id) })
                     }
+                    Reach::Value(value) => return Some(Found { value, depth: TREE_DEPTH, is_leaf: true, extra: 0 }),
                     Reach::Unknown => return None,
                     Reach::Coarse => {}
                 }
