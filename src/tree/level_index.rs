@@ -25,7 +25,7 @@ use std::sync::OnceLock;
 
 /// Trees of fewer nodes get no index: their arena fits in the second-level
 /// cache, where the index's longer steps would only cost time.
-pub(crate) const LEVEL_INDEX_MIN_NODES: usize = 1 << 20;
+pub(crate) const LEVEL_INDEX_MIN_NODES: usize = 1 << 19;
 
 /// The deepest level with inner nodes.
 const LAST_INNER: u8 = TREE_DEPTH - 1;
@@ -279,6 +279,11 @@ impl LevelSlot {
         Some(self.0.as_ref()?.get_or_init(|| LevelIndex::build(p, size)))
     }
 
+    /// Whether full-depth searches go through an index.
+    pub fn is_armed(&self) -> bool {
+        self.0.is_some()
+    }
+
     pub fn bytes(&self) -> usize {
         self.0.as_ref().and_then(OnceLock::get).map_or(0, LevelIndex::bytes)
     }
@@ -371,6 +376,39 @@ mod tests {
             tree.compact();
             assert_eq!(kind(&agrees(&tree, &keys)), compacted);
         }
+    }
+
+    /// A tree large enough to get its index by itself: `search`,
+    /// `search_many` and `SearchIndex` all answer as the arena does.
+    #[test]
+    fn a_large_tree_searches_through_its_index() {
+        let mut tree = OccupancyTree::new(0.1).unwrap();
+        let mut s = 3u64;
+        let mut codes: Vec<u64> = (0..400_000)
+            .map(|_| {
+                s = s.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+                let c = |shift: u32| 32_000 + ((s >> shift) % 1_500) as u16;
+                MortonCode::encode(Key([c(10), c(25), 32_700 + ((s >> 40) % 40) as u16])).0
+            })
+            .collect();
+        codes.sort_unstable();
+        codes.dedup();
+        let (hits, misses) = codes.split_at(codes.len() / 3);
+        tree.update_batch(hits, 0.85, InnerNodes::Update);
+        tree.update_batch(misses, -0.4, InnerNodes::Update);
+        assert!(tree.size() >= LEVEL_INDEX_MIN_NODES && tree.levels_armed(), "{} nodes", tree.size());
+        let keys: Vec<Key> =
+            codes.iter().step_by(7).map(|&c| MortonCode(c).decode()).chain(tree_and_keys(false).1).collect();
+        let want: Vec<_> = keys.iter().map(|&k| tree.search_arena(k, 0)).collect();
+        let got: Vec<_> = keys.iter().map(|&k| tree.search(k, 0)).collect();
+        assert_eq!(got, want);
+        assert!(tree.levels.bytes() > 0, "the searches built the index");
+        let mut many = Vec::new();
+        tree.search_many(&keys, 0, &mut many);
+        assert_eq!(many, want);
+        let index = crate::SearchIndex::new(&tree);
+        assert!(keys.iter().zip(&want).all(|(&k, w)| index.search(k, 0) == *w));
+        assert!(want.iter().any(Option::is_none) && want.iter().any(Option::is_some));
     }
 
     /// `OccupancyTree::search` through the index gives the arena's

@@ -654,6 +654,11 @@ impl OccupancyTree {
         self.search_arena(key, depth)
     }
 
+    /// Whether full-depth searches go through the level index.
+    pub(crate) fn levels_armed(&self) -> bool {
+        self.levels.is_armed()
+    }
+
     /// [`Self::search`] in the arena alone: for changes, which would drop
     /// the index they built.
     #[inline(always)]
@@ -689,6 +694,12 @@ impl OccupancyTree {
             return;
         };
         let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
+        if depth == TREE_DEPTH && self.levels.is_armed() {
+            // the level index's searches are short and independent: the
+            // processor overlaps their misses without lanes
+            out.extend(keys.iter().map(|&k| self.search(k, depth)));
+            return;
+        }
         let p = a.parts();
         for chunk in keys.chunks(LANES) {
             let mut code = [0u64; LANES];
