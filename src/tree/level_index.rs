@@ -20,12 +20,16 @@ use super::arena::{in_leaf_pool, leaf_index, NodeId, Parts, LEAF_POOL};
 use super::trunk::{Trunks, GRID_NODES_PER_CELL};
 use super::ROOT;
 use crate::key::{Key, TREE_DEPTH};
+use crate::morton::MortonCode;
 use hashbrown::HashMap;
 use std::sync::OnceLock;
 
 /// Trees of fewer nodes get no index: their arena fits in the second-level
 /// cache, where the index's longer steps would only cost time.
 pub(crate) const LEVEL_INDEX_MIN_NODES: usize = 1 << 19;
+
+/// Keys [`LevelIndex::search_lanes`] takes at a time.
+pub(crate) const LANES: usize = 8;
 
 /// The deepest level with inner nodes.
 const LAST_INNER: u8 = TREE_DEPTH - 1;
@@ -190,6 +194,49 @@ impl LevelIndex {
             return self.ended(m);
         }
         self.voxel(self.child(i, m, pos))
+    }
+
+    /// [`Self::search`] for up to [`LANES`] keys in lockstep, answers in
+    /// `out`: each round steps every lane still walking one level, so the
+    /// lanes' cache misses overlap (on the largest maps the processor does
+    /// not overlap one search after another as well).
+    pub fn search_lanes(&self, keys: &[Key], out: &mut [Reach; LANES]) {
+        debug_assert!(keys.len() <= LANES);
+        let mut node = [0u32; LANES];
+        let mut depth = [0u8; LANES];
+        let mut code = [0u64; LANES];
+        let mut walking = 0u32;
+        for (l, &key) in keys.iter().enumerate() {
+            code[l] = MortonCode::encode_table(key).0;
+            let (n, from) = self.trunks.start(key, code[l], TREE_DEPTH, |n| Some(self.mask(n)), |n, m, pos| {
+                Some(self.child(n, m, pos))
+            });
+            if from == TREE_DEPTH {
+                out[l] = self.voxel(n);
+            } else {
+                (node[l], depth[l]) = (n, from);
+                walking |= 1 << l;
+            }
+        }
+        while walking != 0 {
+            let mut lanes = walking;
+            while lanes != 0 {
+                let l = lanes.trailing_zeros() as usize;
+                lanes &= lanes - 1;
+                let i = node[l];
+                let m = self.mask(i);
+                let pos = ((code[l] >> (3 * (LAST_INNER - depth[l]))) & 7) as usize;
+                if m & (1 << pos) == 0 {
+                    out[l] = self.ended(m);
+                    walking &= !(1 << l);
+                } else if depth[l] == LAST_INNER {
+                    out[l] = self.voxel(self.child(i, m, pos));
+                    walking &= !(1 << l);
+                } else {
+                    (node[l], depth[l]) = (self.child(i, m, pos), depth[l] + 1);
+                }
+            }
+        }
     }
 
     /// The voxel numbered `v` (with [`LEAF_POOL`] set).
@@ -357,6 +404,13 @@ mod tests {
             }] += 1;
         }
         assert!(reached.iter().all(|&n| n > 0), "{reached:?}");
+        let mut lanes = [Reach::Unknown; LANES];
+        for chunk in keys.chunks(LANES - 1) {
+            index.search_lanes(chunk, &mut lanes);
+            for (l, &key) in chunk.iter().enumerate() {
+                assert_eq!(lanes[l], index.search(key, MortonCode::encode(key).0), "{key} in lanes");
+            }
+        }
         index
     }
 

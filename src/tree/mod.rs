@@ -694,13 +694,20 @@ impl OccupancyTree {
             return;
         };
         let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
-        if depth == TREE_DEPTH && self.levels.is_armed() {
-            // the level index's searches are short and independent: the
-            // processor overlaps their misses without lanes
-            out.extend(keys.iter().map(|&k| self.search(k, depth)));
+        let p = a.parts();
+        if let Some(index) = self.levels.get(&p, self.size).filter(|_| depth == TREE_DEPTH) {
+            let mut reach = [Reach::Unknown; level_index::LANES];
+            for chunk in keys.chunks(level_index::LANES) {
+                index.search_lanes(chunk, &mut reach);
+                out.extend(chunk.iter().zip(&reach).map(|(&key, r)| match *r {
+                    Reach::Voxel(id) => Some(Found { value: a.value(id), depth, is_leaf: true, extra: a.extra(id) }),
+                    Reach::Value(value) => Some(Found { value, depth, is_leaf: true, extra: 0 }),
+                    Reach::Unknown => None,
+                    Reach::Coarse => self.search_arena(key, depth),
+                }));
+            }
             return;
         }
-        let p = a.parts();
         for chunk in keys.chunks(LANES) {
             let mut code = [0u64; LANES];
             let mut key = [Key::ROOT; LANES];

@@ -8,7 +8,9 @@
 //! only the levels below the table that answered. The index borrows the
 //! tree, so the borrow checker rules out the tree changing under it (node
 //! ids move on structural changes). Answers are exactly
-//! [`OccupancyTree::search`]'s.
+//! [`OccupancyTree::search`]'s. On trees large enough to have a level
+//! index (`level_index.rs`) its one-at-a-time searches go through that
+//! instead, which is faster than the tables.
 
 use super::{descend_to, search_target, Found, NodeArena, NodeId, OccupancyTree, Parts, ROOT};
 use crate::key::{adjust_key_to_depth, Key, TREE_DEPTH};
