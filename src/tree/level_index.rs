@@ -21,7 +21,6 @@ use super::trunk::{Trunks, GRID_NODES_PER_CELL};
 use super::ROOT;
 use crate::key::{Key, TREE_DEPTH};
 use crate::morton::MortonCode;
-use hashbrown::HashMap;
 use std::sync::OnceLock;
 
 /// Trees of fewer nodes get no index: their arena fits in the second-level
@@ -208,9 +207,13 @@ impl LevelIndex {
         let mut walking = 0u32;
         for (l, &key) in keys.iter().enumerate() {
             code[l] = MortonCode::encode_table(key).0;
-            let (n, from) = self.trunks.start(key, code[l], TREE_DEPTH, |n| Some(self.mask(n)), |n, m, pos| {
-                Some(self.child(n, m, pos))
-            });
+            let (n, from) = self.trunks.start(
+                key,
+                code[l],
+                TREE_DEPTH,
+                |n| Some(self.mask(n)),
+                |n, m, pos| Some(self.child(n, m, pos)),
+            );
             if from == TREE_DEPTH {
                 out[l] = self.voxel(n);
             } else {
@@ -263,44 +266,69 @@ impl Voxels {
     /// when the tree has no extras and at most 256 voxel values, else the
     /// rank when the leaf pool is in the index's numbering, else the first
     /// children.
-    fn new(p: &Parts<'_>, masks: &[u8], leaf_first: Vec<NodeId>) -> Self {
-        let voxels =
-            || masks.iter().zip(&leaf_first).flat_map(|(&m, &f)| (0..m.count_ones()).map(move |k| leaf_index(f + k)));
+    fn new(p: &Parts<'_>, masks: &[u8], mut leaf_first: Vec<NodeId>) -> Self {
+        // the depth-15 nodes' child groups in the leaf pool, in order
+        let groups = || masks.iter().zip(&leaf_first).map(|(&m, &f)| (leaf_index(f), m.count_ones() as usize));
         if p.extras.is_empty() && p.leaf_extras.is_empty() {
-            let mut values: Vec<f32> = Vec::new();
-            let mut place: HashMap<u32, u8> = HashMap::new();
-            let mut last = None;
-            let codes: Option<Vec<u8>> = voxels()
-                .map(|l| {
-                    let v = p.leaf_values[l];
-                    if let Some((bits, code)) = last {
-                        if bits == v.to_bits() {
-                            return Some(code);
-                        }
-                    }
-                    let code = match place.get(&v.to_bits()) {
-                        Some(&c) => c,
-                        None => {
-                            let c = u8::try_from(values.len()).ok()?;
-                            values.push(v);
-                            place.insert(v.to_bits(), c);
-                            c
-                        }
-                    };
-                    last = Some((v.to_bits(), code));
-                    Some(code)
-                })
-                .collect();
-            if let Some(codes) = codes {
-                return Voxels::Palette { codes, values };
+            let voxels = groups().map(|(_, k)| k).sum();
+            if let Some(palette) = Palette::of(groups().flat_map(|(first, k)| &p.leaf_values[first..first + k]), voxels)
+            {
+                return palette;
             }
         }
-        if voxels().enumerate().all(|(k, l)| k == l) {
+        let mut next = 0;
+        if groups().all(|(first, k)| {
+            let in_order = k == 0 || first == next;
+            next += k;
+            in_order
+        }) {
             return Voxels::Ranked;
         }
-        let mut leaf_first = leaf_first;
         leaf_first.shrink_to_fit();
         Voxels::FirstChild(leaf_first)
+    }
+}
+
+/// Builds [`Voxels::Palette`]: an open-addressed table of the values seen
+/// so far (a hash map per voxel made the first search of a 16M-node tree
+/// take three times as long).
+struct Palette {
+    bits: [u32; Self::SLOTS],
+    code: [u16; Self::SLOTS],
+}
+
+impl Palette {
+    const SLOTS: usize = 1024;
+    const EMPTY: u16 = u16::MAX;
+
+    /// The palette of `voxels` values, `None` past 256 distinct ones.
+    fn of<'a>(values: impl Iterator<Item = &'a f32>, voxels: usize) -> Option<Voxels> {
+        let mut t = Palette { bits: [0; Self::SLOTS], code: [Self::EMPTY; Self::SLOTS] };
+        let mut distinct: Vec<f32> = Vec::new();
+        let mut codes = Vec::with_capacity(voxels);
+        let mut last: Option<(u32, u8)> = None;
+        for v in values {
+            let bits = v.to_bits();
+            let code = match last {
+                Some((b, c)) if b == bits => c,
+                _ => {
+                    let mut h = (bits.wrapping_mul(0x9E37_79B9) >> 22) as usize;
+                    while t.code[h] != Self::EMPTY && t.bits[h] != bits {
+                        h = (h + 1) % Self::SLOTS;
+                    }
+                    if t.code[h] == Self::EMPTY {
+                        t.code[h] = u16::try_from(distinct.len()).ok().filter(|&c| c < 256)?;
+                        t.bits[h] = bits;
+                        distinct.push(*v);
+                    }
+                    let c = t.code[h] as u8;
+                    last = Some((bits, c));
+                    c
+                }
+            };
+            codes.push(code);
+        }
+        Some(Voxels::Palette { codes, values: distinct })
     }
 }
 
