@@ -1,5 +1,5 @@
 //! A breadth-first copy of a large tree's navigation above depth 16, for
-//! one-at-a-time searches.
+//! full-depth searches.
 //!
 //! A random point query on a large map is a chain of dependent cache
 //! misses, one per level below the trunk grid. In the arena the nodes of
@@ -9,12 +9,13 @@
 //! a word with one `u32` per word saying where the word's first child lies
 //! (the children of the nodes before it, counted): 1.5 bytes per inner
 //! node, and a level's nodes side by side, so the upper levels stay in
-//! cache. The depth-15 nodes keep their arena first child, which leads
-//! straight to the voxel's value in the arena's leaf pool.
+//! cache. A voxel's value comes from a palette (one byte per voxel), the
+//! arena's leaf pool at the voxel's rank, or the arena first child of its
+//! depth-15 parent ([`Voxels`]).
 //!
-//! It holds no values, so value changes leave it valid; any structural
-//! change drops it with the trunks, and the next search builds it again.
-//! Answers above depth 16 (pruned leaves) are left to the arena's descent.
+//! Any change drops it with the trunks, so it is never stale, and the
+//! first search after the trunks are derived again builds it. Answers
+//! above depth 16 (pruned leaves) are left to the arena's descent.
 
 use super::arena::{in_leaf_pool, leaf_index, NodeId, Parts, LEAF_POOL};
 use super::trunk::{Trunks, GRID_NODES_PER_CELL};
@@ -48,7 +49,7 @@ pub(crate) struct LevelIndex {
     nodes: u32,
     /// Where the voxels' values are.
     voxels: Voxels,
-    /// Search starts, on index ids (arena ids for the voxels).
+    /// Search starts, on index ids (voxels as [`Self::voxel`] takes them).
     trunks: Trunks<u32>,
 }
 

@@ -641,17 +641,22 @@ impl OccupancyTree {
         if depth == 0 || depth >= TREE_DEPTH {
             let p = a.parts();
             if let Some(index) = self.levels.get(&p, self.size) {
-                match index.search(key, MortonCode::encode_table(key).0) {
-                    Reach::Voxel(id) => {
-                        return Some(Found { value: a.value(id), depth: TREE_DEPTH, is_leaf: true, extra: a.extra(id) })
-                    }
-                    Reach::Value(value) => return Some(Found { value, depth: TREE_DEPTH, is_leaf: true, extra: 0 }),
-                    Reach::Unknown => return None,
-                    Reach::Coarse => {}
-                }
+                return self.answer(a, key, index.search(key, MortonCode::encode_table(key).0));
             }
         }
         self.search_arena(key, depth)
+    }
+
+    /// The full-depth answer for `key` from where the level index got.
+    #[inline(always)]
+    fn answer(&self, a: &NodeArena, key: Key, reach: Reach) -> Option<Found> {
+        let voxel = |value, extra| Some(Found { value, depth: TREE_DEPTH, is_leaf: true, extra });
+        match reach {
+            Reach::Voxel(id) => voxel(a.value(id), a.extra(id)),
+            Reach::Value(value) => voxel(value, 0),
+            Reach::Unknown => None,
+            Reach::Coarse => self.search_arena(key, 0),
+        }
     }
 
     /// Whether full-depth searches go through the level index.
@@ -699,12 +704,7 @@ impl OccupancyTree {
             let mut reach = [Reach::Unknown; level_index::LANES];
             for chunk in keys.chunks(level_index::LANES) {
                 index.search_lanes(chunk, &mut reach);
-                out.extend(chunk.iter().zip(&reach).map(|(&key, r)| match *r {
-                    Reach::Voxel(id) => Some(Found { value: a.value(id), depth, is_leaf: true, extra: a.extra(id) }),
-                    Reach::Value(value) => Some(Found { value, depth, is_leaf: true, extra: 0 }),
-                    Reach::Unknown => None,
-                    Reach::Coarse => self.search_arena(key, depth),
-                }));
+                out.extend(chunk.iter().zip(&reach).map(|(&key, &r)| self.answer(a, key, r)));
             }
             return;
         }
