@@ -127,6 +127,7 @@ impl LevelIndex {
         let mut index = LevelIndex { words, first, deepest, nodes, voxels, trunks: Trunks::at_root(0) };
         let cells = size / GRID_NODES_PER_CELL as usize;
         index.trunks = Trunks::build(0, cells, |n| Some(index.mask(n)), |n, m, pos| Some(index.child(n, m, pos)));
+        index.trunks.prepare(|n| Some(index.mask(n)), |n, m, pos| Some(index.child(n, m, pos)));
         index
     }
 
@@ -480,12 +481,14 @@ mod tests {
         tree.update_batch(hits, 0.85, InnerNodes::Update);
         tree.update_batch(misses, -0.4, InnerNodes::Update);
         assert!(tree.size() >= LEVEL_INDEX_MIN_NODES && tree.levels_armed(), "{} nodes", tree.size());
+        assert_eq!((tree.levels.bytes(), tree.trunks.bytes()), (0, 0), "nothing built before a search");
+        tree.prepare_search();
+        assert!(tree.levels.bytes() > 0 && tree.trunks.bytes() > 0, "prepare_search builds both");
         let keys: Vec<Key> =
             codes.iter().step_by(7).map(|&c| MortonCode(c).decode()).chain(tree_and_keys(false).1).collect();
         let want: Vec<_> = keys.iter().map(|&k| tree.search_arena(k, 0)).collect();
         let got: Vec<_> = keys.iter().map(|&k| tree.search(k, 0)).collect();
         assert_eq!(got, want);
-        assert!(tree.levels.bytes() > 0, "the searches built the index");
         let mut many = Vec::new();
         tree.search_many(&keys, 0, &mut many);
         assert_eq!(many, want);
@@ -500,6 +503,8 @@ mod tests {
     fn search_through_the_index_matches_the_arena() {
         for distinct in [false, true] {
             let (mut tree, keys) = tree_and_keys(distinct);
+            tree.prepare_search();
+            assert_eq!(tree.levels.bytes(), 0, "a small tree gets no index");
             tree.levels = LevelSlot(Some(OnceLock::new()));
             for &k in &keys {
                 assert_eq!(tree.search(k, 0), tree.search_arena(k, 0), "{k}");

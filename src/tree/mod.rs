@@ -659,6 +659,19 @@ impl OccupancyTree {
         }
     }
 
+    /// Builds now what searches otherwise build at the first one after a
+    /// bulk change: the grids below the trunks and, on trees of 2^19 nodes
+    /// or more, the level index (up to ~140 ms for 16M nodes). For callers
+    /// whose first query must not wait; answers do not change. Does nothing
+    /// while the tree is changing (after a change other than a bulk one).
+    pub fn prepare_search(&self) {
+        if let Some(a) = &self.arena {
+            let p = a.parts();
+            self.trunks.prepare(|n| Some(p.mask(n)), |n, _, pos| p.descend(n, pos as u64).ok());
+            self.levels.get(&p, self.size);
+        }
+    }
+
     /// Whether full-depth searches go through the level index.
     pub(crate) fn levels_armed(&self) -> bool {
         self.levels.is_armed()

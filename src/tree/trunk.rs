@@ -158,6 +158,12 @@ impl<N: Copy + Default> Trunks<N> {
         (self.ends[i] >> DEPTH_SHIFT) as u8
     }
 
+    /// Builds the grids now if the first search has not (`mask` and
+    /// `child` as for [`Self::start`]).
+    pub fn prepare(&self, mask: impl Fn(N) -> Option<u8>, child: impl Fn(N, u8, usize) -> Option<N>) {
+        self.grids.get_or_init(|| self.build_grids(mask, child));
+    }
+
     /// Heap bytes of the grids (0 until a search has built them).
     pub fn bytes(&self) -> usize {
         self.grids.get().map_or(0, |g| g.cells.capacity() * std::mem::size_of::<Cell<N>>())
