@@ -125,9 +125,13 @@ impl LevelIndex {
             children += w.count_ones();
         }
         let mut index = LevelIndex { words, first, deepest, nodes, voxels, trunks: Trunks::at_root(0) };
-        let cells = size / GRID_NODES_PER_CELL as usize;
-        index.trunks = Trunks::build(0, cells, |n| Some(index.mask(n)), |n, m, pos| Some(index.child(n, m, pos)));
-        index.trunks.prepare(|n| Some(index.mask(n)), |n, m, pos| Some(index.child(n, m, pos)));
+        let trunks = {
+            let (mask, child) = (|n| Some(index.mask(n)), |n, m, pos| Some(index.child(n, m, pos)));
+            let trunks = Trunks::build(0, size / GRID_NODES_PER_CELL as usize, mask, child);
+            trunks.prepare(mask, child);
+            trunks
+        };
+        index.trunks = trunks;
         index
     }
 
@@ -168,11 +172,28 @@ impl LevelIndex {
         }
     }
 
+    /// Where a full-depth search for `key` (Morton `code`) starts (the
+    /// grids are built with the index, so the closures only look up).
+    #[inline(always)]
+    fn start(&self, key: Key, code: u64) -> (u32, u8) {
+        self.trunks.start(key, code, TREE_DEPTH, |n| Some(self.mask(n)), |n, m, pos| Some(self.child(n, m, pos)))
+    }
+
+    /// Child `pos` of index node `i`, or where the path ends there.
+    #[inline(always)]
+    fn step(&self, i: u32, pos: usize) -> Result<u32, Reach> {
+        let m = self.mask(i);
+        if m & (1 << pos) == 0 {
+            Err(self.ended(m))
+        } else {
+            Ok(self.child(i, m, pos))
+        }
+    }
+
     /// A full-depth search for `key` (Morton `code`).
     #[inline(always)]
     pub fn search(&self, key: Key, code: u64) -> Reach {
-        let (mut i, from) =
-            self.trunks.start(key, code, TREE_DEPTH, |n| Some(self.mask(n)), |n, m, pos| Some(self.child(n, m, pos)));
+        let (mut i, from) = self.start(key, code);
         if from == TREE_DEPTH {
             return self.voxel(i);
         }
@@ -189,12 +210,10 @@ impl LevelIndex {
             }
             i = self.first[w] + (word & ((1 << bit) - 1)).count_ones();
         }
-        let m = self.mask(i);
-        let pos = (code & 7) as usize;
-        if m & (1 << pos) == 0 {
-            return self.ended(m);
+        match self.step(i, (code & 7) as usize) {
+            Ok(v) => self.voxel(v),
+            Err(end) => end,
         }
-        self.voxel(self.child(i, m, pos))
     }
 
     /// [`Self::search`] for up to [`LANES`] keys in lockstep, answers in
@@ -209,13 +228,7 @@ impl LevelIndex {
         let mut walking = 0u32;
         for (l, &key) in keys.iter().enumerate() {
             code[l] = MortonCode::encode_table(key).0;
-            let (n, from) = self.trunks.start(
-                key,
-                code[l],
-                TREE_DEPTH,
-                |n| Some(self.mask(n)),
-                |n, m, pos| Some(self.child(n, m, pos)),
-            );
+            let (n, from) = self.start(key, code[l]);
             if from == TREE_DEPTH {
                 out[l] = self.voxel(n);
             } else {
@@ -228,17 +241,13 @@ impl LevelIndex {
             while lanes != 0 {
                 let l = lanes.trailing_zeros() as usize;
                 lanes &= lanes - 1;
-                let i = node[l];
-                let m = self.mask(i);
                 let pos = ((code[l] >> (3 * (LAST_INNER - depth[l]))) & 7) as usize;
-                if m & (1 << pos) == 0 {
-                    out[l] = self.ended(m);
-                    walking &= !(1 << l);
-                } else if depth[l] == LAST_INNER {
-                    out[l] = self.voxel(self.child(i, m, pos));
-                    walking &= !(1 << l);
-                } else {
-                    (node[l], depth[l]) = (self.child(i, m, pos), depth[l] + 1);
+                match self.step(node[l], pos) {
+                    Ok(c) if depth[l] < LAST_INNER => (node[l], depth[l]) = (c, depth[l] + 1),
+                    done => {
+                        out[l] = done.map_or_else(|end| end, |v| self.voxel(v));
+                        walking &= !(1 << l);
+                    }
                 }
             }
         }
@@ -369,7 +378,6 @@ impl LevelSlot {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::morton::MortonCode;
     use crate::{InnerNodes, OccupancyTree};
 
     /// A tree with voxels in random order, a pruned depth-13 leaf and a

@@ -217,12 +217,12 @@ impl<'t> SearchIndex<'t> {
     /// does (as in unknown space above the tables).
     #[inline]
     pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
-        if self.tree.levels_armed() && search_target(key, depth).1 == TREE_DEPTH {
+        let (key, depth) = search_target(key, depth);
+        if depth == TREE_DEPTH && self.tree.levels_armed() {
             // a large tree's level index beats the tables
             return self.tree.search(key, depth);
         }
         let a = self.tree.arena()?;
-        let (key, depth) = search_target(key, depth);
         let code = MortonCode::encode_table(key).0;
         let p = a.parts();
         let (node, from) = self.start(&p, key, code, depth);
