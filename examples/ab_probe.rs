@@ -4,6 +4,8 @@
 //!
 //! * `time`: fastest of 9 passes over 1M queries, in ns per query: search by
 //!   key and by point on the tree, by key and by point on the mapped view.
+//! * `race`: OctoMap's search over the 1M points, then ours by point, five
+//!   times, as the benchmark alternates them (each evicts the other's data).
 //! * `leaves`: eight rounds of OctoMap's leaf walk followed by ours twice (as
 //!   the benchmark alternates them), then the spread of 200 of ours back to
 //!   back (the branch predictor learns a walk that repeats).
@@ -49,6 +51,18 @@ fn fold(t: &OccupancyTree) -> (usize, f64) {
     t.leaves(0).fold((0, 0f64), |(n, s), l| (n + 1, s + f64::from(l.value)))
 }
 
+/// OctoMap's tree of the same scans.
+fn oracle(scans: &[common::Scan], res: f64) -> OracleTree {
+    let mut batch = ScanBatch::new();
+    for (cloud, origin) in scans {
+        let v: Vec<[f32; 3]> = cloud.iter().map(|p| p.to_array()).collect();
+        batch.push(&v, origin.to_array());
+    }
+    let mut om = OracleTree::new(res).expect("oracle");
+    om.insert_scans(&batch, -1.0, false, false).expect("insert");
+    om
+}
+
 /// Microseconds of one run of `f`, and its result.
 fn micros<T>(f: impl FnOnce() -> T) -> (f64, T) {
     let t = Instant::now();
@@ -59,7 +73,7 @@ fn micros<T>(f: impl FnOnce() -> T) -> (f64, T) {
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.len() < 3 {
-        eprintln!("ab_probe indoor|outdoor RES time|leaves|fold|search|mapped|depths [compact]");
+        eprintln!("ab_probe indoor|outdoor RES time|race|leaves|fold|search|mapped|depths [compact]");
         std::process::exit(2);
     }
     let kind = if args[0] == "outdoor" { SceneKind::Outdoor } else { SceneKind::Indoor };
@@ -69,7 +83,7 @@ fn main() {
     if args.get(3).map(String::as_str) == Some("compact") {
         tree.compact();
     }
-    let n = if args[2] == "time" { 1_000_000 } else { 200_000 };
+    let n = if args[2] == "time" || args[2] == "race" { 1_000_000 } else { 200_000 };
     let points = common::query_points(&tree, n, 11);
     let keys: Vec<Key> = points.iter().map(|&p| tree.key(p).expect("in the map")).collect();
     let bytes = mapped::to_bytes(&tree, Default::default()).expect("olm");
@@ -86,14 +100,23 @@ fn main() {
                 best(&|| view_by_point(&view, &points)),
             );
         }
-        "leaves" => {
-            let mut batch = ScanBatch::new();
-            for (cloud, origin) in &scans {
-                let v: Vec<[f32; 3]> = cloud.iter().map(|p| p.to_array()).collect();
-                batch.push(&v, origin.to_array());
+        "race" => {
+            let om = oracle(&scans, res);
+            let q: Vec<[f32; 3]> = points.iter().map(|p| p.to_array()).collect();
+            let mut out = vec![0f32; q.len()];
+            for _ in 0..5 {
+                let (theirs, _) = micros(|| om.bench_search(&q, 0, &mut out));
+                let (ours, _) = micros(|| by_point(&tree, &points));
+                println!(
+                    "OctoMap {:6.1} ns, then ours {:6.1} ns a query: {:.2}x",
+                    theirs * 1e3 / n as f64,
+                    ours * 1e3 / n as f64,
+                    theirs / ours
+                );
             }
-            let mut om = OracleTree::new(res).expect("oracle");
-            om.insert_scans(&batch, -1.0, false, false).expect("insert");
+        }
+        "leaves" => {
+            let om = oracle(&scans, res);
             for _ in 0..8 {
                 let (theirs, a) = micros(|| om.bench_leaf_sum(0));
                 let (after, b) = micros(|| fold(&tree));

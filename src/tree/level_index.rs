@@ -13,6 +13,12 @@
 //! arena's leaf pool at the voxel's rank, or the arena first child of its
 //! depth-15 parent ([`Voxels`]).
 //!
+//! With a palette, the levels below depth 12 are kept apart: each depth-13
+//! node's subtree (its masks at depths 13–15 and its voxels' palette codes)
+//! is one run of bytes, about 45 on the largest bench map, so that the
+//! search's last four steps read one or two cache lines instead of missing
+//! in four arrays of megabytes each ([`Blocks`]).
+//!
 //! Any change drops it with the trunks, so it is never stale, and the
 //! first search after the trunks are derived again builds it. Answers
 //! above depth 16 (pruned leaves) are left to the arena's descent.
@@ -34,6 +40,16 @@ pub(crate) const LANES: usize = 8;
 /// The deepest level with inner nodes.
 const LAST_INNER: u8 = TREE_DEPTH - 1;
 
+/// The depth of the nodes whose subtrees [`Blocks`] holds.
+const BLOCK_DEPTH: u8 = 13;
+
+/// Nodes at depths 13–15 from which a palette's index is laid out in
+/// [`Blocks`]: with fewer, their words (1.5 MB here) stay in the
+/// second-level cache, and the blocks' counting costs more than the cached
+/// levels (measured slower on the bench's indoor 0.05 m map, 0.2M nodes
+/// there; faster outdoors at 0.1 m, 1.8M, and 0.05 m, 5.7M).
+const BLOCKS_MIN_NODES: usize = 1 << 20;
+
 #[derive(Clone, Debug)]
 pub(crate) struct LevelIndex {
     /// Child masks of the nodes above depth 16, breadth-first, in each
@@ -42,8 +58,12 @@ pub(crate) struct LevelIndex {
     /// Per word: the index of the first child of its nodes (one plus the
     /// children of all nodes before it).
     first: Vec<u32>,
-    /// Index of the first depth-15 node.
+    /// Index of the first node at depth `last`.
     deepest: u32,
+    /// The depth of the deepest nodes in `words`: 15, or [`BLOCK_DEPTH`]
+    /// with [`Voxels::Blocks`], whose nodes at that depth are in the blocks
+    /// (their indices from `deepest` on number the blocks).
+    last: u8,
     /// The nodes above depth 16: the children of the depth-15 ones are
     /// numbered on from here.
     nodes: u32,
@@ -68,6 +88,25 @@ enum Voxels {
     /// maps), and one byte a voxel is a quarter of the leaf pool to miss
     /// in.
     Palette { codes: Vec<u8>, values: Vec<f32> },
+    /// The depth-13 subtrees, their voxels' values through a palette: the
+    /// layout for a palette when the levels below depth 12 would not fit
+    /// in the second-level cache.
+    Blocks(Blocks),
+}
+
+/// Per depth-13 node, one run of bytes: its mask, its children's masks,
+/// their children's masks (each level in child order), then its voxels'
+/// palette codes. A search finds its way through the run by counting mask
+/// bits, eight bytes at a time.
+#[derive(Clone, Debug)]
+struct Blocks {
+    /// Where each depth-13 node's run starts in `bytes`.
+    offsets: Vec<u32>,
+    /// The runs, then eight zero bytes, so that any eight-byte read that
+    /// starts inside a run stays inside the vector.
+    bytes: Vec<u8>,
+    /// The distinct voxel values, by palette code.
+    values: Vec<f32>,
 }
 
 /// Where a search through the index ends.
@@ -86,17 +125,21 @@ pub(crate) enum Reach {
 impl LevelIndex {
     /// The index of the arena's nodes (`size` of them, OctoMap's count).
     pub fn build(p: &Parts<'_>, size: usize) -> Self {
+        Self::build_with(p, size, BLOCKS_MIN_NODES)
+    }
+
+    /// [`Self::build`], with blocks from `blocks_min` nodes at depths 13–15.
+    fn build_with(p: &Parts<'_>, size: usize, blocks_min: usize) -> Self {
         let mut masks: Vec<u8> = Vec::new();
         let mut leaf_first = Vec::new();
-        let mut deepest = None;
+        // where each depth's nodes start in `masks`
+        let mut starts = [usize::MAX; TREE_DEPTH as usize];
         let (mut level, mut next) = (vec![ROOT], Vec::new());
         for depth in 0..=LAST_INNER {
             if level.is_empty() {
                 break;
             }
-            if depth == LAST_INNER {
-                deepest = Some(masks.len());
-            }
+            starts[usize::from(depth)] = masks.len();
             next.clear();
             for &n in &level {
                 let m = p.masks[n as usize];
@@ -110,9 +153,13 @@ impl LevelIndex {
             }
             std::mem::swap(&mut level, &mut next);
         }
-        let deepest = deepest.unwrap_or(masks.len()) as u32;
         let nodes = masks.len() as u32;
-        let voxels = Voxels::new(p, &masks[deepest as usize..], leaf_first);
+        let start = |depth: u8| starts[usize::from(depth)].min(masks.len());
+        let (voxels, last) = Voxels::new(p, &masks, start, leaf_first, blocks_min);
+        let deepest = start(last) as u32;
+        // with blocks, the words end above them
+        let in_words = if last == BLOCK_DEPTH { deepest as usize } else { masks.len() };
+        let masks = &masks[..in_words];
         let mut words = Vec::with_capacity(masks.len().div_ceil(8));
         let mut first = Vec::with_capacity(words.capacity());
         let mut children = 1u32;
@@ -124,9 +171,10 @@ impl LevelIndex {
             first.push(children);
             children += w.count_ones();
         }
-        let mut index = LevelIndex { words, first, deepest, nodes, voxels, trunks: Trunks::at_root(0) };
+        let mut index = LevelIndex { words, first, deepest, last, nodes, voxels, trunks: Trunks::at_root(0) };
         let trunks = {
-            let (mask, child) = (|n| Some(index.mask(n)), |n, m, pos| Some(index.child(n, m, pos)));
+            // the grids stop at the blocks
+            let (mask, child) = (|n| Some(index.mask(n)), |n, m, pos| index.word_child(n, m, pos));
             let trunks = Trunks::build(0, size / GRID_NODES_PER_CELL as usize, mask, child);
             trunks.prepare(mask, child);
             trunks
@@ -141,6 +189,7 @@ impl LevelIndex {
             Voxels::FirstChild(f) => 4 * f.capacity(),
             Voxels::Ranked => 0,
             Voxels::Palette { codes, values } => codes.capacity() + 4 * values.capacity(),
+            Voxels::Blocks(b) => 4 * b.offsets.capacity() + b.bytes.capacity() + 4 * b.values.capacity(),
         };
         8 * self.words.capacity() + 4 * self.first.capacity() + voxels + self.trunks.bytes()
     }
@@ -148,13 +197,23 @@ impl LevelIndex {
     #[inline(always)]
     fn mask(&self, n: u32) -> u8 {
         if in_leaf_pool(n) {
-            0
-        } else {
-            (self.words[(n >> 3) as usize] >> (8 * (n & 7))) as u8
+            return 0;
+        }
+        match &self.voxels {
+            Voxels::Blocks(b) if n >= self.deepest => b.bytes[b.offsets[(n - self.deepest) as usize] as usize],
+            _ => (self.words[(n >> 3) as usize] >> (8 * (n & 7))) as u8,
         }
     }
 
-    /// Child `pos` (present in `m`, `n`'s mask) of index node `n`.
+    /// [`Self::child`] of a node in `words` (`None` for one in a block,
+    /// whose children have no index).
+    #[inline(always)]
+    fn word_child(&self, n: u32, m: u8, pos: usize) -> Option<u32> {
+        (self.last != BLOCK_DEPTH || n < self.deepest).then(|| self.child(n, m, pos))
+    }
+
+    /// Child `pos` (present in `m`, `n`'s mask) of index node `n` (one in
+    /// `words`).
     #[inline(always)]
     fn child(&self, n: u32, m: u8, pos: usize) -> u32 {
         if n >= self.deepest {
@@ -184,7 +243,7 @@ impl LevelIndex {
     fn step(&self, i: u32, pos: usize) -> Result<u32, Reach> {
         let m = self.mask(i);
         if m & (1 << pos) == 0 {
-            Err(self.ended(m))
+            Err(ended(m))
         } else {
             Ok(self.child(i, m, pos))
         }
@@ -200,19 +259,29 @@ impl LevelIndex {
         // one word and its first-child entry per level: the chain of
         // dependent steps is a load, a shift, a popcount and an add
         let mut positions = (code << (64 - 3 * u32::from(TREE_DEPTH))) << (3 * u32::from(from));
-        for _ in from..LAST_INNER {
+        for _ in from..self.last {
             let w = (i >> 3) as usize;
             let word = self.words[w];
             let bit = 8 * (i & 7) + (positions >> 61) as u32;
             positions <<= 3;
             if word & (1 << bit) == 0 {
-                return self.ended((word >> (8 * (i & 7))) as u8);
+                return ended((word >> (8 * (i & 7))) as u8);
             }
             i = self.first[w] + (word & ((1 << bit) - 1)).count_ones();
         }
-        match self.step(i, (code & 7) as usize) {
-            Ok(v) => self.voxel(v),
-            Err(end) => end,
+        self.last_step(i, code)
+    }
+
+    /// The end of a search for `code` that has reached node `i` at depth
+    /// `last`.
+    #[inline(always)]
+    fn last_step(&self, i: u32, code: u64) -> Reach {
+        match &self.voxels {
+            Voxels::Blocks(b) => b.find((i - self.deepest) as usize, code),
+            _ => match self.step(i, (code & 7) as usize) {
+                Ok(v) => self.voxel(v),
+                Err(end) => end,
+            },
         }
     }
 
@@ -241,11 +310,16 @@ impl LevelIndex {
             while lanes != 0 {
                 let l = lanes.trailing_zeros() as usize;
                 lanes &= lanes - 1;
+                if depth[l] == self.last {
+                    out[l] = self.last_step(node[l], code[l]);
+                    walking &= !(1 << l);
+                    continue;
+                }
                 let pos = ((code[l] >> (3 * (LAST_INNER - depth[l]))) & 7) as usize;
                 match self.step(node[l], pos) {
-                    Ok(c) if depth[l] < LAST_INNER => (node[l], depth[l]) = (c, depth[l] + 1),
-                    done => {
-                        out[l] = done.map_or_else(|end| end, |v| self.voxel(v));
+                    Ok(c) => (node[l], depth[l]) = (c, depth[l] + 1),
+                    Err(end) => {
+                        out[l] = end;
                         walking &= !(1 << l);
                     }
                 }
@@ -253,38 +327,52 @@ impl LevelIndex {
         }
     }
 
-    /// The voxel numbered `v` (with [`LEAF_POOL`] set).
+    /// The voxel numbered `v` (with [`LEAF_POOL`] set; never reached with
+    /// blocks, which hold all voxels).
     #[inline(always)]
     fn voxel(&self, v: u32) -> Reach {
         match &self.voxels {
             Voxels::Palette { codes, values } => Reach::Value(values[usize::from(codes[leaf_index(v)])]),
-            _ => Reach::Voxel(v),
-        }
-    }
-
-    #[inline(always)]
-    fn ended(&self, mask: u8) -> Reach {
-        if mask == 0 {
-            Reach::Coarse
-        } else {
-            Reach::Unknown
+            _ => {
+                debug_assert!(!matches!(self.voxels, Voxels::Blocks(_)));
+                Reach::Voxel(v)
+            }
         }
     }
 }
 
 impl Voxels {
-    /// For the depth-15 nodes' `masks` and arena first children: a palette
-    /// when the tree has no extras and at most 256 voxel values, else the
-    /// rank when the leaf pool is in the index's numbering, else the first
-    /// children.
-    fn new(p: &Parts<'_>, masks: &[u8], mut leaf_first: Vec<NodeId>) -> Self {
+    /// For the index's `masks` (breadth-first, depth `d`'s from `start(d)`
+    /// on) and the depth-15 nodes' arena first children: a palette when the
+    /// tree has no extras and at most 256 voxel values (in blocks from
+    /// `blocks_min` nodes at depths 13–15 on), else the rank when
+    /// the leaf pool is in the index's numbering, else the first children;
+    /// and the depth where the words end.
+    fn new(
+        p: &Parts<'_>,
+        masks: &[u8],
+        start: impl Fn(u8) -> usize,
+        mut leaf_first: Vec<NodeId>,
+        blocks_min: usize,
+    ) -> (Self, u8) {
+        let deepest = &masks[start(LAST_INNER)..];
         // the depth-15 nodes' child groups in the leaf pool, in order
-        let groups = || masks.iter().zip(&leaf_first).map(|(&m, &f)| (leaf_index(f), m.count_ones() as usize));
+        let groups = || deepest.iter().zip(&leaf_first).map(|(&m, &f)| (leaf_index(f), m.count_ones() as usize));
         if p.extras.is_empty() && p.leaf_extras.is_empty() {
             let voxels = groups().map(|(_, k)| k).sum();
-            if let Some(palette) = Palette::of(groups().flat_map(|(first, k)| &p.leaf_values[first..first + k]), voxels)
+            if let Some((codes, values)) =
+                Palette::of(groups().flat_map(|(first, k)| &p.leaf_values[first..first + k]), voxels)
             {
-                return palette;
+                let level = |d: u8| &masks[start(d)..start(d + 1).max(start(d))];
+                if masks.len() - start(BLOCK_DEPTH) < blocks_min {
+                    return (Voxels::Palette { codes, values }, LAST_INNER);
+                }
+                let blocks = Blocks::new(
+                    [level(BLOCK_DEPTH), level(BLOCK_DEPTH + 1), &masks[start(LAST_INNER)..]],
+                    &codes,
+                    values,
+                );
+                return (Voxels::Blocks(blocks), BLOCK_DEPTH);
             }
         }
         let mut next = 0;
@@ -293,14 +381,113 @@ impl Voxels {
             next += k;
             in_order
         }) {
-            return Voxels::Ranked;
+            return (Voxels::Ranked, LAST_INNER);
         }
         leaf_first.shrink_to_fit();
-        Voxels::FirstChild(leaf_first)
+        (Voxels::FirstChild(leaf_first), LAST_INNER)
     }
 }
 
-/// Builds [`Voxels::Palette`]: an open-addressed table of the values seen
+impl Blocks {
+    /// The runs of the depth-13 nodes, given the masks at depths 13, 14
+    /// and 15 (breadth-first) and the voxels' palette codes.
+    fn new(levels: [&[u8]; 3], codes: &[u8], values: Vec<f32>) -> Self {
+        let [m13, m14, m15] = levels;
+        let mut bytes = Vec::with_capacity(m13.len() + m14.len() + m15.len() + codes.len() + 8);
+        let mut offsets = Vec::with_capacity(m13.len());
+        // where the next node's children start at each level below
+        let (mut at14, mut at15, mut at_voxel) = (0, 0, 0);
+        let children = |masks: &[u8]| masks.iter().map(|m| m.count_ones() as usize).sum::<usize>();
+        for &m in m13 {
+            offsets.push(bytes.len() as u32);
+            bytes.push(m);
+            let n14 = m.count_ones() as usize;
+            let s14 = &m14[at14..at14 + n14];
+            let n15 = children(s14);
+            let s15 = &m15[at15..at15 + n15];
+            let voxels = children(s15);
+            bytes.extend_from_slice(s14);
+            bytes.extend_from_slice(s15);
+            bytes.extend_from_slice(&codes[at_voxel..at_voxel + voxels]);
+            (at14, at15, at_voxel) = (at14 + n14, at15 + n15, at_voxel + voxels);
+        }
+        bytes.extend_from_slice(&[0; 8]);
+        Blocks { offsets, bytes, values }
+    }
+
+    /// The rest of a search for `code` below depth-13 node `block`.
+    #[inline(always)]
+    fn find(&self, block: usize, code: u64) -> Reach {
+        let b = &self.bytes;
+        let pos = |depth: u8| (code >> (3 * (LAST_INNER - depth))) as u32 & 7;
+        let below = |m: u8, p: u32| (u32::from(m) & ((1 << p) - 1)).count_ones() as usize;
+        let mut at = self.offsets[block] as usize;
+        let m13 = b[at];
+        let p = pos(BLOCK_DEPTH);
+        if m13 & (1 << p) == 0 {
+            return ended(m13);
+        }
+        // depth 14: the children of the one node at depth 13
+        let (n14, r14) = (m13.count_ones() as usize, below(m13, p));
+        let w14 = word(b, at + 1);
+        let m14 = b[at + 1 + r14];
+        let p = pos(BLOCK_DEPTH + 1);
+        if m14 & (1 << p) == 0 {
+            return ended(m14);
+        }
+        // depth 15: after the depth-14 masks; this node's rank is the bits
+        // of the masks before its parent's and of its parent's below it
+        at += 1 + n14;
+        let n15 = (w14 & low_bytes(n14)).count_ones() as usize;
+        let r15 = (w14 & low_bytes(r14)).count_ones() as usize + below(m14, p);
+        let m15 = b[at + r15];
+        let p = pos(LAST_INNER);
+        if m15 & (1 << p) == 0 {
+            return ended(m15);
+        }
+        // the voxels, after the depth-15 masks
+        let voxel = ones(b, at, r15) + below(m15, p);
+        Reach::Value(self.values[usize::from(b[at + n15 + voxel])])
+    }
+}
+
+/// The eight bytes of `b` from `at` as a little-endian word.
+#[inline(always)]
+fn word(b: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(b[at..at + 8].try_into().expect("eight bytes"))
+}
+
+/// A mask of the low `k` bytes of a word (`k` ≤ 8).
+#[inline(always)]
+fn low_bytes(k: usize) -> u64 {
+    // two shifts, so that k = 8 does not shift by 64
+    ((1u64 << (4 * k)) << (4 * k)).wrapping_sub(1)
+}
+
+/// The set bits of `b[at..at + len]`.
+#[inline(always)]
+fn ones(b: &[u8], at: usize, len: usize) -> usize {
+    let mut n = 0;
+    let mut i = 0;
+    while i + 8 <= len {
+        n += word(b, at + i).count_ones();
+        i += 8;
+    }
+    n += (word(b, at + i) & low_bytes(len - i)).count_ones();
+    n as usize
+}
+
+/// Where a path ends at a node with mask `m` that lacks the next child.
+#[inline(always)]
+fn ended(m: u8) -> Reach {
+    if m == 0 {
+        Reach::Coarse
+    } else {
+        Reach::Unknown
+    }
+}
+
+/// Builds the palette of [`Voxels::Blocks`]: an open-addressed table of the values seen
 /// so far (a hash map per voxel made the first search of a 16M-node tree
 /// take three times as long).
 struct Palette {
@@ -312,8 +499,9 @@ impl Palette {
     const SLOTS: usize = 1024;
     const EMPTY: u16 = u16::MAX;
 
-    /// The palette of `voxels` values, `None` past 256 distinct ones.
-    fn of<'a>(values: impl Iterator<Item = &'a f32>, voxels: usize) -> Option<Voxels> {
+    /// The codes of `voxels` values and the palette, `None` past 256
+    /// distinct values.
+    fn of<'a>(values: impl Iterator<Item = &'a f32>, voxels: usize) -> Option<(Vec<u8>, Vec<f32>)> {
         let mut t = Palette { bits: [0; Self::SLOTS], code: [Self::EMPTY; Self::SLOTS] };
         let mut distinct: Vec<f32> = Vec::new();
         let mut codes = Vec::with_capacity(voxels);
@@ -339,7 +527,7 @@ impl Palette {
             };
             codes.push(code);
         }
-        Some(Voxels::Palette { codes, values: distinct })
+        Some((codes, distinct))
     }
 }
 
@@ -380,8 +568,8 @@ mod tests {
     use super::*;
     use crate::{InnerNodes, OccupancyTree};
 
-    /// A tree with voxels in random order, a pruned depth-13 leaf and a
-    /// pruned depth-15 leaf; keys on its voxels, beside them and far away.
+    /// A tree with voxels in random order, pruned leaves at depths 13, 14
+    /// and 15, and a full depth-13 subtree; keys on its voxels, beside them and far away.
     fn tree_and_keys(distinct_values: bool) -> (OccupancyTree, Vec<Key>) {
         let mut tree = OccupancyTree::new(0.1).unwrap();
         let mut s = 7u32;
@@ -409,19 +597,37 @@ mod tests {
         for i in 0..8u16 {
             tree.set_value(Key([32900 + (i & 1), 32902 + ((i >> 1) & 1), 32604 + (i >> 2)]), -1.5, InnerNodes::Update);
         }
+        // and a 4x4x4 one, a depth-14 leaf
+        for i in 0..64u16 {
+            tree.set_value(Key([32644 + (i & 3), 32652 + ((i >> 2) & 3), 32624 + (i >> 4)]), 1.25, InnerNodes::Update);
+        }
+        // a depth-13 node with all its 64 depth-15 nodes, half their voxels
+        for i in 0..512u16 {
+            let k = Key([32664 + (i & 7), 32672 + ((i >> 3) & 7), 32664 + (i >> 6)]);
+            if k.0.iter().map(|&c| u32::from(c)).sum::<u32>() % 2 == 0 {
+                tree.update_occupancy(k, i % 3 == 0, InnerNodes::Update);
+            }
+            keys.push(k);
+        }
         tree.prune();
         let probes: Vec<Key> = keys.iter().map(|k| Key(k.0.map(|c| c + 1))).collect();
         keys.extend(probes);
-        keys.extend([Key([32643, 32650, 32620]), Key([32901, 32903, 32605]), Key([0, 0, 0]), Key([40000, 1, 65535])]);
+        keys.extend([
+            Key([32643, 32650, 32620]),
+            Key([32645, 32653, 32625]),
+            Key([32901, 32903, 32605]),
+            Key([0, 0, 0]),
+            Key([40000, 1, 65535]),
+        ]);
         (tree, keys)
     }
 
     /// The index's answer is the arena descent's: the same voxel, unknown
     /// space where the arena finds nothing, a coarse leaf where it finds
     /// one above depth 16.
-    fn agrees(tree: &OccupancyTree, keys: &[Key]) -> LevelIndex {
+    fn agrees(tree: &OccupancyTree, keys: &[Key], blocks_min: usize) -> LevelIndex {
         let a = tree.arena().unwrap();
-        let index = LevelIndex::build(&a.parts(), tree.size());
+        let index = LevelIndex::build_with(&a.parts(), tree.size(), blocks_min);
         let mut reached = [0; 3];
         for &key in keys {
             let got = index.search(key, MortonCode::encode(key).0);
@@ -452,21 +658,27 @@ mod tests {
         index
     }
 
-    /// All three ways to a voxel's value: the palette (a plain tree with
-    /// few values, as built and compacted), the arena's first children (as
-    /// built, many values) and the rank (compacted, many values).
+    /// All four ways to a voxel's value: the palette and the blocks (a
+    /// plain tree with few values, as built and compacted), the arena's
+    /// first children (as built, many values) and the rank (compacted,
+    /// many values).
     #[test]
     fn the_index_finds_what_the_arena_finds_as_built_and_compacted() {
         let kind = |index: &LevelIndex| match index.voxels {
             Voxels::FirstChild(_) => "first child",
             Voxels::Ranked => "rank",
             Voxels::Palette { .. } => "palette",
+            Voxels::Blocks(_) => "blocks",
         };
-        for (distinct, as_built, compacted) in [(false, "palette", "palette"), (true, "first child", "rank")] {
+        for (distinct, blocks_min, as_built, compacted) in [
+            (false, usize::MAX, "palette", "palette"),
+            (false, 0, "blocks", "blocks"),
+            (true, 0, "first child", "rank"),
+        ] {
             let (mut tree, keys) = tree_and_keys(distinct);
-            assert_eq!(kind(&agrees(&tree, &keys)), as_built);
+            assert_eq!(kind(&agrees(&tree, &keys, blocks_min)), as_built);
             tree.compact();
-            assert_eq!(kind(&agrees(&tree, &keys)), compacted);
+            assert_eq!(kind(&agrees(&tree, &keys, blocks_min)), compacted);
         }
     }
 
