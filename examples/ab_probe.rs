@@ -3,7 +3,8 @@
 //! `cargo run --release --example ab_probe -- indoor|outdoor RES JOB [compact]`.
 //!
 //! * `time`: fastest of 9 passes over 1M queries, in ns per query: search by
-//!   key and by point on the tree, by key and by point on the mapped view.
+//!   key and by point on the tree, `search_many`, by key and by point on
+//!   the mapped view.
 //! * `race`: OctoMap's search over the 1M points, then ours by point, five
 //!   times, as the benchmark alternates them (each evicts the other's data).
 //! * `leaves`: eight rounds of OctoMap's leaf walk followed by ours twice (as
@@ -34,6 +35,13 @@ fn by_key(t: &OccupancyTree, keys: &[Key]) -> f32 {
 #[inline(never)]
 fn by_point(t: &OccupancyTree, points: &[Point3]) -> f32 {
     points.iter().filter_map(|&p| t.search_point(p, 0).ok().flatten()).map(|f| f.value).sum()
+}
+
+#[inline(never)]
+fn many(t: &OccupancyTree, keys: &[Key]) -> f32 {
+    let mut found = Vec::new();
+    t.search_many(keys, 0, &mut found);
+    found.iter().flatten().map(|f| f.value).sum()
 }
 
 #[inline(never)]
@@ -93,8 +101,9 @@ fn main() {
         "time" => {
             let best = |f: &dyn Fn() -> f32| (0..9).map(|_| micros(f).0 * 1e3 / n as f64).fold(f64::MAX, f64::min);
             println!(
-                "ns per query: tree by key {:6.2}, by point {:6.2}; mapped by key {:6.2}, by point {:6.2}",
+                "ns per query: tree by key {:6.2}, by point {:6.2}, search_many {:6.2}; mapped by key {:6.2}, by point {:6.2}",
                 best(&|| by_key(&tree, &keys)),
+                best(&|| many(&tree, &keys)),
                 best(&|| by_point(&tree, &points)),
                 best(&|| view_by_key(&view, &keys)),
                 best(&|| view_by_point(&view, &points)),

@@ -310,8 +310,17 @@ impl LevelIndex {
             while lanes != 0 {
                 let l = lanes.trailing_zeros() as usize;
                 lanes &= lanes - 1;
-                if depth[l] == self.last {
-                    out[l] = self.last_step(node[l], code[l]);
+                if depth[l] >= self.last {
+                    match &self.voxels {
+                        // a round for the block's offset, one for the block,
+                        // so that the lanes' misses on both overlap
+                        Voxels::Blocks(b) if depth[l] == self.last => {
+                            (node[l], depth[l]) = (b.offsets[(node[l] - self.deepest) as usize], TREE_DEPTH);
+                            continue;
+                        }
+                        Voxels::Blocks(b) => out[l] = b.find_at(node[l] as usize, code[l]),
+                        _ => out[l] = self.last_step(node[l], code[l]),
+                    }
                     walking &= !(1 << l);
                     continue;
                 }
@@ -418,10 +427,15 @@ impl Blocks {
     /// The rest of a search for `code` below depth-13 node `block`.
     #[inline(always)]
     fn find(&self, block: usize, code: u64) -> Reach {
+        self.find_at(self.offsets[block] as usize, code)
+    }
+
+    /// [`Self::find`], given where the block starts.
+    #[inline(always)]
+    fn find_at(&self, mut at: usize, code: u64) -> Reach {
         let b = &self.bytes;
         let pos = |depth: u8| (code >> (3 * (LAST_INNER - depth))) as u32 & 7;
         let below = |m: u8, p: u32| (u32::from(m) & ((1 << p) - 1)).count_ones() as usize;
-        let mut at = self.offsets[block] as usize;
         let m13 = b[at];
         let p = pos(BLOCK_DEPTH);
         if m13 & (1 << p) == 0 {
