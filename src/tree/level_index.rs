@@ -13,17 +13,18 @@
 //! arena's leaf pool at the voxel's rank, or the arena first child of its
 //! depth-15 parent ([`Voxels`]).
 //!
-//! With a palette, the levels below depth 12 are kept apart: each depth-13
-//! node's subtree (its masks at depths 13–15 and its voxels' palette codes)
-//! is one run of bytes, about 45 on the largest bench map, so that the
-//! search's last four steps read one or two cache lines instead of missing
-//! in four arrays of megabytes each ([`Blocks`]).
+//! With a palette on a tree whose levels below depth 12 would not fit in
+//! the second-level cache, those levels are kept apart: each depth-13
+//! node's subtree is one run of bytes (about 45 on the largest bench map;
+//! [`blocks`]), so that a search's last four steps read one or two cache
+//! lines instead of missing in four arrays of megabytes each.
 //!
 //! Any change drops it with the trunks, so it is never stale, and the
 //! first search after the trunks are derived again builds it. Answers
 //! above depth 16 (pruned leaves) are left to the arena's descent.
 
 use super::arena::{in_leaf_pool, leaf_index, NodeId, Parts, LEAF_POOL};
+use super::blocks::{self, BlockEnd, BLOCK_DEPTH};
 use super::trunk::{Trunks, GRID_NODES_PER_CELL};
 use super::ROOT;
 use crate::key::{Key, TREE_DEPTH};
@@ -40,9 +41,6 @@ pub(crate) const LANES: usize = 8;
 /// The deepest level with inner nodes.
 const LAST_INNER: u8 = TREE_DEPTH - 1;
 
-/// The depth of the nodes whose subtrees [`Blocks`] holds.
-const BLOCK_DEPTH: u8 = 13;
-
 /// Nodes at depths 13–15 from which a palette's index is laid out in
 /// [`Blocks`]: with fewer, their words (1.5 MB here) stay in the
 /// second-level cache, and the blocks' counting costs more than the cached
@@ -52,8 +50,9 @@ const BLOCKS_MIN_NODES: usize = 1 << 20;
 
 #[derive(Clone, Debug)]
 pub(crate) struct LevelIndex {
-    /// Child masks of the nodes above depth 16, breadth-first, in each
-    /// level by Morton code: node `i`'s is byte `i & 7` of word `i >> 3`.
+    /// Child masks of the nodes down to depth `last`, breadth-first, in
+    /// each level by Morton code: node `i`'s is byte `i & 7` of word
+    /// `i >> 3`.
     words: Vec<u64>,
     /// Per word: the index of the first child of its nodes (one plus the
     /// children of all nodes before it).
@@ -94,16 +93,11 @@ enum Voxels {
     Blocks(Blocks),
 }
 
-/// Per depth-13 node, one run of bytes: its mask, its children's masks,
-/// their children's masks (each level in child order), then its voxels'
-/// palette codes. A search finds its way through the run by counting mask
-/// bits, eight bytes at a time.
+/// The depth-13 subtrees as runs of bytes (see [`blocks`]).
 #[derive(Clone, Debug)]
 struct Blocks {
     /// Where each depth-13 node's run starts in `bytes`.
     offsets: Vec<u32>,
-    /// The runs, then eight zero bytes, so that any eight-byte read that
-    /// starts inside a run stays inside the vector.
     bytes: Vec<u8>,
     /// The distinct voxel values, by palette code.
     values: Vec<f32>,
@@ -401,26 +395,8 @@ impl Blocks {
     /// The runs of the depth-13 nodes, given the masks at depths 13, 14
     /// and 15 (breadth-first) and the voxels' palette codes.
     fn new(levels: [&[u8]; 3], codes: &[u8], values: Vec<f32>) -> Self {
-        let [m13, m14, m15] = levels;
-        let mut bytes = Vec::with_capacity(m13.len() + m14.len() + m15.len() + codes.len() + 8);
-        let mut offsets = Vec::with_capacity(m13.len());
-        // where the next node's children start at each level below
-        let (mut at14, mut at15, mut at_voxel) = (0, 0, 0);
-        let children = |masks: &[u8]| masks.iter().map(|m| m.count_ones() as usize).sum::<usize>();
-        for &m in m13 {
-            offsets.push(bytes.len() as u32);
-            bytes.push(m);
-            let n14 = m.count_ones() as usize;
-            let s14 = &m14[at14..at14 + n14];
-            let n15 = children(s14);
-            let s15 = &m15[at15..at15 + n15];
-            let voxels = children(s15);
-            bytes.extend_from_slice(s14);
-            bytes.extend_from_slice(s15);
-            bytes.extend_from_slice(&codes[at_voxel..at_voxel + voxels]);
-            (at14, at15, at_voxel) = (at14 + n14, at15 + n15, at_voxel + voxels);
-        }
-        bytes.extend_from_slice(&[0; 8]);
+        let (mut offsets, mut bytes) = (Vec::new(), Vec::new());
+        blocks::build(levels, codes, &mut offsets, &mut bytes);
         Blocks { offsets, bytes, values }
     }
 
@@ -432,63 +408,14 @@ impl Blocks {
 
     /// [`Self::find`], given where the block starts.
     #[inline(always)]
-    fn find_at(&self, mut at: usize, code: u64) -> Reach {
-        let b = &self.bytes;
-        let pos = |depth: u8| (code >> (3 * (LAST_INNER - depth))) as u32 & 7;
-        let below = |m: u8, p: u32| (u32::from(m) & ((1 << p) - 1)).count_ones() as usize;
-        let m13 = b[at];
-        let p = pos(BLOCK_DEPTH);
-        if m13 & (1 << p) == 0 {
-            return ended(m13);
+    fn find_at(&self, at: usize, code: u64) -> Reach {
+        match blocks::walk(&self.bytes, at, code) {
+            Some(BlockEnd::Voxel(c)) => Reach::Value(self.values[usize::from(c)]),
+            Some(BlockEnd::Unknown) => Reach::Unknown,
+            // (the bytes never end early here: the arena's descent answers)
+            Some(BlockEnd::Coarse) | None => Reach::Coarse,
         }
-        // depth 14: the children of the one node at depth 13
-        let (n14, r14) = (m13.count_ones() as usize, below(m13, p));
-        let w14 = word(b, at + 1);
-        let m14 = b[at + 1 + r14];
-        let p = pos(BLOCK_DEPTH + 1);
-        if m14 & (1 << p) == 0 {
-            return ended(m14);
-        }
-        // depth 15: after the depth-14 masks; this node's rank is the bits
-        // of the masks before its parent's and of its parent's below it
-        at += 1 + n14;
-        let n15 = (w14 & low_bytes(n14)).count_ones() as usize;
-        let r15 = (w14 & low_bytes(r14)).count_ones() as usize + below(m14, p);
-        let m15 = b[at + r15];
-        let p = pos(LAST_INNER);
-        if m15 & (1 << p) == 0 {
-            return ended(m15);
-        }
-        // the voxels, after the depth-15 masks
-        let voxel = ones(b, at, r15) + below(m15, p);
-        Reach::Value(self.values[usize::from(b[at + n15 + voxel])])
     }
-}
-
-/// The eight bytes of `b` from `at` as a little-endian word.
-#[inline(always)]
-fn word(b: &[u8], at: usize) -> u64 {
-    u64::from_le_bytes(b[at..at + 8].try_into().expect("eight bytes"))
-}
-
-/// A mask of the low `k` bytes of a word (`k` ≤ 8).
-#[inline(always)]
-fn low_bytes(k: usize) -> u64 {
-    // two shifts, so that k = 8 does not shift by 64
-    ((1u64 << (4 * k)) << (4 * k)).wrapping_sub(1)
-}
-
-/// The set bits of `b[at..at + len]`.
-#[inline(always)]
-fn ones(b: &[u8], at: usize, len: usize) -> usize {
-    let mut n = 0;
-    let mut i = 0;
-    while i + 8 <= len {
-        n += word(b, at + i).count_ones();
-        i += 8;
-    }
-    n += (word(b, at + i) & low_bytes(len - i)).count_ones();
-    n as usize
 }
 
 /// Where a path ends at a node with mask `m` that lacks the next child.

@@ -1,6 +1,7 @@
 //! The occupancy octree: OctoMap's `OcTree` semantics on a node arena.
 
 mod arena;
+pub(crate) mod blocks;
 mod counting;
 mod cursor;
 mod iter;
