@@ -11,7 +11,9 @@ mod common;
 
 use common::*;
 use octolinear::formats::{bt, ot};
-use octolinear::mapped::{self, format, MapItem, MapView, MappedMap, OccupancyLookup, OlmError, Variant, WriteOptions};
+use octolinear::mapped::{
+    self, format, MapItem, MapView, MappedMap, OccupancyLookup, OlmError, SearchBlocksSection, Variant, WriteOptions,
+};
 use octolinear::ray::CastError;
 use octolinear::simulate::{simulate, LidarConfig, SceneKind, SplitMix64};
 use octolinear::{CastOptions, CastOutcome, CountingTree, Found, Key, KeyBox, NodeKind, OccupancyTree, Point3};
@@ -88,6 +90,7 @@ fn ml_of(tree: &OccupancyTree) -> OccupancyTree {
 fn all_options() -> Vec<(&'static str, WriteOptions)> {
     vec![
         ("full/rank", WriteOptions::default()),
+        ("full/rank blocks", WriteOptions { search_blocks: SearchBlocksSection::Always, ..Default::default() }),
         ("full/rank b64", WriteOptions { rank_block_log2: 6, ..Default::default() }),
         ("full/pointers", WriteOptions::pointers()),
         ("ml/rank", WriteOptions::max_likelihood()),
@@ -1124,4 +1127,44 @@ fn counting_section_damage_is_caught() {
     let root_count = |m: &MappedMap<&[u8]>| m.view().nodes(0).next().map(|n| n.extra);
     let before = root_count(&MappedMap::new(&good[..]).unwrap());
     assert_eq!(root_count(&m), before.map(|c| c ^ 0x10));
+}
+
+/// The search-blocks section: written on request (and for small maps only
+/// on request), skipped by nothing else, and a damaged run is caught by
+/// `verify` while searches still answer without panicking.
+#[test]
+fn search_blocks_section_is_optional_and_checked() {
+    let always = WriteOptions { search_blocks: SearchBlocksSection::Always, ..Default::default() };
+    let never = WriteOptions { search_blocks: SearchBlocksSection::Never, ..Default::default() };
+    let (good, plain) = (sample_bytes(always), sample_bytes(never));
+    assert_eq!(sample_bytes(WriteOptions::default()), plain, "a small map gets no blocks by default");
+    let kind = format::SectionKind::SearchBlocks as u16;
+    let header = MappedMap::new(&good[..]).unwrap().header().clone();
+    let at = header.sections.iter().position(|s| s.kind == kind).expect("written");
+    let section = header.sections[at];
+    assert_eq!(section.flags, format::SECTION_OPTIONAL);
+    assert_eq!(
+        &good[format::HEADER_LEN..plain.len()],
+        &plain[format::HEADER_LEN..],
+        "the other sections are as without"
+    );
+    // no palette for a colour map: no section even when asked
+    let color = sample_bytes_of(always, NodeKind::Color);
+    assert!(!MappedMap::new(&color[..]).unwrap().header().sections.iter().any(|s| s.kind == kind));
+    // a changed palette code, checksums fixed: verify names the section
+    let runs_end = (section.offset + section.length) as usize - 16;
+    let mut b = good.clone();
+    b[runs_end] ^= 1;
+    fix_all_crcs(&mut b);
+    let m = MappedMap::new(&b[..]).unwrap();
+    assert!(matches!(m.verify(), Err(OlmError::Section { kind: 9, .. })), "{:?}", m.verify());
+    // fields that do not add up are refused at open
+    let mut b = good.clone();
+    b[section.offset as usize + 8..section.offset as usize + 12].copy_from_slice(&300u32.to_le_bytes());
+    fix_all_crcs(&mut b);
+    assert!(matches!(MappedMap::new(&b[..]), Err(OlmError::Section { kind: 9, .. })));
+    // the section in a maximum-likelihood file does not belong there
+    let ml =
+        sample_bytes(WriteOptions { search_blocks: SearchBlocksSection::Always, ..WriteOptions::max_likelihood() });
+    assert!(!MappedMap::new(&ml[..]).unwrap().header().sections.iter().any(|s| s.kind == kind));
 }

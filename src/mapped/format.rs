@@ -7,6 +7,7 @@
 //! safe to parse.
 
 use super::nav::Node;
+use super::search_blocks::SearchBlocks;
 use super::OlmError;
 use crate::key::KeySpace;
 use crate::sensor::SensorModel;
@@ -18,7 +19,7 @@ pub const MAGIC: [u8; 8] = *b"OCTOLIN\0";
 /// Major version this reader understands; files of another major are refused.
 pub const VERSION_MAJOR: u16 = 1;
 /// Minor version written; readers accept any minor of their major.
-pub const VERSION_MINOR: u16 = 1;
+pub const VERSION_MINOR: u16 = 2;
 /// Written as a little-endian `u32`; reads back as this value only when
 /// the file was produced little-endian (bytes `0d 0c 0b 0a`).
 pub const ENDIAN_CHECK: u32 = 0x0A0B_0C0D;
@@ -147,6 +148,10 @@ pub enum SectionKind {
     Colors = 7,
     /// `OcTreeStamped`: `u32` time stamp per node.
     Stamps = 8,
+    /// Optional, full / rank plain maps only: the depth-13 subtrees as
+    /// runs of bytes with a palette of the voxel values, for full-depth
+    /// searches (`search_blocks.rs`).
+    SearchBlocks = 9,
 }
 
 impl SectionKind {
@@ -160,6 +165,7 @@ impl SectionKind {
             6 => SectionKind::InnerOccupancy,
             7 => SectionKind::Colors,
             8 => SectionKind::Stamps,
+            9 => SectionKind::SearchBlocks,
             _ => return None,
         })
     }
@@ -174,6 +180,7 @@ impl SectionKind {
             SectionKind::InnerOccupancy => "inner-occupancy",
             SectionKind::Colors => "colors",
             SectionKind::Stamps => "stamps",
+            SectionKind::SearchBlocks => "search-blocks",
         }
     }
 }
@@ -302,6 +309,8 @@ pub(crate) struct Ranges {
     pub inner_occupancy: Range<usize>,
     pub colors: Range<usize>,
     pub stamps: Range<usize>,
+    /// Empty when the file has no search-blocks section.
+    pub search_blocks: Range<usize>,
 }
 
 impl Ranges {
@@ -315,6 +324,7 @@ impl Ranges {
             SectionKind::InnerOccupancy => self.inner_occupancy = r,
             SectionKind::Colors => self.colors = r,
             SectionKind::Stamps => self.stamps = r,
+            SectionKind::SearchBlocks => self.search_blocks = r,
         }
     }
 }
@@ -526,8 +536,23 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Meta, OlmError> {
         // in bounds of `bytes` (checked above), so these fit in usize
         ranges.set(*kind, s.offset as usize..(s.offset + s.length) as usize);
     }
-    if let Some(s) =
-        sections.iter().find(|s| SectionKind::from_id(s.kind).is_some_and(|k| !required.iter().any(|(r, _)| *r == k)))
+    // the optional search blocks: full / rank plain maps, once
+    let blocks_allowed = (kind, variant, index) == (TreeKind::OcTree, Variant::Full, Index::Rank);
+    let optional = |k: SectionKind| k == SectionKind::SearchBlocks && blocks_allowed;
+    let mut blocks = sections.iter().filter(|s| s.kind == SectionKind::SearchBlocks as u16 && blocks_allowed);
+    if let Some(s) = blocks.next() {
+        if blocks.next().is_some() {
+            return Err(OlmError::Section { kind: s.kind, reason: "appears twice".into() });
+        }
+        let range = s.offset as usize..(s.offset + s.length) as usize;
+        if let Err(reason) = SearchBlocks::parse(&bytes[range.clone()], node_count) {
+            return Err(OlmError::Section { kind: s.kind, reason });
+        }
+        ranges.set(SectionKind::SearchBlocks, range);
+    }
+    if let Some(s) = sections
+        .iter()
+        .find(|s| SectionKind::from_id(s.kind).is_some_and(|k| !optional(k) && !required.iter().any(|(r, _)| *r == k)))
     {
         return Err(OlmError::Section { kind: s.kind, reason: "section does not belong to this variant".into() });
     }

@@ -42,6 +42,7 @@
 pub mod format;
 mod nav;
 mod query;
+mod search_blocks;
 mod verify;
 mod write;
 
@@ -51,7 +52,8 @@ pub use format::{
 pub use query::{cast_ray, MapItem, OccupancyLookup};
 pub use verify::VerifyReport;
 pub use write::{
-    counting_to_bytes, to_bytes, write, write_counting, write_counting_file, write_file, write_file_with, WriteOptions,
+    counting_to_bytes, to_bytes, write, write_counting, write_counting_file, write_file, write_file_with,
+    SearchBlocksSection, WriteOptions,
 };
 
 use crate::geometry::Point3;
@@ -62,6 +64,7 @@ use crate::tree::{CountingTree, Found, KeyBox, LevelTables, OccupancyTree, Preor
 use format::Meta;
 use nav::{with_nav, AnyNav, Extras, MlNav, Nav, Node, PtrNav, RankNav};
 use query::RawIter;
+use search_blocks::SearchBlocks;
 use std::io;
 use std::path::Path;
 
@@ -194,6 +197,8 @@ pub struct MapView<'a> {
     meta: &'a Meta,
     nav: AnyNav<'a>,
     extras: Extras<'a>,
+    /// The search-blocks section, when the file has one.
+    blocks: Option<SearchBlocks<'a>>,
 }
 
 /// Depth-first iteration over a mapped file, in OctoMap's order.
@@ -237,7 +242,12 @@ impl<'a> Iterator for MapIter<'a> {
 
 impl<'a> MapView<'a> {
     fn from_parts(data: &'a [u8], meta: &'a Meta) -> Self {
-        MapView { data, meta, nav: AnyNav::new(data, meta), extras: Extras::new(data, meta) }
+        // checked when the map was opened
+        let blocks = data
+            .get(meta.ranges.search_blocks.clone())
+            .filter(|b| !b.is_empty())
+            .and_then(|b| SearchBlocks::parse(b, meta.header.node_count).ok());
+        MapView { data, meta, nav: AnyNav::new(data, meta), extras: Extras::new(data, meta), blocks }
     }
 
     pub fn header(&self) -> &'a Header {
@@ -312,6 +322,11 @@ impl<'a> MapView<'a> {
     #[inline(always)]
     pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
         let trunks = self.trunks()?;
+        if let (Some(blocks), AnyNav::Rank(nav)) = (&self.blocks, &self.nav) {
+            if query::normalize_depth(depth) == TREE_DEPTH {
+                return query::search_through_blocks(*nav, blocks, trunks, key);
+            }
+        }
         with_nav!(self.nav, |nav| query::search(nav, self.extras, trunks, key, depth))
     }
 

@@ -6,13 +6,15 @@
 //! the header announces (a verified file never reaches that bound; a
 //! corrupted one whose child indices alias cannot make them run longer).
 
-use super::nav::{Extras, Nav, Node};
+use super::nav::{Extras, Nav, Node, RankNav};
+use super::search_blocks::{Below, SearchBlocks};
 use crate::geometry::Point3;
 use crate::key::packed;
 use crate::key::{adjust_key_to_depth, Key, KeySpace, KEY_CENTER, TREE_DEPTH};
 use crate::morton::MortonCode;
 use crate::ray::{CastError, CastOptions, CastOutcome};
 use crate::sensor::SensorModel;
+use crate::tree::blocks::BLOCK_DEPTH;
 use crate::tree::{Found, KeyBox, LastAnswer, OccupancyTree, Trunks};
 
 /// What ray casting needs from a map: OctoMap's `search` and its key space.
@@ -78,6 +80,28 @@ pub(crate) fn search<N: Nav>(nav: N, extras: Extras<'_>, trunks: &Trunks<Node>, 
     let (code, depth) = search_target(key, depth);
     search_from(nav, code, depth, trunk_start(nav, trunks, key, code, depth))
         .map(|(f, n)| Found { extra: extras.get(n), ..f })
+}
+
+/// A full-depth [`search`] of a plain map with a search-blocks section:
+/// the rank layout's descent to depth 13, then the node's run.
+#[inline(always)]
+pub(crate) fn search_through_blocks(
+    nav: RankNav<'_>,
+    blocks: &SearchBlocks<'_>,
+    trunks: &Trunks<Node>,
+    key: Key,
+) -> Option<Found> {
+    let (code, depth) = search_target(key, TREE_DEPTH);
+    let start = trunk_start(nav, trunks, key, code, BLOCK_DEPTH);
+    let (node, d, mask) = nav.descend(start.0, start.1, BLOCK_DEPTH, code)?;
+    if d == BLOCK_DEPTH && mask != 0 {
+        match blocks.below(node.idx, code) {
+            Below::Value(value) => return Some(Found { value, depth, is_leaf: true, extra: 0 }),
+            Below::Unknown => return None,
+            Below::Descend => return search_from(nav, code, depth, (node, d)).map(|(f, _)| f),
+        }
+    }
+    Some(Found { value: nav.get(node)?.0, depth: d, is_leaf: mask == 0, extra: 0 })
 }
 
 /// Where a search for `key` (Morton `code`, at `depth`) starts; see

@@ -6,6 +6,7 @@
 
 use super::format::{u16_at, u32_at, u64_at, Index, Meta, SectionKind, TreeKind, Variant, HEADER_LEN};
 use super::nav::{count_inner, label_mask, AnyNav, MlNav, RankNav};
+use super::search_blocks::SearchBlocks;
 use super::OlmError;
 use crate::key::TREE_DEPTH;
 
@@ -43,7 +44,7 @@ pub(crate) fn verify(data: &[u8], meta: &Meta) -> Result<VerifyReport, OlmError>
         padding_is_zero(colors, (3 * h.node_count) as usize, SectionKind::Colors)?;
     }
     let mut report = match AnyNav::new(data, meta) {
-        AnyNav::Rank(nav) => verify_rank(nav, meta)?,
+        AnyNav::Rank(nav) => verify_rank(data, nav, meta)?,
         AnyNav::Ptr(_) => verify_pointers(data, meta)?,
         AnyNav::Ml(nav) => verify_ml(nav, meta)?,
     };
@@ -116,7 +117,7 @@ fn levels(records: u32, levels: u8, rank: impl Fn(u32) -> Option<u32>) -> (u8, u
     (deepest, end)
 }
 
-fn verify_rank(nav: RankNav<'_>, meta: &Meta) -> Result<VerifyReport, OlmError> {
+fn verify_rank(data: &[u8], nav: RankNav<'_>, meta: &Meta) -> Result<VerifyReport, OlmError> {
     let h = &meta.header;
     let n = h.node_count;
     padding_is_zero(nav.masks, n as usize, SectionKind::Masks)?;
@@ -131,6 +132,13 @@ fn verify_rank(nav: RankNav<'_>, meta: &Meta) -> Result<VerifyReport, OlmError> 
     let (deepest, end) = levels(nav.n, TREE_DEPTH, |i| nav.rank(i));
     if u64::from(end) != n {
         return Err(structure(format!("nodes {end}..{n} lie below depth {TREE_DEPTH}")));
+    }
+    if let Some(blocks) = data.get(meta.ranges.search_blocks.clone()).filter(|b| !b.is_empty()) {
+        let blocks = SearchBlocks::parse(blocks, n)
+            .map_err(|reason| OlmError::Section { kind: SectionKind::SearchBlocks as u16, reason })?;
+        // where depths 13 to 16 start
+        let starts = [12, 13, 14, 15].map(|d| levels(nav.n, d, |i| nav.rank(i)).1);
+        blocks.verify(nav, starts)?;
     }
     Ok(VerifyReport { nodes: n, inner_nodes: inner, leaves: n - inner, max_depth: deepest, checked_bytes: 0 })
 }

@@ -17,6 +17,19 @@ pub(crate) const BLOCK_DEPTH: u8 = 13;
 /// any run stays inside the bytes.
 pub(crate) const PADDING: usize = 8;
 
+/// A tree's depth-13 subtrees as runs, in breadth-first numbering, for a
+/// mapped file.
+pub(crate) struct SubtreeRuns {
+    /// The breadth-first index of the first depth-13 node.
+    pub first: u32,
+    /// The palette: the distinct voxel values, by code.
+    pub values: Vec<f32>,
+    /// Where each depth-13 node's run starts in `runs`.
+    pub offsets: Vec<u32>,
+    /// The runs, then [`PADDING`].
+    pub runs: Vec<u8>,
+}
+
 /// Where a search below a depth-13 node ends.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum BlockEnd {

@@ -24,7 +24,7 @@
 //! above depth 16 (pruned leaves) are left to the arena's descent.
 
 use super::arena::{in_leaf_pool, leaf_index, NodeId, Parts, LEAF_POOL};
-use super::blocks::{self, BlockEnd, BLOCK_DEPTH};
+use super::blocks::{self, BlockEnd, SubtreeRuns, BLOCK_DEPTH};
 use super::trunk::{Trunks, GRID_NODES_PER_CELL};
 use super::ROOT;
 use crate::key::{Key, TREE_DEPTH};
@@ -46,7 +46,7 @@ const LAST_INNER: u8 = TREE_DEPTH - 1;
 /// second-level cache, and the blocks' counting costs more than the cached
 /// levels (measured slower on the bench's indoor 0.05 m map, 0.2M nodes
 /// there; faster outdoors at 0.1 m, 1.8M, and 0.05 m, 5.7M).
-const BLOCKS_MIN_NODES: usize = 1 << 20;
+pub(crate) const BLOCKS_MIN_NODES: usize = 1 << 20;
 
 #[derive(Clone, Debug)]
 pub(crate) struct LevelIndex {
@@ -425,6 +425,19 @@ fn ended(m: u8) -> Reach {
         Reach::Coarse
     } else {
         Reach::Unknown
+    }
+}
+
+/// The tree's depth-13 subtrees as [`blocks`] runs, for a tree with
+/// `min_nodes` or more nodes at depths 13–15; `None` when its voxels carry
+/// extras or take more than 256 values, or it has fewer nodes there.
+pub(crate) fn subtree_runs(p: &Parts<'_>, size: usize, min_nodes: usize) -> Option<SubtreeRuns> {
+    let index = LevelIndex::build_with(p, size, min_nodes);
+    match index.voxels {
+        Voxels::Blocks(b) => {
+            Some(SubtreeRuns { first: index.deepest, values: b.values, offsets: b.offsets, runs: b.bytes })
+        }
+        _ => None,
     }
 }
 

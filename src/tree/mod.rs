@@ -16,6 +16,7 @@ pub use arena::{ArenaUsage, NodeArena, NodeId};
 pub use counting::CountingTree;
 pub(crate) use cursor::{LastAnswer, PathSearch};
 pub use iter::{KeyBox, NodeItem, NodeIter};
+pub(crate) use level_index::BLOCKS_MIN_NODES;
 use level_index::{LevelSlot, Reach};
 pub(crate) use search_index::LevelTables;
 pub use search_index::SearchIndex;
@@ -995,6 +996,13 @@ impl OccupancyTree {
     /// When the arena is compacted without being asked.
     pub fn set_compaction(&mut self, compaction: Compaction) {
         self.compaction = compaction;
+    }
+
+    /// The depth-13 subtrees as search-block runs for a mapped file (see
+    /// `level_index::subtree_runs`), for a tree with `min_nodes` or more
+    /// nodes at depths 13–15.
+    pub(crate) fn subtree_runs(&self, min_nodes: usize) -> Option<blocks::SubtreeRuns> {
+        level_index::subtree_runs(&self.arena.as_ref()?.parts(), self.size, min_nodes)
     }
 
     /// Re-lays the arena in depth-first (Morton) order with no free slots,
