@@ -1299,6 +1299,12 @@ fn olm_maps_convert_verify_and_answer_queries_like_the_source() {
     }
     assert_eq!(ok(&["query", f.p("a.olm"), "--points", points]), from_ot);
     assert!(from_ot.contains(",occupied,") && from_ot.contains(",free,") && from_ot.contains(",unknown,"));
+    // --search-blocks: a larger file that answers the same
+    ok(&["convert", f.p("a.ot"), f.p("sb.olm"), "--search-blocks"]);
+    assert!(ok(&["verify", f.p("sb.olm")]).contains(": ok"));
+    assert!(std::fs::metadata(f.path("sb.olm")).unwrap().len() > std::fs::metadata(f.path("a.olm")).unwrap().len());
+    assert_eq!(ok(&["query", f.p("sb.olm"), "--points", points]), from_ot);
+    fail(&["convert", f.p("a.ot"), f.p("sb.bt"), "--search-blocks"], "--search-blocks applies to .olm output");
     // --ml: the maximum-likelihood variant, which answers as the .bt does
     ok(&["convert", f.p("a.bt"), f.p("ml.olm"), "--ml"]);
     assert!(ok(&["verify", f.p("ml.olm")]).contains(": ok"));

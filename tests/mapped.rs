@@ -1129,15 +1129,17 @@ fn counting_section_damage_is_caught() {
     assert_eq!(root_count(&m), before.map(|c| c ^ 0x10));
 }
 
-/// The search-blocks section: written on request (and for small maps only
-/// on request), skipped by nothing else, and a damaged run is caught by
+/// The search-blocks section: written only on request (and for a small map
+/// only when asked for always), and a damaged run is caught by
 /// `verify` while searches still answer without panicking.
 #[test]
 fn search_blocks_section_is_optional_and_checked() {
     let always = WriteOptions { search_blocks: SearchBlocksSection::Always, ..Default::default() };
     let never = WriteOptions { search_blocks: SearchBlocksSection::Never, ..Default::default() };
     let (good, plain) = (sample_bytes(always), sample_bytes(never));
-    assert_eq!(sample_bytes(WriteOptions::default()), plain, "a small map gets no blocks by default");
+    assert_eq!(sample_bytes(WriteOptions::default()), plain, "none by default");
+    let auto = WriteOptions { search_blocks: SearchBlocksSection::Auto, ..Default::default() };
+    assert_eq!(sample_bytes(auto), plain, "a small map gets none when the writer decides");
     let kind = format::SectionKind::SearchBlocks as u16;
     let header = MappedMap::new(&good[..]).unwrap().header().clone();
     let at = header.sections.iter().position(|s| s.kind == kind).expect("written");

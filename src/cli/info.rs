@@ -99,15 +99,29 @@ pub struct ConvertArgs {
     /// Write the maximum-likelihood variant of .olm (occupancy maps only).
     #[arg(long)]
     ml: bool,
+    /// Add the search-blocks section to a full .olm of an occupancy map
+    /// (about a fifth more file; full-depth searches of maps with millions
+    /// of nodes about 1.6x faster).
+    #[arg(long, conflicts_with = "ml")]
+    search_blocks: bool,
 }
 
 pub fn convert(a: ConvertArgs) -> Result<()> {
-    if a.ml && MapFormat::of(&a.output)? != MapFormat::Olm {
-        bail!("--ml applies to .olm output, not {}", a.output.display());
+    if (a.ml || a.search_blocks) && MapFormat::of(&a.output)? != MapFormat::Olm {
+        let flag = if a.ml { "--ml" } else { "--search-blocks" };
+        bail!("{flag} applies to .olm output, not {}", a.output.display());
     }
     match load_any(&a.input)? {
         AnyMap::Occupancy(m) if a.ml => {
             let opts = octolinear::mapped::WriteOptions::max_likelihood();
+            octolinear::mapped::write_file_with(&m.tree, &a.output, opts)
+                .with_context(|| format!("cannot write {}", a.output.display()))
+        }
+        AnyMap::Occupancy(m) if a.search_blocks => {
+            let opts = octolinear::mapped::WriteOptions {
+                search_blocks: octolinear::mapped::SearchBlocksSection::Always,
+                ..Default::default()
+            };
             octolinear::mapped::write_file_with(&m.tree, &a.output, opts)
                 .with_context(|| format!("cannot write {}", a.output.display()))
         }
