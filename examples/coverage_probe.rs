@@ -1,0 +1,36 @@
+//! How much of a scan's ray walking revisits voxels: `cargo run --release
+//! --example coverage_probe -- indoor|outdoor RES` walks the bench's scans'
+//! rays in order with `RayKeys` and counts, per ray, the steps before its
+//! first voxel that no earlier ray of the same scan visited: the most an
+//! exact "skip what is already covered" scheme could leave out. A probe.
+
+use octolinear::simulate::{simulate, LidarConfig, SceneKind};
+use octolinear::{Key, OccupancyTree};
+use std::collections::HashSet;
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let kind = if args.first().map(String::as_str) == Some("outdoor") { SceneKind::Outdoor } else { SceneKind::Indoor };
+    let res: f64 = args.get(1).map_or(0.2, |s| s.parse().expect("RES"));
+    let (cfg, scans) =
+        if kind == SceneKind::Indoor { (LidarConfig::indoor(), 24) } else { (LidarConfig::outdoor(), 6) };
+    let graph = simulate(kind, scans, 7, &cfg).expect("simulate");
+    let tree = OccupancyTree::new(res).expect("resolution");
+    let (mut rays, mut steps, mut covered) = (0usize, 0usize, 0usize);
+    for node in &graph.nodes {
+        let (cloud, origin) = node.graph2tree();
+        let mut seen: HashSet<Key> = HashSet::new();
+        for &p in &cloud.points {
+            let Ok(walk) = tree.ray_keys(origin, p) else { continue };
+            let keys: Vec<Key> = walk.collect();
+            rays += 1;
+            steps += keys.len();
+            covered += keys.iter().position(|k| !seen.contains(k)).unwrap_or(keys.len());
+            seen.extend(keys);
+        }
+    }
+    println!(
+        "{rays} rays, {steps} steps; before each ray's first new voxel: {covered} steps ({:.1}%)",
+        100.0 * covered as f64 / steps as f64
+    );
+}

@@ -1,0 +1,102 @@
+//! What a scan's ray walks cost without the rest of insertion:
+//! `cargo run --release --example walk_probe -- indoor|outdoor RES` sets up
+//! every ray of the bench's scans (as `insert_point_cloud` does), then walks
+//! them all, one at a time and two in lockstep, XOR-ing the voxel codes
+//! (no key lists, no filter, no sort, no tree). Prints the ray set-up cost
+//! per ray and the walk cost per step. A probe, not a benchmark of record.
+
+use octolinear::simulate::{simulate, LidarConfig, SceneKind};
+use octolinear::{MortonCode, OccupancyTree, RayFan};
+use std::hint::black_box;
+use std::time::Instant;
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let kind = if args.first().map(String::as_str) == Some("outdoor") { SceneKind::Outdoor } else { SceneKind::Indoor };
+    let res: f64 = args.get(1).map_or(0.2, |s| s.parse().expect("RES"));
+    let (cfg, scans) =
+        if kind == SceneKind::Indoor { (LidarConfig::indoor(), 24) } else { (LidarConfig::outdoor(), 6) };
+    let graph = simulate(kind, scans, 7, &cfg).expect("simulate");
+    let tree = OccupancyTree::new(res).expect("resolution");
+    let keys = tree.key_space();
+    let clouds: Vec<_> = graph.nodes.iter().map(|n| n.graph2tree()).collect();
+    let best = |f: &dyn Fn() -> u64| {
+        (0..7)
+            .map(|_| {
+                let t = Instant::now();
+                black_box(f());
+                t.elapsed().as_secs_f64()
+            })
+            .fold(f64::MAX, f64::min)
+    };
+    // into a vector that already has the room (its growth is not set-up)
+    let set_up = |rays: &mut Vec<_>| {
+        rays.clear();
+        for (cloud, origin) in &clouds {
+            let fan = RayFan::new(keys, *origin).expect("origin in the map");
+            for &p in &cloud.points {
+                let Ok(end) = keys.key(p) else { continue };
+                rays.extend(fan.ray(p, MortonCode::encode(end).0));
+            }
+        }
+    };
+    let mut rays = Vec::new();
+    set_up(&mut rays);
+    let scratch = std::cell::RefCell::new(Vec::with_capacity(rays.len()));
+    let setup = best(&|| {
+        let mut v = scratch.borrow_mut();
+        set_up(&mut v);
+        v.len() as u64
+    });
+    let steps: u64 = rays
+        .iter()
+        .map(|r| {
+            std::iter::from_fn({
+                let mut r = *r;
+                move || r.next_code()
+            })
+            .count() as u64
+        })
+        .sum();
+    let one = best(&|| {
+        let mut x = 0;
+        for r in &rays {
+            let mut r = *r;
+            while let Some(c) = r.next_code() {
+                x ^= c;
+            }
+        }
+        x
+    });
+    let two = best(&|| {
+        let mut x = 0;
+        for pair in rays.chunks(2) {
+            let (mut a, sa) = pair[0].split();
+            let (mut b, sb) = pair[pair.len() - 1].split();
+            let (mut a_done, mut b_done) = (false, pair.len() == 1);
+            while !(a_done && b_done) {
+                match a.next_code(&sa) {
+                    Some(c) => x ^= c,
+                    None => a_done = true,
+                }
+                match b.next_code(&sb) {
+                    Some(c) => x ^= c,
+                    None => b_done = true,
+                }
+            }
+        }
+        x
+    });
+    let ns = |s: f64, n: u64| s * 1e9 / n as f64;
+    println!(
+        "{} rays, {steps} steps: set-up {:.2} ms ({:.1} ns a ray); walks one at a time {:.2} ms ({:.2} ns a step), \
+         two in lockstep {:.2} ms ({:.2} ns a step)",
+        rays.len(),
+        setup * 1e3,
+        ns(setup, rays.len() as u64),
+        one * 1e3,
+        ns(one, steps),
+        two * 1e3,
+        ns(two, steps)
+    );
+}
