@@ -18,6 +18,14 @@ use crate::tree::blocks::{self, BlockEnd, SubtreeRuns, PADDING};
 
 const FIELDS: usize = 16;
 
+/// Nodes at depths 13–15 from which `SearchBlocksSection::Auto` writes the
+/// section. Lower than the in-memory index's threshold: the rank layout's
+/// levels take more cache than the index's words. Measured
+/// (`examples/ab_probe RES time`, mapped by key): outdoor 0.2 m (about
+/// 0.45M such nodes) 53–57 → 35 ns with the section, indoor 0.05 m (under
+/// 0.2M) 31–32 → 34 ns.
+pub(crate) const AUTO_MIN_NODES: usize = 1 << 18;
+
 /// The section's parts, over the file's bytes.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct SearchBlocks<'a> {

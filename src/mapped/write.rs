@@ -36,9 +36,8 @@ pub struct WriteOptions {
 pub enum SearchBlocksSection {
     #[default]
     Never,
-    /// For maps with 2^20 or more nodes at depths 13–15, where a search's
-    /// last levels no longer stay in the processor's caches (the in-memory
-    /// tree's own rule for its index).
+    /// For maps with 2^18 or more nodes at depths 13–15, where the rank
+    /// layout's last levels no longer stay in the processor's caches.
     Auto,
     /// Whenever the map can have one.
     Always,
@@ -167,7 +166,7 @@ pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOption
         resolution: tree.resolution(),
     };
     let min_nodes = match opts.search_blocks {
-        SearchBlocksSection::Auto => Some(crate::tree::BLOCKS_MIN_NODES),
+        SearchBlocksSection::Auto => Some(super::search_blocks::AUTO_MIN_NODES),
         SearchBlocksSection::Always => Some(0),
         SearchBlocksSection::Never => None,
     };

@@ -46,7 +46,7 @@ const LAST_INNER: u8 = TREE_DEPTH - 1;
 /// second-level cache, and the blocks' counting costs more than the cached
 /// levels (measured slower on the bench's indoor 0.05 m map, 0.2M nodes
 /// there; faster outdoors at 0.1 m, 1.8M, and 0.05 m, 5.7M).
-pub(crate) const BLOCKS_MIN_NODES: usize = 1 << 20;
+const BLOCKS_MIN_NODES: usize = 1 << 20;
 
 #[derive(Clone, Debug)]
 pub(crate) struct LevelIndex {

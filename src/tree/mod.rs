@@ -16,7 +16,6 @@ pub use arena::{ArenaUsage, NodeArena, NodeId};
 pub use counting::CountingTree;
 pub(crate) use cursor::{LastAnswer, PathSearch};
 pub use iter::{KeyBox, NodeItem, NodeIter};
-pub(crate) use level_index::BLOCKS_MIN_NODES;
 use level_index::{LevelSlot, Reach};
 pub(crate) use search_index::LevelTables;
 pub use search_index::SearchIndex;
