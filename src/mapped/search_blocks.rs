@@ -83,10 +83,13 @@ impl<'a> SearchBlocks<'a> {
     /// `index`, a depth-13 node with children.
     #[inline(always)]
     pub fn below(&self, index: u32, code: u64) -> Below {
-        let found = index.checked_sub(self.first).filter(|&j| j < self.count).and_then(|j| {
-            let at = u32_at(self.offsets, 4 * j as usize)?;
-            blocks::walk(self.runs, at as usize, code)
-        });
+        // (no closures: one of them was compiled as an out-of-line call)
+        let j = index.wrapping_sub(self.first);
+        let at = if j < self.count { u32_at(self.offsets, 4 * j as usize) } else { None };
+        let found = match at {
+            Some(at) => blocks::walk(self.runs, at as usize, code),
+            None => None,
+        };
         match found {
             Some(BlockEnd::Voxel(c)) => match u32_at(self.palette, 4 * usize::from(c)) {
                 Some(bits) => Below::Value(f32::from_bits(bits)),
