@@ -4,7 +4,10 @@
 //! first voxel that no earlier ray of the same scan visited: the most an
 //! exact "skip what is already covered" scheme could leave out. A probe.
 
-use octolinear::simulate::{simulate, LidarConfig, SceneKind};
+#[path = "../benches/common/mod.rs"]
+mod common;
+
+use octolinear::simulate::SceneKind;
 use octolinear::{Key, OccupancyTree};
 use std::collections::HashSet;
 
@@ -12,16 +15,14 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let kind = if args.first().map(String::as_str) == Some("outdoor") { SceneKind::Outdoor } else { SceneKind::Indoor };
     let res: f64 = args.get(1).map_or(0.2, |s| s.parse().expect("RES"));
-    let (cfg, scans) =
-        if kind == SceneKind::Indoor { (LidarConfig::indoor(), 24) } else { (LidarConfig::outdoor(), 6) };
-    let graph = simulate(kind, scans, 7, &cfg).expect("simulate");
+    // the benchmark's scans
+    let scans = common::scans(kind, if kind == SceneKind::Indoor { 24 } else { 6 });
     let tree = OccupancyTree::new(res).expect("resolution");
     let (mut rays, mut steps, mut covered) = (0usize, 0usize, 0usize);
-    for node in &graph.nodes {
-        let (cloud, origin) = node.graph2tree();
+    for (points, origin) in &scans {
         let mut seen: HashSet<Key> = HashSet::new();
-        for &p in &cloud.points {
-            let Ok(walk) = tree.ray_keys(origin, p) else { continue };
+        for &p in points {
+            let Ok(walk) = tree.ray_keys(*origin, p) else { continue };
             let keys: Vec<Key> = walk.collect();
             rays += 1;
             steps += keys.len();

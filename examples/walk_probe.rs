@@ -5,7 +5,10 @@
 //! (no key lists, no filter, no sort, no tree). Prints the ray set-up cost
 //! per ray and the walk cost per step. A probe, not a benchmark of record.
 
-use octolinear::simulate::{simulate, LidarConfig, SceneKind};
+#[path = "../benches/common/mod.rs"]
+mod common;
+
+use octolinear::simulate::SceneKind;
 use octolinear::{MortonCode, OccupancyTree, RayFan};
 use std::hint::black_box;
 use std::time::Instant;
@@ -14,12 +17,10 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let kind = if args.first().map(String::as_str) == Some("outdoor") { SceneKind::Outdoor } else { SceneKind::Indoor };
     let res: f64 = args.get(1).map_or(0.2, |s| s.parse().expect("RES"));
-    let (cfg, scans) =
-        if kind == SceneKind::Indoor { (LidarConfig::indoor(), 24) } else { (LidarConfig::outdoor(), 6) };
-    let graph = simulate(kind, scans, 7, &cfg).expect("simulate");
+    // the benchmark's scans
+    let scans = common::scans(kind, if kind == SceneKind::Indoor { 24 } else { 6 });
     let tree = OccupancyTree::new(res).expect("resolution");
     let keys = tree.key_space();
-    let clouds: Vec<_> = graph.nodes.iter().map(|n| n.graph2tree()).collect();
     let best = |f: &dyn Fn() -> u64| {
         (0..7)
             .map(|_| {
@@ -32,9 +33,9 @@ fn main() {
     // into a vector that already has the room (its growth is not set-up)
     let set_up = |rays: &mut Vec<_>| {
         rays.clear();
-        for (cloud, origin) in &clouds {
+        for (points, origin) in &scans {
             let fan = RayFan::new(keys, *origin).expect("origin in the map");
-            for &p in &cloud.points {
+            for &p in points {
                 let Ok(end) = keys.key(p) else { continue };
                 rays.extend(fan.ray(p, MortonCode::encode(end).0));
             }
