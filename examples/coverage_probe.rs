@@ -7,16 +7,11 @@
 #[path = "../benches/common/mod.rs"]
 mod common;
 
-use octolinear::simulate::SceneKind;
 use octolinear::{Key, OccupancyTree};
 use std::collections::HashSet;
 
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let kind = if args.first().map(String::as_str) == Some("outdoor") { SceneKind::Outdoor } else { SceneKind::Indoor };
-    let res: f64 = args.get(1).map_or(0.2, |s| s.parse().expect("RES"));
-    // the benchmark's scans
-    let scans = common::scans(kind, if kind == SceneKind::Indoor { 24 } else { 6 });
+    let (_, res, scans) = common::scene_from_args();
     let tree = OccupancyTree::new(res).expect("resolution");
     let (mut rays, mut steps, mut covered) = (0usize, 0usize, 0usize);
     for (points, origin) in &scans {

@@ -28,6 +28,16 @@ pub fn scans(kind: SceneKind, scans: usize) -> Vec<Scan> {
         .collect()
 }
 
+/// For the probes in `examples/`: the scene and resolution their first two
+/// arguments name (`indoor|outdoor RES`; indoor, 0.2 m when absent) and the
+/// benchmark's scans of that scene (24 indoors, 6 outdoors).
+pub fn scene_from_args() -> (SceneKind, f64, Vec<Scan>) {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let kind = if args.first().map(String::as_str) == Some("outdoor") { SceneKind::Outdoor } else { SceneKind::Indoor };
+    let res: f64 = args.get(1).map_or(0.2, |s| s.parse().expect("RES"));
+    (kind, res, scans(kind, if kind == SceneKind::Indoor { 24 } else { 6 }))
+}
+
 pub fn num_points(scans: &[Scan]) -> usize {
     scans.iter().map(|(p, _)| p.len()).sum()
 }
