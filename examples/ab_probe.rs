@@ -4,7 +4,7 @@
 //!
 //! * `time`: fastest of 9 passes over 1M queries, in ns per query: search by
 //!   key and by point on the tree, `search_many`, by key and by point on
-//!   the mapped view.
+//!   the mapped view, and its `search_many`.
 //! * `race`: OctoMap's search over the 1M points, then ours by point, five
 //!   times, as the benchmark alternates them (each evicts the other's data).
 //! * `leaves`: eight rounds of OctoMap's leaf walk followed by ours twice (as
@@ -47,6 +47,13 @@ fn many(t: &OccupancyTree, keys: &[Key]) -> f32 {
 #[inline(never)]
 fn view_by_key(v: &MapView<'_>, keys: &[Key]) -> f32 {
     keys.iter().filter_map(|&k| v.search(k, 0)).map(|f| f.value).sum()
+}
+
+#[inline(never)]
+fn view_many(v: &MapView<'_>, keys: &[Key]) -> f32 {
+    let mut found = Vec::new();
+    v.search_many(keys, 0, &mut found);
+    found.iter().flatten().map(|f| f.value).sum()
 }
 
 #[inline(never)]
@@ -103,12 +110,14 @@ fn main() {
         "time" => {
             let best = |f: &dyn Fn() -> f32| (0..9).map(|_| micros(f).0 * 1e3 / n as f64).fold(f64::MAX, f64::min);
             println!(
-                "ns per query: tree by key {:6.2}, by point {:6.2}, search_many {:6.2}; mapped by key {:6.2}, by point {:6.2}",
+                "ns per query: tree by key {:6.2}, by point {:6.2}, search_many {:6.2}; \
+                 mapped by key {:6.2}, by point {:6.2}, search_many {:6.2}",
                 best(&|| by_key(&tree, &keys)),
                 best(&|| many(&tree, &keys)),
                 best(&|| by_point(&tree, &points)),
                 best(&|| view_by_key(&view, &keys)),
                 best(&|| view_by_point(&view, &points)),
+                best(&|| view_many(&view, &keys)),
             );
         }
         "race" => {
