@@ -373,11 +373,6 @@ impl<'a> MapView<'a> {
             out.resize(keys.len(), None);
             return;
         };
-        if let (Some(blocks), AnyNav::Rank(nav)) = (&self.blocks, &self.nav) {
-            if query::normalize_depth(depth) == TREE_DEPTH {
-                return query::search_many_through_blocks(*nav, blocks, trunks, keys, out);
-            }
-        }
         with_nav!(self.nav, |nav| query::search_many(nav, self.extras, trunks, keys, depth, out))
     }
 

@@ -204,64 +204,6 @@ pub(crate) fn search_many<N: Nav>(
     }
 }
 
-/// [`search_many`] at full depth on a map with a search-blocks section:
-/// eight descents of the rank layout to depth 13 in lockstep, then each
-/// lane's run (as [`search_through_blocks`]).
-pub(crate) fn search_many_through_blocks(
-    nav: RankNav<'_>,
-    blocks: &SearchBlocks<'_>,
-    trunks: &Trunks<Node>,
-    keys: &[Key],
-    out: &mut Vec<Option<Found>>,
-) {
-    const LANES: usize = 8;
-    out.clear();
-    let leaf = |node: Node, depth: u8| nav.get(node).map(|(value, _)| Found { value, depth, is_leaf: true, extra: 0 });
-    for chunk in keys.chunks(LANES) {
-        let mut at = [(Node::default(), 0u8, 0u8); LANES];
-        let mut code = [0u64; LANES];
-        let mut found = [None; LANES];
-        let mut walking = 0u32;
-        for (l, &key) in chunk.iter().enumerate() {
-            code[l] = MortonCode::encode_table(key).0;
-            let (node, depth) = trunk_start(nav, trunks, key, code[l], BLOCK_DEPTH);
-            if let Some(mask) = nav.mask(node) {
-                at[l] = (node, depth, mask);
-                walking |= 1 << l;
-            }
-        }
-        while walking != 0 {
-            let mut lanes = walking;
-            while lanes != 0 {
-                let l = lanes.trailing_zeros() as usize;
-                lanes &= lanes - 1;
-                let (node, depth, mask) = at[l];
-                let pos = ((code[l] >> (3 * (TREE_DEPTH - 1 - depth))) & 7) as usize;
-                let next = if mask & (1 << pos) == 0 {
-                    // a leaf above depth 16, or unknown space
-                    found[l] = if mask == 0 { leaf(node, depth) } else { None };
-                    None
-                } else if depth == BLOCK_DEPTH {
-                    found[l] = match blocks.below(node.idx, code[l]) {
-                        Below::Value(value) => Some(Found { value, depth: TREE_DEPTH, is_leaf: true, extra: 0 }),
-                        Below::Unknown => None,
-                        Below::Descend => search_from(nav, code[l], TREE_DEPTH, (node, depth)).map(|(f, _)| f),
-                    };
-                    None
-                } else {
-                    // a corrupted file may end the walk: no answer, as `search`
-                    nav.child(node, mask, pos).and_then(|c| Some((c, depth + 1, nav.mask(c)?)))
-                };
-                match next {
-                    Some(step) => at[l] = step,
-                    None => walking &= !(1 << l),
-                }
-            }
-        }
-        out.extend_from_slice(&found[..chunk.len()]);
-    }
-}
-
 /// Does the node at `key`/`depth` overlap the box? (OctoMap's test, as
 /// `KeyBox` applies it in the tree's iterator.)
 #[inline]
