@@ -366,10 +366,10 @@ impl Voxels {
             if let Some((codes, values)) =
                 Palette::of(groups().flat_map(|(first, k)| &p.leaf_values[first..first + k]), voxels)
             {
-                let level = |d: u8| &masks[start(d)..start(d + 1).max(start(d))];
                 if masks.len() - start(BLOCK_DEPTH) < blocks_min {
                     return (Voxels::Palette { codes, values }, LAST_INNER);
                 }
+                let level = |d: u8| &masks[start(d)..start(d + 1).max(start(d))];
                 let blocks = Blocks::new(
                     [level(BLOCK_DEPTH), level(BLOCK_DEPTH + 1), &masks[start(LAST_INNER)..]],
                     &codes,
@@ -441,9 +441,9 @@ pub(crate) fn subtree_runs(p: &Parts<'_>, size: usize, min_nodes: usize) -> Opti
     }
 }
 
-/// Builds the palette of [`Voxels::Blocks`]: an open-addressed table of the values seen
-/// so far (a hash map per voxel made the first search of a 16M-node tree
-/// take three times as long).
+/// Builds the palette of [`Voxels::Palette`] and [`Voxels::Blocks`]: an
+/// open-addressed table of the values seen so far (a hash map per voxel
+/// made the first search of a 16M-node tree take three times as long).
 struct Palette {
     bits: [u32; Self::SLOTS],
     code: [u16; Self::SLOTS],
