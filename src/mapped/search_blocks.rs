@@ -105,7 +105,7 @@ impl<'a> SearchBlocks<'a> {
     pub fn verify(&self, nav: RankNav<'_>, level_starts: [u32; 4]) -> Result<(), OlmError> {
         let bad = |reason: String| OlmError::Section { kind: super::SectionKind::SearchBlocks as u16, reason };
         let [s13, s14, s15, s16] = level_starts.map(|s| s as usize);
-        if (self.first as usize, self.count as usize) != (s13, s14 - s13) {
+        if (self.first as usize, self.count as usize) != (s13, s14.saturating_sub(s13)) {
             return Err(bad(format!(
                 "holds depth-13 nodes {}..{}, the masks put them at {s13}..{s14}",
                 self.first,
