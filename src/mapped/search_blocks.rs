@@ -14,7 +14,7 @@
 use super::format::u32_at;
 use super::nav::RankNav;
 use super::OlmError;
-use crate::tree::blocks::{self, BlockEnd, SubtreeRuns, PADDING};
+use crate::tree::blocks::{self, BlockEnd, Runs, SubtreeRuns, PADDING};
 
 const FIELDS: usize = 16;
 
@@ -128,11 +128,10 @@ impl<'a> SearchBlocks<'a> {
             codes.push(*code);
         }
         let masks = |a: usize, b: usize| nav.masks.get(a..b).ok_or_else(|| bad("masks section too short".into()));
-        let (mut offsets, mut runs) = (Vec::new(), Vec::new());
-        blocks::build([masks(s13, s14)?, masks(s14, s15)?, masks(s15, s16)?], &codes, &mut offsets, &mut runs);
+        let want = Runs::build([masks(s13, s14)?, masks(s14, s15)?, masks(s15, s16)?], &codes);
         let stored: Vec<u32> =
             self.offsets.chunks_exact(4).map(|b| u32::from_le_bytes(b.try_into().expect("four bytes"))).collect();
-        if stored != offsets || self.runs != runs.as_slice() {
+        if stored != want.offsets || self.runs != want.bytes.as_slice() {
             return Err(bad("runs differ from the masks and values".into()));
         }
         if self.tail.iter().any(|&b| b != 0) {
@@ -144,13 +143,14 @@ impl<'a> SearchBlocks<'a> {
 
 /// The section's bytes for a tree's runs.
 pub(crate) fn encode(r: &SubtreeRuns) -> Vec<u8> {
-    let mut b = Vec::with_capacity(FIELDS + 4 * r.values.len() + 4 * r.offsets.len() + r.runs.len() + 8);
-    for v in [r.first, r.offsets.len() as u32, r.values.len() as u32, r.runs.len() as u32] {
+    let (offsets, runs) = (&r.runs.offsets, &r.runs.bytes);
+    let mut b = Vec::with_capacity(FIELDS + 4 * r.values.len() + 4 * offsets.len() + runs.len() + 8);
+    for v in [r.first, offsets.len() as u32, r.values.len() as u32, runs.len() as u32] {
         b.extend_from_slice(&v.to_le_bytes());
     }
     b.extend(r.values.iter().flat_map(|v| v.to_le_bytes()));
-    b.extend(r.offsets.iter().flat_map(|o| o.to_le_bytes()));
-    b.extend_from_slice(&r.runs);
+    b.extend(offsets.iter().flat_map(|o| o.to_le_bytes()));
+    b.extend_from_slice(runs);
     b.resize(b.len().next_multiple_of(8), 0);
     b
 }

@@ -172,7 +172,7 @@ pub fn write<W: Write + Seek>(tree: &OccupancyTree, w: &mut W, opts: WriteOption
     };
     let blocks = match (opts.variant, opts.index, src.kind, min_nodes) {
         (Variant::Full, Index::Rank, TreeKind::OcTree, Some(min)) => {
-            tree.subtree_runs(min).filter(|r| !r.offsets.is_empty()).map(|r| super::search_blocks::encode(&r))
+            tree.subtree_runs(min).filter(|r| !r.runs.offsets.is_empty()).map(|r| super::search_blocks::encode(&r))
         }
         _ => None,
     };

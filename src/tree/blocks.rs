@@ -17,6 +17,15 @@ pub(crate) const BLOCK_DEPTH: u8 = 13;
 /// any run stays inside the bytes.
 pub(crate) const PADDING: usize = 8;
 
+/// The runs of a level's depth-13 nodes.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Runs {
+    /// Where each depth-13 node's run starts in `bytes`.
+    pub offsets: Vec<u32>,
+    /// The runs, then [`PADDING`].
+    pub bytes: Vec<u8>,
+}
+
 /// A tree's depth-13 subtrees as runs, in breadth-first numbering, for a
 /// mapped file.
 pub(crate) struct SubtreeRuns {
@@ -24,10 +33,7 @@ pub(crate) struct SubtreeRuns {
     pub first: u32,
     /// The palette: the distinct voxel values, by code.
     pub values: Vec<f32>,
-    /// Where each depth-13 node's run starts in `runs`.
-    pub offsets: Vec<u32>,
-    /// The runs, then [`PADDING`].
-    pub runs: Vec<u8>,
+    pub runs: Runs,
 }
 
 /// Where a search below a depth-13 node ends.
@@ -41,32 +47,33 @@ pub(crate) enum BlockEnd {
     Coarse,
 }
 
-/// The runs of the depth-13 nodes, given the masks at depths 13, 14 and
-/// 15 (breadth-first) and the voxels' palette codes (breadth-first too),
-/// appended to `bytes` (then [`PADDING`]); the runs' starts, relative to
-/// where `bytes` ended, go to `offsets`.
-pub(crate) fn build(levels: [&[u8]; 3], codes: &[u8], offsets: &mut Vec<u32>, bytes: &mut Vec<u8>) {
-    let [m13, m14, m15] = levels;
-    let base = bytes.len();
-    bytes.reserve(m13.len() + m14.len() + m15.len() + codes.len() + PADDING);
-    offsets.reserve(m13.len());
-    // where the next node's descendants start at each level below
-    let (mut at14, mut at15, mut at_voxel) = (0, 0, 0);
-    let children = |masks: &[u8]| masks.iter().map(|m| m.count_ones() as usize).sum::<usize>();
-    for &m in m13 {
-        offsets.push((bytes.len() - base) as u32);
-        bytes.push(m);
-        let n14 = m.count_ones() as usize;
-        let s14 = &m14[at14..at14 + n14];
-        let n15 = children(s14);
-        let s15 = &m15[at15..at15 + n15];
-        let voxels = children(s15);
-        bytes.extend_from_slice(s14);
-        bytes.extend_from_slice(s15);
-        bytes.extend_from_slice(&codes[at_voxel..at_voxel + voxels]);
-        (at14, at15, at_voxel) = (at14 + n14, at15 + n15, at_voxel + voxels);
+impl Runs {
+    /// The runs of the depth-13 nodes, given the masks at depths 13, 14
+    /// and 15 (breadth-first) and the voxels' palette codes (breadth-first
+    /// too).
+    pub fn build(levels: [&[u8]; 3], codes: &[u8]) -> Runs {
+        let [m13, m14, m15] = levels;
+        let mut bytes = Vec::with_capacity(m13.len() + m14.len() + m15.len() + codes.len() + PADDING);
+        let mut offsets = Vec::with_capacity(m13.len());
+        // where the next node's descendants start at each level below
+        let (mut at14, mut at15, mut at_voxel) = (0, 0, 0);
+        let children = |masks: &[u8]| masks.iter().map(|m| m.count_ones() as usize).sum::<usize>();
+        for &m in m13 {
+            offsets.push(bytes.len() as u32);
+            bytes.push(m);
+            let n14 = m.count_ones() as usize;
+            let s14 = &m14[at14..at14 + n14];
+            let n15 = children(s14);
+            let s15 = &m15[at15..at15 + n15];
+            let voxels = children(s15);
+            bytes.extend_from_slice(s14);
+            bytes.extend_from_slice(s15);
+            bytes.extend_from_slice(&codes[at_voxel..at_voxel + voxels]);
+            (at14, at15, at_voxel) = (at14 + n14, at15 + n15, at_voxel + voxels);
+        }
+        bytes.extend_from_slice(&[0; PADDING]);
+        Runs { offsets, bytes }
     }
-    bytes.extend_from_slice(&[0; PADDING]);
 }
 
 /// The rest of a full-depth search for `code` (a voxel's Morton code)

@@ -24,7 +24,7 @@
 //! above depth 16 (pruned leaves) are left to the arena's descent.
 
 use super::arena::{in_leaf_pool, leaf_index, NodeId, Parts, LEAF_POOL};
-use super::blocks::{self, BlockEnd, SubtreeRuns, BLOCK_DEPTH};
+use super::blocks::{self, BlockEnd, Runs, SubtreeRuns, BLOCK_DEPTH};
 use super::trunk::{Trunks, GRID_NODES_PER_CELL};
 use super::ROOT;
 use crate::key::{Key, TREE_DEPTH};
@@ -42,7 +42,7 @@ pub(crate) const LANES: usize = 8;
 const LAST_INNER: u8 = TREE_DEPTH - 1;
 
 /// Nodes at depths 13–15 from which a palette's index is laid out in
-/// [`Blocks`]: with fewer, their words (1.5 MB here) stay in the
+/// [`Voxels::Blocks`]: with fewer, their words (1.5 MB here) stay in the
 /// second-level cache, and the blocks' counting costs more than the cached
 /// levels (measured slower on the bench's indoor 0.05 m map, 0.2M nodes
 /// there; faster outdoors at 0.1 m, 1.8M, and 0.05 m, 5.7M).
@@ -60,7 +60,7 @@ pub(crate) struct LevelIndex {
     /// Index of the first node at depth `last`.
     deepest: u32,
     /// The depth of the deepest nodes in `words`: 15, or [`BLOCK_DEPTH`]
-    /// with [`Voxels::Blocks`], whose nodes at that depth are in the blocks
+    /// with `Voxels::Blocks`, whose nodes at that depth are in the blocks
     /// (their indices from `deepest` on number the blocks).
     last: u8,
     /// The nodes above depth 16: the children of the depth-15 ones are
@@ -90,17 +90,7 @@ enum Voxels {
     /// The depth-13 subtrees, their voxels' values through a palette: the
     /// layout for a palette when the levels below depth 12 would not fit
     /// in the second-level cache.
-    Blocks(Blocks),
-}
-
-/// The depth-13 subtrees as runs of bytes (see [`blocks`]).
-#[derive(Clone, Debug)]
-struct Blocks {
-    /// Where each depth-13 node's run starts in `bytes`.
-    offsets: Vec<u32>,
-    bytes: Vec<u8>,
-    /// The distinct voxel values, by palette code.
-    values: Vec<f32>,
+    Blocks { runs: Runs, values: Vec<f32> },
 }
 
 /// Where a search through the index ends.
@@ -124,29 +114,7 @@ impl LevelIndex {
 
     /// [`Self::build`], with blocks from `blocks_min` nodes at depths 13–15.
     fn build_with(p: &Parts<'_>, size: usize, blocks_min: usize) -> Self {
-        let mut masks: Vec<u8> = Vec::new();
-        let mut leaf_first = Vec::new();
-        // where each depth's nodes start in `masks`
-        let mut starts = [usize::MAX; TREE_DEPTH as usize];
-        let (mut level, mut next) = (vec![ROOT], Vec::new());
-        for depth in 0..=LAST_INNER {
-            if level.is_empty() {
-                break;
-            }
-            starts[usize::from(depth)] = masks.len();
-            next.clear();
-            for &n in &level {
-                let m = p.masks[n as usize];
-                masks.push(m);
-                let first = p.first_child[n as usize];
-                if depth == LAST_INNER {
-                    leaf_first.push(first);
-                } else {
-                    next.extend((0..m.count_ones()).map(|k| first + k));
-                }
-            }
-            std::mem::swap(&mut level, &mut next);
-        }
+        let BreadthFirst { masks, starts, leaf_first } = BreadthFirst::of(p);
         let nodes = masks.len() as u32;
         let start = |depth: u8| starts[usize::from(depth)].min(masks.len());
         let (voxels, last) = Voxels::new(p, &masks, start, leaf_first, blocks_min);
@@ -183,7 +151,9 @@ impl LevelIndex {
             Voxels::FirstChild(f) => 4 * f.capacity(),
             Voxels::Ranked => 0,
             Voxels::Palette { codes, values } => codes.capacity() + 4 * values.capacity(),
-            Voxels::Blocks(b) => 4 * b.offsets.capacity() + b.bytes.capacity() + 4 * b.values.capacity(),
+            Voxels::Blocks { runs, values } => {
+                4 * runs.offsets.capacity() + runs.bytes.capacity() + 4 * values.capacity()
+            }
         };
         8 * self.words.capacity() + 4 * self.first.capacity() + voxels + self.trunks.bytes()
     }
@@ -194,7 +164,9 @@ impl LevelIndex {
             return 0;
         }
         match &self.voxels {
-            Voxels::Blocks(b) if n >= self.deepest => b.bytes[b.offsets[(n - self.deepest) as usize] as usize],
+            Voxels::Blocks { runs, .. } if n >= self.deepest => {
+                runs.bytes[runs.offsets[(n - self.deepest) as usize] as usize]
+            }
             _ => (self.words[(n >> 3) as usize] >> (8 * (n & 7))) as u8,
         }
     }
@@ -271,7 +243,9 @@ impl LevelIndex {
     #[inline(always)]
     fn last_step(&self, i: u32, code: u64) -> Reach {
         match &self.voxels {
-            Voxels::Blocks(b) => b.find((i - self.deepest) as usize, code),
+            Voxels::Blocks { runs, values } => {
+                find_in_run(runs, values, runs.offsets[(i - self.deepest) as usize] as usize, code)
+            }
             _ => match self.step(i, (code & 7) as usize) {
                 Ok(v) => self.voxel(v),
                 Err(end) => end,
@@ -308,11 +282,13 @@ impl LevelIndex {
                     match &self.voxels {
                         // a round for the block's offset, one for the block,
                         // so that the lanes' misses on both overlap
-                        Voxels::Blocks(b) if depth[l] == self.last => {
-                            (node[l], depth[l]) = (b.offsets[(node[l] - self.deepest) as usize], TREE_DEPTH);
+                        Voxels::Blocks { runs, .. } if depth[l] == self.last => {
+                            (node[l], depth[l]) = (runs.offsets[(node[l] - self.deepest) as usize], TREE_DEPTH);
                             continue;
                         }
-                        Voxels::Blocks(b) => out[l] = b.find_at(node[l] as usize, code[l]),
+                        Voxels::Blocks { runs, values } => {
+                            out[l] = find_in_run(runs, values, node[l] as usize, code[l])
+                        }
                         _ => out[l] = self.last_step(node[l], code[l]),
                     }
                     walking &= !(1 << l);
@@ -337,7 +313,7 @@ impl LevelIndex {
         match &self.voxels {
             Voxels::Palette { codes, values } => Reach::Value(values[usize::from(codes[leaf_index(v)])]),
             _ => {
-                debug_assert!(!matches!(self.voxels, Voxels::Blocks(_)));
+                debug_assert!(!matches!(self.voxels, Voxels::Blocks { .. }));
                 Reach::Voxel(v)
             }
         }
@@ -370,12 +346,9 @@ impl Voxels {
                     return (Voxels::Palette { codes, values }, LAST_INNER);
                 }
                 let level = |d: u8| &masks[start(d)..start(d + 1).max(start(d))];
-                let blocks = Blocks::new(
-                    [level(BLOCK_DEPTH), level(BLOCK_DEPTH + 1), &masks[start(LAST_INNER)..]],
-                    &codes,
-                    values,
-                );
-                return (Voxels::Blocks(blocks), BLOCK_DEPTH);
+                let runs =
+                    Runs::build([level(BLOCK_DEPTH), level(BLOCK_DEPTH + 1), &masks[start(LAST_INNER)..]], &codes);
+                return (Voxels::Blocks { runs, values }, BLOCK_DEPTH);
             }
         }
         let mut next = 0;
@@ -391,30 +364,15 @@ impl Voxels {
     }
 }
 
-impl Blocks {
-    /// The runs of the depth-13 nodes, given the masks at depths 13, 14
-    /// and 15 (breadth-first) and the voxels' palette codes.
-    fn new(levels: [&[u8]; 3], codes: &[u8], values: Vec<f32>) -> Self {
-        let (mut offsets, mut bytes) = (Vec::new(), Vec::new());
-        blocks::build(levels, codes, &mut offsets, &mut bytes);
-        Blocks { offsets, bytes, values }
-    }
-
-    /// The rest of a search for `code` below depth-13 node `block`.
-    #[inline(always)]
-    fn find(&self, block: usize, code: u64) -> Reach {
-        self.find_at(self.offsets[block] as usize, code)
-    }
-
-    /// [`Self::find`], given where the block starts.
-    #[inline(always)]
-    fn find_at(&self, at: usize, code: u64) -> Reach {
-        match blocks::walk(&self.bytes, at, code) {
-            Some(BlockEnd::Voxel(c)) => Reach::Value(self.values[usize::from(c)]),
-            Some(BlockEnd::Unknown) => Reach::Unknown,
-            // (the bytes never end early here: the arena's descent answers)
-            Some(BlockEnd::Coarse) | None => Reach::Coarse,
-        }
+/// The rest of a search for `code` below the depth-13 node whose run
+/// starts at `at` in `runs`, voxel values by palette code in `values`.
+#[inline(always)]
+fn find_in_run(runs: &Runs, values: &[f32], at: usize, code: u64) -> Reach {
+    match blocks::walk(&runs.bytes, at, code) {
+        Some(BlockEnd::Voxel(c)) => Reach::Value(values[usize::from(c)]),
+        Some(BlockEnd::Unknown) => Reach::Unknown,
+        // (the bytes never end early here: the arena's descent answers)
+        Some(BlockEnd::Coarse) | None => Reach::Coarse,
     }
 }
 
@@ -431,13 +389,49 @@ fn ended(m: u8) -> Reach {
 /// The tree's depth-13 subtrees as [`blocks`] runs, for a tree with
 /// `min_nodes` or more nodes at depths 13–15; `None` when its voxels carry
 /// extras or take more than 256 values, or it has fewer nodes there.
-pub(crate) fn subtree_runs(p: &Parts<'_>, size: usize, min_nodes: usize) -> Option<SubtreeRuns> {
-    let index = LevelIndex::build_with(p, size, min_nodes);
-    match index.voxels {
-        Voxels::Blocks(b) => {
-            Some(SubtreeRuns { first: index.deepest, values: b.values, offsets: b.offsets, runs: b.bytes })
-        }
+pub(crate) fn subtree_runs(p: &Parts<'_>, min_nodes: usize) -> Option<SubtreeRuns> {
+    let BreadthFirst { masks, starts, leaf_first } = BreadthFirst::of(p);
+    let start = |depth: u8| starts[usize::from(depth)].min(masks.len());
+    match Voxels::new(p, &masks, start, leaf_first, min_nodes).0 {
+        Voxels::Blocks { runs, values } => Some(SubtreeRuns { first: start(BLOCK_DEPTH) as u32, values, runs }),
         _ => None,
+    }
+}
+
+/// The arena's nodes above depth 16 in breadth-first order.
+struct BreadthFirst {
+    /// Their child masks, each level in Morton order.
+    masks: Vec<u8>,
+    /// Where each depth's nodes start in `masks` (`usize::MAX`: none).
+    starts: [usize; TREE_DEPTH as usize],
+    /// The depth-15 nodes' arena first children.
+    leaf_first: Vec<NodeId>,
+}
+
+impl BreadthFirst {
+    fn of(p: &Parts<'_>) -> Self {
+        let mut b =
+            BreadthFirst { masks: Vec::new(), starts: [usize::MAX; TREE_DEPTH as usize], leaf_first: Vec::new() };
+        let (mut level, mut next) = (vec![ROOT], Vec::new());
+        for depth in 0..=LAST_INNER {
+            if level.is_empty() {
+                break;
+            }
+            b.starts[usize::from(depth)] = b.masks.len();
+            next.clear();
+            for &n in &level {
+                let m = p.masks[n as usize];
+                b.masks.push(m);
+                let first = p.first_child[n as usize];
+                if depth == LAST_INNER {
+                    b.leaf_first.push(first);
+                } else {
+                    next.extend((0..m.count_ones()).map(|k| first + k));
+                }
+            }
+            std::mem::swap(&mut level, &mut next);
+        }
+        b
     }
 }
 
@@ -622,7 +616,7 @@ mod tests {
             Voxels::FirstChild(_) => "first child",
             Voxels::Ranked => "rank",
             Voxels::Palette { .. } => "palette",
-            Voxels::Blocks(_) => "blocks",
+            Voxels::Blocks { .. } => "blocks",
         };
         for (distinct, blocks_min, as_built, compacted) in [
             (false, usize::MAX, "palette", "palette"),

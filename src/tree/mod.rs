@@ -1001,7 +1001,7 @@ impl OccupancyTree {
     /// `level_index::subtree_runs`), for a tree with `min_nodes` or more
     /// nodes at depths 13–15.
     pub(crate) fn subtree_runs(&self, min_nodes: usize) -> Option<blocks::SubtreeRuns> {
-        level_index::subtree_runs(&self.arena.as_ref()?.parts(), self.size, min_nodes)
+        level_index::subtree_runs(&self.arena.as_ref()?.parts(), min_nodes)
     }
 
     /// Re-lays the arena in depth-first (Morton) order with no free slots,
