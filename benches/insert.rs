@@ -57,6 +57,27 @@ fn key_lists(updates: &[ScanUpdate]) -> KeyLists {
     KeyLists { codes, sorted, hashed }
 }
 
+/// The deduplication by sorting: both lists radix-sorted and freed of
+/// repeats, the occupied codes removed from the free ones by merging
+/// (octolinear's way before the block sets).
+fn dedup_sort(free: &[u64], occupied: &[u64]) -> ScanUpdate {
+    let sorted = |codes: &[u64]| {
+        let mut v = codes.to_vec();
+        octolinear::morton::sort_codes(&mut v);
+        v.dedup();
+        v
+    };
+    let (mut free, occupied) = (sorted(free), sorted(occupied));
+    let mut j = 0;
+    free.retain(|&c| {
+        while j < occupied.len() && occupied[j] < c {
+            j += 1;
+        }
+        j == occupied.len() || occupied[j] != c
+    });
+    ScanUpdate { free, occupied }
+}
+
 /// The deduplication OctoMap's way: hash sets, the occupied keys removed
 /// from the free set, then (for the batched walk) sorted.
 fn dedup_hash(free: &[u64], occupied: &[u64]) -> ScanUpdate {
@@ -169,7 +190,7 @@ fn split(c: &mut Criterion) {
             });
             eprintln!(
                 "insert: {name} {res} m: {} scans, {points} points, {steps} ray-key steps ({:.1} per point), \
-                 {n_raw} raw codes after the recent-key filter, {n_updates} voxel updates ({:.2} per point)",
+                 {n_raw} raw codes (every ray step and end point), {n_updates} voxel updates ({:.2} per point)",
                 scans.len(),
                 steps as f64 / points as f64,
                 n_updates as f64 / points as f64
@@ -185,12 +206,15 @@ fn split(c: &mut Criterion) {
                 t_cast * 1e9 / steps as f64
             );
             for (i, (f, o)) in raw.iter().enumerate() {
-                let u = ScanUpdate::from_codes(f.clone(), o.clone());
-                assert!(u == updates[i] && dedup_hash(f, o) == u, "deduplications differ");
+                let u = ScanUpdate::from_codes(f, o);
+                assert!(u == updates[i] && dedup_hash(f, o) == u && dedup_sort(f, o) == u, "deduplications differ");
             }
             g.throughput(Throughput::Elements(n_raw as u64));
+            g.bench_function("dedup_blocks", |b| {
+                b.iter(|| raw.iter().map(|(f, o)| ScanUpdate::from_codes(f, o)).collect::<Vec<_>>())
+            });
             g.bench_function("dedup_sort", |b| {
-                b.iter(|| raw.iter().map(|(f, o)| ScanUpdate::from_codes(f.clone(), o.clone())).collect::<Vec<_>>())
+                b.iter(|| raw.iter().map(|(f, o)| dedup_sort(f, o)).collect::<Vec<_>>())
             });
             g.bench_function("dedup_hash", |b| {
                 b.iter(|| raw.iter().map(|(f, o)| dedup_hash(f, o)).collect::<Vec<_>>())

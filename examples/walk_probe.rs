@@ -48,8 +48,8 @@ fn main() {
         .iter()
         .map(|r| {
             std::iter::from_fn({
-                let mut r = *r;
-                move || r.next_code()
+                let (mut w, steps) = r.split();
+                move || w.next_code(&steps)
             })
             .count() as u64
         })
@@ -57,8 +57,8 @@ fn main() {
     let one = best(&|| {
         let mut x = 0;
         for r in &rays {
-            let mut r = *r;
-            while let Some(c) = r.next_code() {
+            let (mut w, steps) = r.split();
+            while let Some(c) = w.next_code(&steps) {
                 x ^= c;
             }
         }

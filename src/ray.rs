@@ -160,8 +160,8 @@ fn walk_codes(
     length: f64,
     mut f: impl FnMut(u64),
 ) {
-    let mut ray = FanRay::new(start, step, t_max, t_delta, end_code, length);
-    while let Some(code) = ray.next_code() {
+    let (mut state, steps) = FanRay::new(start, step, t_max, t_delta, end_code, length).split();
+    while let Some(code) = state.next_code(&steps) {
         f(code);
     }
 }
@@ -177,7 +177,13 @@ const AXIS_MASKS: [u64; 3] = [0x2492_4924_9249, 0x2492_4924_9249 << 1, 0x2492_49
 /// registers.
 #[derive(Clone, Copy)]
 pub struct FanRay {
-    state: WalkState,
+    code: u64,
+    end_code: u64,
+    length: f64,
+    // plain doubles: a ray set up out of line is returned through memory,
+    // and at this size the copy is a few moves instead of a `memcpy` call
+    t_max: [f64; 3],
+    t_delta: [f64; 3],
     steps: AxisSteps,
 }
 
@@ -201,10 +207,7 @@ pub struct AxisSteps {
 impl FanRay {
     #[inline(always)]
     fn new(start: u64, step: [i32; 3], t_max: [f64; 3], t_delta: [f64; 3], end_code: u64, length: f64) -> Self {
-        FanRay {
-            state: WalkState { code: start, end_code, length, clock: StepClock::new(t_max, t_delta) },
-            steps: AxisSteps::new(step),
-        }
+        FanRay { code: start, end_code, length, t_max, t_delta, steps: AxisSteps::new(step) }
     }
 
     /// A ray with no voxel left.
@@ -212,15 +215,11 @@ impl FanRay {
         FanRay::new(0, [0; 3], [0.0; 3], [1.0; 3], u64::MAX, f64::NEG_INFINITY)
     }
 
-    /// The next voxel's Morton code, `None` once the ray is done (and from
-    /// then on).
+    /// The walk's changing state, and its constants.
     #[inline(always)]
-    pub fn next_code(&mut self) -> Option<u64> {
-        self.state.next_code(&self.steps)
-    }
-
     pub fn split(self) -> (WalkState, AxisSteps) {
-        (self.state, self.steps)
+        let clock = StepClock::new(self.t_max, self.t_delta);
+        (WalkState { code: self.code, end_code: self.end_code, length: self.length, clock }, self.steps)
     }
 }
 
@@ -399,9 +398,10 @@ impl RayFan {
     /// `end`.
     #[inline]
     pub fn for_each_code(&self, end: Point3, end_code: u64, mut f: impl FnMut(u64)) {
-        if let Some(mut ray) = self.ray(end, end_code) {
+        if let Some(ray) = self.ray(end, end_code) {
             f(self.origin_code);
-            while let Some(code) = ray.next_code() {
+            let (mut state, steps) = ray.split();
+            while let Some(code) = state.next_code(&steps) {
                 f(code);
             }
         }

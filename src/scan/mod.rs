@@ -10,16 +10,18 @@
 //! tree is bit-identical for any thread count.
 //!
 //! The sets are not hash sets, although OctoMap's are: rays walk Morton
-//! codes ([`RayFan`]), a small direct-mapped filter of recent codes drops
-//! all but a few per cent of the repeats (rays of one scan share the voxels
-//! near the sensor), and the raw lists are radix-sorted, which the Morton
-//! order application needs anyway, and freed of repeats and of the occupied
-//! codes in one merging pass. Measured with `cargo bench --bench insert --
-//! dedup`, that takes 0.45-0.53x (indoor scenes, 0.05-0.2 m) and
-//! 0.28-0.41x (outdoor) the time of inserting the same raw lists into
-//! hashbrown sets ([`KeySet`]), removing the occupied keys from the free set
-//! and sorting the sets for the batched walk. Hash sets remain where lists do not pay:
-//! merging end points for `discretize`.
+//! codes ([`RayFan`]) and set one bit per voxel in bitmaps of aligned
+//! 8x8x8 blocks (`block_set`), which absorb the repeats as they happen
+//! (rays of one scan share the voxels near the sensor, about ten visits a
+//! voxel indoors) and give the codes in Morton order, which the batched
+//! application needs, by sorting the blocks alone. Before, a direct-mapped
+//! filter of recent codes dropped most repeats and the remaining lists
+//! were radix-sorted and merged; the block sets took insertion on the
+//! bench scenes from 25.7-28.0 to 20.5-21.3 ms (indoor 0.2 m) and 244 to
+//! 173 ms (indoor 0.05 m), see `docs/benchmarks.md`. `cargo bench --bench
+//! insert -- dedup` compares them with sorting and hashing the raw lists.
+//! Hash sets remain where bitmaps do not pay: merging end points for
+//! `discretize`.
 //!
 //! [`OccupancyTree::insert_point_clouds`] integrates a sequence of scans and,
 //! with several threads, casts the following scans (each whole on one
@@ -30,11 +32,14 @@ use crate::key::{Key, KeyError, KeySpace};
 use crate::morton::MortonCode;
 use crate::ray::{point_along, FanRay, RayFan, RayKeys};
 use crate::tree::{InnerNodes, OccupancyTree};
+use block_set::BlockSet;
 use hashbrown::HashSet;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::hash::{BuildHasherDefault, Hasher};
 use std::sync::{Condvar, Mutex};
+
+mod block_set;
 
 /// A hasher for keys: the Morton code mixed by one multiplication.
 #[derive(Default, Clone, Copy)]
@@ -64,30 +69,14 @@ impl Hasher for KeyHasher {
 /// [`KeyHasher`].
 pub type KeySet = HashSet<MortonCode, BuildHasherDefault<KeyHasher>>;
 
-/// Size of the direct-mapped filter of recently emitted ray keys; rays of
-/// one scan share most voxels near the sensor, and the filter drops all but
-/// a few per cent of the repeats before they reach the key lists.
-const RECENT_SLOTS: usize = 1 << RECENT_BITS;
-const RECENT_BITS: u32 = 13;
-
-#[inline(always)]
-fn recent_slot(code: u64) -> usize {
-    ((code ^ (code >> 21)).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> (64 - RECENT_BITS)) as usize
-}
-
-/// The key lists one worker collects (Morton codes, unsorted, repeats
-/// allowed), with its filter of recent keys.
+/// What one worker collects: the free and the occupied voxels.
+#[derive(Default)]
 struct Casting {
-    free: Vec<u64>,
-    occupied: Vec<u64>,
-    recent: Vec<u64>,
+    free: BlockSet,
+    occupied: BlockSet,
 }
 
 impl Casting {
-    fn new() -> Self {
-        Casting { free: Vec::new(), occupied: Vec::new(), recent: vec![u64::MAX; RECENT_SLOTS] }
-    }
-
     /// `computeUpdate`'s work for one end point. `fan` holds the rays'
     /// common origin; `None` when it lies outside the map (no rays then).
     #[inline]
@@ -99,28 +88,22 @@ impl Casting {
             let Ok(end_key) = keys.key(end) else { return };
             let end_code = MortonCode::encode(end_key).0;
             if within {
-                self.occupied.push(end_code);
+                self.occupied.insert(end_code);
             }
             if let Some(fan) = fan {
-                let (free, recent) = (&mut self.free, &mut self.recent);
-                fan.for_each_code(end, end_code, |c| {
-                    // skip keys a recent ray already gave
-                    let slot = &mut recent[recent_slot(c)];
-                    if *slot != c {
-                        *slot = c;
-                        free.push(c);
-                    }
-                });
+                fan.for_each_code(end, end_code, |c| self.free.insert(c));
             }
             return;
         };
         if within && bbx.contains_point(p) {
             if let Ok(k) = keys.key(p) {
-                self.occupied.push(MortonCode::encode(k).0);
+                self.occupied.insert(MortonCode::encode(k).0);
             }
         }
         if let Ok(ray) = RayKeys::new(keys, origin, end) {
-            self.free.extend(ray.take_while(|&k| bbx.contains_key(k)).map(|k| MortonCode::encode(k).0));
+            for k in ray.take_while(|&k| bbx.contains_key(k)) {
+                self.free.insert(MortonCode::encode(k).0);
+            }
         }
     }
 
@@ -141,23 +124,21 @@ impl Casting {
             }
             return;
         };
-        // a few voxels per point pass the filter (many more on long rays)
-        self.free.reserve(4 * points.len());
         let mut points = points.iter();
         // the two walks' changing state apart from their constants, so that
         // it stays in registers
-        let (mut a, mut a_steps) = self.next_ray(keys, fan, &mut points, origin, opts).split();
-        let (mut b, mut b_steps) = self.next_ray(keys, fan, &mut points, origin, opts).split();
+        let (mut a, mut a_steps) = self.next_ray(fan, keys, &mut points, origin, opts).split();
+        let (mut b, mut b_steps) = self.next_ray(fan, keys, &mut points, origin, opts).split();
         loop {
             let (ca, cb) = (a.next_code(&a_steps), b.next_code(&b_steps));
             match ca {
-                Some(c) => self.push_free(c),
-                None => (a, a_steps) = self.next_ray(keys, fan, &mut points, origin, opts).split(),
+                Some(c) => self.free.insert(c),
+                None => (a, a_steps) = self.next_ray(fan, keys, &mut points, origin, opts).split(),
             }
             match cb {
-                Some(c) => self.push_free(c),
+                Some(c) => self.free.insert(c),
                 None => {
-                    (b, b_steps) = self.next_ray(keys, fan, &mut points, origin, opts).split();
+                    (b, b_steps) = self.next_ray(fan, keys, &mut points, origin, opts).split();
                     if ca.is_none() && points.len() == 0 {
                         break;
                     }
@@ -166,10 +147,10 @@ impl Casting {
         }
         // the last rays
         while let Some(c) = a.next_code(&a_steps) {
-            self.push_free(c);
+            self.free.insert(c);
         }
         while let Some(c) = b.next_code(&b_steps) {
-            self.push_free(c);
+            self.free.insert(c);
         }
     }
 
@@ -179,8 +160,8 @@ impl Casting {
     #[inline(never)]
     fn next_ray(
         &mut self,
-        keys: &KeySpace,
         fan: &RayFan,
+        keys: &KeySpace,
         points: &mut std::slice::Iter<Point3>,
         origin: Point3,
         opts: &ScanOptions,
@@ -192,36 +173,26 @@ impl Casting {
             let Ok(end_key) = keys.key(end) else { continue };
             let end_code = MortonCode::encode(end_key).0;
             if within {
-                self.occupied.push(end_code);
+                self.occupied.insert(end_code);
             }
             if let Some(ray) = fan.ray(end, end_code) {
-                self.push_free(fan.origin_code());
+                self.free.insert(fan.origin_code());
                 return ray;
             }
         }
         FanRay::finished()
     }
 
-    /// Adds a free code unless the filter of recent keys has it.
-    #[inline(always)]
-    fn push_free(&mut self, c: u64) {
-        let slot = &mut self.recent[recent_slot(c)];
-        if *slot != c {
-            *slot = c;
-            self.free.push(c);
-        }
+    /// Both sets as sorted lists; the free one keeps the occupied voxels
+    /// (another worker's may have them too).
+    fn finish(&self) -> (Vec<u64>, Vec<u64>) {
+        (self.free.sorted_codes(None), self.occupied.sorted_codes(None))
     }
 
-    /// Sorts both lists and drops repeats.
-    fn finish(&mut self) {
-        sort_dedup(&mut self.free);
-        sort_dedup(&mut self.occupied);
+    /// The scan's update, when this worker cast all of it.
+    fn into_update(self) -> ScanUpdate {
+        ScanUpdate { free: self.free.sorted_codes(Some(&self.occupied)), occupied: self.occupied.sorted_codes(None) }
     }
-}
-
-fn sort_dedup(codes: &mut Vec<u64>) {
-    crate::morton::sort_codes(codes);
-    dedup_except(codes, &[]);
 }
 
 /// Drops repeats from the sorted `codes`, and every code of the sorted
@@ -379,13 +350,12 @@ pub struct ScanUpdate {
 
 impl ScanUpdate {
     /// The update from casting output (Morton codes in any order, repeats
-    /// allowed): both lists sorted and freed of repeats, then the occupied
-    /// codes removed from the free ones, by merging.
-    pub fn from_codes(mut free: Vec<u64>, mut occupied: Vec<u64>) -> Self {
-        sort_dedup(&mut occupied);
-        crate::morton::sort_codes(&mut free);
-        dedup_except(&mut free, &occupied);
-        ScanUpdate { free, occupied }
+    /// allowed), through the block sets a scan's casting fills.
+    pub fn from_codes(free: &[u64], occupied: &[u64]) -> Self {
+        let mut c = Casting::default();
+        free.iter().for_each(|&f| c.free.insert(f));
+        occupied.iter().for_each(|&o| c.occupied.insert(o));
+        c.into_update()
     }
 
     /// The lists as keys, in Morton order.
@@ -593,17 +563,23 @@ impl OccupancyTree {
         compute_update(self.key_space(), points, origin, opts)
     }
 
-    /// The raw output of one thread's ray casting for a scan of finite
-    /// points with default options: the free codes, with the few repeats
-    /// the recent-key filter lets through, and the occupied codes, with all
-    /// their repeats, both unsorted. [`ScanUpdate::from_codes`] turns them
-    /// into [`Self::compute_update`]'s result; benchmarks use them to
-    /// compare ways of removing the repeats.
+    /// The raw output of ray casting for a scan of finite points with
+    /// default options: the free codes of every ray and the occupied codes
+    /// of every end point, repeats included, unsorted.
+    /// [`ScanUpdate::from_codes`] turns them into [`Self::compute_update`]'s
+    /// result; benchmarks use them to compare ways of removing the repeats.
     pub fn cast_codes(&self, points: &[Point3], origin: Point3) -> (Vec<u64>, Vec<u64>) {
+        let (mut free, mut occupied) = (Vec::new(), Vec::new());
         let fan = RayFan::new(self.key_space(), origin).ok();
-        let mut c = Casting::new();
-        c.cast_all(self.key_space(), fan.as_ref(), points, origin, &ScanOptions::default());
-        (c.free, c.occupied)
+        for &p in points {
+            let Ok(key) = self.key_space().key(p) else { continue };
+            let code = MortonCode::encode(key).0;
+            occupied.push(code);
+            if let Some(fan) = &fan {
+                fan.for_each_code(p, code, |c| free.push(c));
+            }
+        }
+        (free, occupied)
     }
 
     /// OctoMap's `insertPointCloudRays` ("simple" mode): ray by ray, each
@@ -818,9 +794,9 @@ fn cast_serial(
     origin: Point3,
     opts: &ScanOptions,
 ) -> ScanUpdate {
-    let mut c = Casting::new();
+    let mut c = Casting::default();
     c.cast_all(keys, fan, points, origin, opts);
-    ScanUpdate::from_codes(c.free, c.occupied)
+    c.into_update()
 }
 
 fn cast_scan(
@@ -835,18 +811,15 @@ fn cast_scan(
         return cast_serial(keys, points, fan, origin, opts);
     }
     let chunk = points.len().div_ceil(2 * threads).max(512);
-    let parts: Vec<Casting> = points
+    let parts: Vec<(Vec<u64>, Vec<u64>)> = points
         .par_chunks(chunk)
-        .fold(Casting::new, |mut acc, chunk| {
+        .fold(Casting::default, |mut acc, chunk| {
             acc.cast_all(keys, fan, chunk, origin, opts);
             acc
         })
-        .map(|mut c| {
-            c.finish();
-            c
-        })
+        .map(|c| c.finish())
         .collect();
-    let (free, occupied): (Vec<_>, Vec<_>) = parts.into_iter().map(|c| (c.free, c.occupied)).unzip();
+    let (free, occupied): (Vec<_>, Vec<_>) = parts.into_iter().unzip();
     let (mut free, occupied) = rayon::join(|| merge_sorted(free), || merge_sorted(occupied));
     dedup_except(&mut free, &occupied);
     ScanUpdate { free, occupied }
