@@ -10,6 +10,7 @@
 //! * `leaves`: eight rounds of OctoMap's leaf walk followed by ours twice (as
 //!   the benchmark alternates them), then the spread of 200 of ours back to
 //!   back (the branch predictor learns a walk that repeats).
+//! * `mleaves`: the same for the mapped view's leaf walk.
 //! * `fold`, `search`, `mapped`: the leaf fold 100 times, or 200k searches
 //!   twice, and nothing else timed; for `valgrind --tool=callgrind
 //!   --toggle-collect='*ab_probe::fold*'` (or `*ab_probe::by_key*`,
@@ -88,7 +89,7 @@ fn micros<T>(f: impl FnOnce() -> T) -> (f64, T) {
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.len() < 3 {
-        eprintln!("ab_probe indoor|outdoor RES time|race|leaves|fold|search|mapped|depths [compact]");
+        eprintln!("ab_probe indoor|outdoor RES time|race|leaves|mleaves|fold|search|mapped|depths [compact]");
         std::process::exit(2);
     }
     let kind = if args[0] == "outdoor" { SceneKind::Outdoor } else { SceneKind::Indoor };
@@ -113,8 +114,8 @@ fn main() {
                 "ns per query: tree by key {:6.2}, by point {:6.2}, search_many {:6.2}; \
                  mapped by key {:6.2}, by point {:6.2}, search_many {:6.2}",
                 best(&|| by_key(&tree, &keys)),
-                best(&|| many(&tree, &keys)),
                 best(&|| by_point(&tree, &points)),
+                best(&|| many(&tree, &keys)),
                 best(&|| view_by_key(&view, &keys)),
                 best(&|| view_by_point(&view, &points)),
                 best(&|| view_many(&view, &keys)),
@@ -147,6 +148,16 @@ fn main() {
             let mut v: Vec<f64> = (0..200).map(|_| micros(|| fold(&tree)).0).collect();
             v.sort_by(f64::total_cmp);
             println!("ours back to back: min {:.1}, median {:.1}, max {:.1} us", v[0], v[100], v[199]);
+        }
+        "mleaves" => {
+            let om = oracle(&scans, res);
+            let view_fold = || view.leaves(0).fold((0, 0f64), |(n, s), l| (n + 1, s + f64::from(l.value)));
+            for _ in 0..8 {
+                let (theirs, _) = micros(|| om.bench_leaf_sum(0));
+                let (after, _) = micros(view_fold);
+                let (again, _) = micros(view_fold);
+                println!("OctoMap {theirs:7.1} us, then the view {after:6.1} us, again {again:6.1} us");
+            }
         }
         "fold" => {
             for _ in 0..100 {

@@ -106,6 +106,9 @@ type Item = (Key, u8, u32, bool, u32);
 trait Queries {
     fn lookup(&self) -> &dyn OccupancyLookup;
     fn items(&self, which: Iter, max_depth: u8) -> Vec<Item>;
+    /// The leaves taken `skip` by `next`, the rest by `fold` (which has
+    /// its own fast path on the view).
+    fn leaves_folded(&self, max_depth: u8, skip: usize) -> Vec<Item>;
     fn cast(&self, o: Point3, d: Point3, opts: CastOptions) -> Result<CastOutcome, CastError>;
     fn search_many(&self, keys: &[Key], depth: u8) -> Vec<Option<Found>>;
 }
@@ -133,6 +136,15 @@ impl Queries for OccupancyTree {
             Iter::Box(b) => self.leaves_in_box(b, d).map(f).collect(),
         }
     }
+    fn leaves_folded(&self, d: u8, skip: usize) -> Vec<Item> {
+        let f = |n: octolinear::tree::NodeItem<'_>| (n.key, n.depth, n.value.to_bits(), n.is_leaf, n.extra);
+        let mut it = self.leaves(d);
+        let head: Vec<Item> = it.by_ref().take(skip).map(f).collect();
+        it.fold(head, |mut v, n| {
+            v.push(f(n));
+            v
+        })
+    }
     fn cast(&self, o: Point3, d: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
         self.cast_ray(o, d, opts)
     }
@@ -154,6 +166,14 @@ impl Queries for MapView<'_> {
             Iter::Box(b) => self.leaves_in_box(b, d).map(item).collect(),
         }
     }
+    fn leaves_folded(&self, d: u8, skip: usize) -> Vec<Item> {
+        let mut it = self.leaves(d);
+        let head: Vec<Item> = it.by_ref().take(skip).map(item).collect();
+        it.fold(head, |mut v, n| {
+            v.push(item(n));
+            v
+        })
+    }
     fn cast(&self, o: Point3, d: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
         self.cast_ray(o, d, opts)
     }
@@ -170,6 +190,9 @@ impl<D: AsRef<[u8]>> Queries for MappedMap<D> {
     }
     fn items(&self, which: Iter, d: u8) -> Vec<Item> {
         self.view().items(which, d)
+    }
+    fn leaves_folded(&self, d: u8, skip: usize) -> Vec<Item> {
+        self.view().leaves_folded(d, skip)
     }
     fn cast(&self, o: Point3, d: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
         mapped::cast_ray(self, o, d, opts)
@@ -214,7 +237,12 @@ fn same_answers(what: &str, reference: &dyn Queries, other: &dyn Queries, seed: 
         }
     }
     for d in [0, 16, 14, 13, 8, 3, 1] {
-        assert_eq!(reference.items(Iter::Leaves, d), other.items(Iter::Leaves, d), "{what}: leaves({d})");
+        let leaves = reference.items(Iter::Leaves, d);
+        assert_eq!(leaves, other.items(Iter::Leaves, d), "{what}: leaves({d})");
+        // fold from the start, from inside a depth-15 node's voxels, and after the end
+        for skip in [0, 1, 7, leaves.len()] {
+            assert_eq!(leaves, other.leaves_folded(d, skip), "{what}: leaves({d}) folded after {skip}");
+        }
     }
     for d in [0, 14, 2] {
         assert_eq!(reference.items(Iter::Nodes, d), other.items(Iter::Nodes, d), "{what}: nodes({d})");

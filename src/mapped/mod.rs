@@ -226,11 +226,8 @@ impl<'a> Iterator for MapIter<'a> {
     /// One match on the layout, then a loop without it.
     #[inline]
     fn fold<B, F: FnMut(B, Self::Item) -> B>(self, init: B, mut f: F) -> B {
-        fn run<'a, N: Nav, B>(mut i: RawIter<'a, N>, mut acc: B, f: &mut impl FnMut(B, MapItem<'a>) -> B) -> B {
-            while let Some(item) = i.next_item() {
-                acc = f(acc, item);
-            }
-            acc
+        fn run<'a, N: Nav, B>(i: RawIter<'a, N>, acc: B, f: &mut impl FnMut(B, MapItem<'a>) -> B) -> B {
+            i.fold(acc, f)
         }
         match self.0 {
             IterInner::Rank(i) => run(i, init, &mut f),

@@ -331,6 +331,59 @@ impl<'a, N: Nav> RawIter<'a, N> {
 
     #[inline]
     pub fn next_item(&mut self) -> Option<MapItem<'a>> {
+        self.advance(false)
+    }
+
+    /// `fold` over the rest of a walk. Where a depth-15 node's voxels come
+    /// next in a walk of all leaves, they are taken in one loop here: the
+    /// same steps as [`Self::next_item`]'s without its frame handling and
+    /// tests (small-map leaf walk 100 → 70 us).
+    pub fn fold<B>(mut self, mut acc: B, f: &mut impl FnMut(B, MapItem<'a>) -> B) -> B {
+        let voxels = self.leaves_only && self.bbx.is_none() && self.max_depth == TREE_DEPTH;
+        loop {
+            if voxels && self.len == TREE_DEPTH as usize {
+                let fr = self.frames[TREE_DEPTH as usize - 1];
+                let mut remaining = fr.remaining;
+                let mut next = fr.next;
+                while remaining != 0 {
+                    if self.budget == 0 {
+                        self.len = 0;
+                        return acc;
+                    }
+                    self.budget -= 1;
+                    let pos = remaining.trailing_zeros() as usize;
+                    remaining &= remaining - 1;
+                    let n = self.nav.member(&fr.children, usize::from(next));
+                    next += 1;
+                    // a voxel's mask is 0 (else the bytes are corrupted, and
+                    // `visit` reports it as a leaf all the same)
+                    if let Some((value, _)) = self.nav.get(n) {
+                        let key = packed::unpack(packed::child(fr.child0, pos, TREE_DEPTH - 1));
+                        let item = MapItem {
+                            key,
+                            depth: TREE_DEPTH,
+                            value,
+                            is_leaf: true,
+                            extra: self.extras.get(n),
+                            keys: self.keys,
+                        };
+                        acc = f(acc, item);
+                    }
+                }
+                self.len -= 1;
+            }
+            match self.advance(voxels) {
+                Some(item) => acc = f(acc, item),
+                None if voxels && self.len == TREE_DEPTH as usize => {}
+                None => return acc,
+            }
+        }
+    }
+
+    /// [`Self::next_item`]; with `stop_at_voxels`, returns `None` also when
+    /// the next frame holds a depth-15 node's voxels (`len` is then 16).
+    #[inline(always)]
+    fn advance(&mut self, stop_at_voxels: bool) -> Option<MapItem<'a>> {
         if self.root_pending {
             self.root_pending = false;
             let root = self.nav.root()?;
@@ -339,6 +392,9 @@ impl<'a, N: Nav> RawIter<'a, N> {
             }
         }
         while self.len > 0 {
+            if stop_at_voxels && self.len == TREE_DEPTH as usize {
+                return None;
+            }
             let depth = self.len - 1;
             let f = &mut self.frames[depth];
             if f.remaining == 0 {
