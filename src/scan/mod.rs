@@ -883,45 +883,37 @@ mod tests {
         assert!(matches!(err, Err(ScanError::Origin { .. })));
     }
 
+    /// `n` simulated indoor scans (points in the world frame, origin).
+    fn indoor_scans(n: usize, seed: u64) -> Vec<(Vec<Point3>, Point3)> {
+        let cfg = crate::simulate::LidarConfig::indoor();
+        let g = crate::simulate::simulate(crate::simulate::SceneKind::Indoor, n, seed, &cfg).unwrap();
+        g.nodes.iter().map(|n| n.graph2tree()).map(|(c, o)| (c.points, o)).collect()
+    }
+
+    fn ot(t: &OccupancyTree) -> Vec<u8> {
+        let mut out = Vec::new();
+        crate::formats::ot::write(t, &mut out).unwrap();
+        out
+    }
+
     #[test]
     fn thread_count_does_not_change_the_tree() {
-        let g = crate::simulate::simulate(
-            crate::simulate::SceneKind::Indoor,
-            3,
-            5,
-            &crate::simulate::LidarConfig::indoor(),
-        )
-        .unwrap();
+        let scans = indoor_scans(3, 5);
         let mut bytes = Vec::new();
         for threads in [1, 2, 8] {
             let mut t = OccupancyTree::new(0.05).unwrap();
-            for n in &g.nodes {
-                let (cloud, origin) = n.graph2tree();
+            for (points, origin) in &scans {
                 let opts = ScanOptions { threads: Some(threads), ..Default::default() };
-                t.insert_point_cloud(&cloud.points, origin, &opts).unwrap();
+                t.insert_point_cloud(points, *origin, &opts).unwrap();
             }
-            let mut out = Vec::new();
-            crate::formats::ot::write(&t, &mut out).unwrap();
-            bytes.push(out);
+            bytes.push(ot(&t));
         }
         assert!(bytes[0] == bytes[1] && bytes[1] == bytes[2]);
     }
 
     #[test]
     fn pipelined_insertion_matches_scan_by_scan() {
-        let g = crate::simulate::simulate(
-            crate::simulate::SceneKind::Indoor,
-            4,
-            9,
-            &crate::simulate::LidarConfig::indoor(),
-        )
-        .unwrap();
-        let scans: Vec<_> = g.nodes.iter().map(|n| n.graph2tree()).map(|(c, o)| (c.points, o)).collect();
-        let ot = |t: &OccupancyTree| {
-            let mut out = Vec::new();
-            crate::formats::ot::write(t, &mut out).unwrap();
-            out
-        };
+        let scans = indoor_scans(4, 9);
         // colour trees must keep OctoMap's key order: colours blended in
         // after each scan make that order visible in the next one
         for kind in [NodeKind::Plain, NodeKind::Color, NodeKind::Stamped] {
