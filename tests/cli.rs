@@ -2,6 +2,8 @@
 //! Debian's OctoMap tools where they exist (bytes of files, numbers they
 //! print), by content otherwise, and every error path a user can hit.
 
+mod common;
+use common::lzf_compress;
 use octolinear::formats::{bt, graph, ot};
 use octolinear::{OccupancyTree, Point3};
 use std::path::{Path, PathBuf};
@@ -763,46 +765,6 @@ fn cloud() -> Vec<[f32; 3]> {
         v.push([q(r * a.cos()), q(r * a.sin()), q(f64::from(i % 13) * 0.125 - 0.5)]);
     }
     v
-}
-
-fn lzf_compress(input: &[u8]) -> Vec<u8> {
-    fn flush(out: &mut Vec<u8>, lit: &mut Vec<u8>) {
-        for chunk in lit.chunks(32) {
-            out.push((chunk.len() - 1) as u8);
-            out.extend_from_slice(chunk);
-        }
-        lit.clear();
-    }
-    let (mut out, mut lit, mut i) = (Vec::new(), Vec::new(), 0);
-    while i < input.len() {
-        let mut best = (0, 0);
-        for j in i.saturating_sub(8192)..i {
-            let mut l = 0;
-            while i + l < input.len() && l < 264 && input[j + l] == input[i + l] {
-                l += 1;
-            }
-            if l > best.0 {
-                best = (l, i - j - 1);
-            }
-        }
-        if best.0 >= 3 {
-            flush(&mut out, &mut lit);
-            let (len, off) = (best.0 - 2, best.1);
-            if len < 7 {
-                out.push(((len << 5) | (off >> 8)) as u8);
-            } else {
-                out.push(((7 << 5) | (off >> 8)) as u8);
-                out.push((len - 7) as u8);
-            }
-            out.push((off & 0xff) as u8);
-            i += best.0;
-        } else {
-            lit.push(input[i]);
-            i += 1;
-        }
-    }
-    flush(&mut out, &mut lit);
-    out
 }
 
 fn write_cloud_files(f: &Fixture, pts: &[[f32; 3]]) -> Vec<PathBuf> {

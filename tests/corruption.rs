@@ -39,10 +39,22 @@ mod fuzz_ros;
 #[path = "../fuzz/fuzz_targets/xyz.rs"]
 mod fuzz_xyz;
 
+#[path = "../fuzz/fuzz_targets/ply.rs"]
+mod fuzz_ply;
+
+#[path = "../fuzz/fuzz_targets/pcd.rs"]
+mod fuzz_pcd;
+
+#[path = "../fuzz/fuzz_targets/binvox.rs"]
+mod fuzz_binvox;
+
+use octolinear::formats::binvox::BinvoxError;
 use octolinear::formats::graph::{GraphError, ScanGraph};
 use octolinear::formats::log::LogError;
+use octolinear::formats::pcd::PcdError;
+use octolinear::formats::ply::PlyError;
 use octolinear::formats::xyz::XyzError;
-use octolinear::formats::{bt, graph, log, ot, ros, xyz, TreeFileError};
+use octolinear::formats::{binvox, bt, graph, log, ot, pcd, ply, ros, xyz, TreeFileError};
 use octolinear::tree::{Clock, CountingTree, InnerNodes, NodeKind, OccupancyTree};
 use octolinear::{Point3, PointCloud, Pose6D, SensorModel};
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -190,6 +202,9 @@ enum Format {
     Xyz,
     Log,
     Ros,
+    Ply,
+    Pcd,
+    Binvox,
 }
 
 impl Format {
@@ -201,6 +216,9 @@ impl Format {
             Format::Xyz => "xyz",
             Format::Log => "log",
             Format::Ros => "ros",
+            Format::Ply => "ply",
+            Format::Pcd => "pcd",
+            Format::Binvox => "binvox",
         }
     }
 
@@ -278,6 +296,37 @@ impl Format {
                 };
                 (e.to_string(), Place::Line(line))
             }),
+            // whole-buffer readers: the allocation bound and the mutant
+            // count are what watch their loops
+            Format::Ply => ply::read(data, true).map(drop).map_err(|e| {
+                let place = match &e {
+                    PlyError::HeaderNotText { offset }
+                    | PlyError::HeaderLine { offset, .. }
+                    | PlyError::DataNotText { offset }
+                    | PlyError::Truncated { offset, .. } => Place::Byte(*offset as u64),
+                    _ => Place::Unknown,
+                };
+                (e.to_string(), place)
+            }),
+            Format::Pcd => pcd::read(data, true).map(drop).map_err(|e| {
+                let place = match &e {
+                    PcdError::HeaderNotText { offset }
+                    | PcdError::BadCount { offset, .. }
+                    | PcdError::DataNotText { offset }
+                    | PcdError::NoSizeWords { offset } => Place::Byte(*offset as u64),
+                    _ => Place::Unknown,
+                };
+                (e.to_string(), place)
+            }),
+            Format::Binvox => binvox::read(data).and_then(|bv| bv.for_each_run(|_, _| {})).map_err(|e| {
+                let place = match &e {
+                    BinvoxError::NotANumber { offset, .. }
+                    | BinvoxError::DataEnds { offset, .. }
+                    | BinvoxError::Overrun { offset, .. } => Place::Byte(*offset as u64),
+                    _ => Place::Unknown,
+                };
+                (e.to_string(), place)
+            }),
         }
     }
 
@@ -289,6 +338,9 @@ impl Format {
             Format::Xyz => fuzz_xyz::check,
             Format::Log => fuzz_log::check,
             Format::Ros => fuzz_ros::check,
+            Format::Ply => fuzz_ply::check,
+            Format::Pcd => fuzz_pcd::check,
+            Format::Binvox => fuzz_binvox::check,
         }
     }
 }
@@ -908,12 +960,145 @@ fn text_mutants() {
     }
 }
 
+/// Small PLY files: ASCII with a face element before the vertices and
+/// float colours, binary of both byte orders with integer colours.
+fn ply_bases() -> Vec<(String, Vec<u8>)> {
+    let pts = points();
+    let head = |format: &str, color: &str| {
+        format!(
+            "ply\nformat {format} 1.0\ncomment test\nelement face 2\nproperty list uchar int vertex_indices\n\
+             element vertex {}\nproperty float x\nproperty {color} red\nproperty float y\nproperty float z\n\
+             property {color} green\nproperty {color} blue\nend_header\n",
+            pts.len()
+        )
+        .into_bytes()
+    };
+    let mut ascii = head("ascii", "float");
+    ascii.extend_from_slice(b"3 0 1 2\n4 0 1 2 3\n");
+    for (i, p) in pts.iter().enumerate() {
+        let c = (i % 5) as f32 / 4.0;
+        ascii.extend_from_slice(format!("{} {c} {} {} 0.5 1\n", p.x, p.y, p.z).as_bytes());
+    }
+    let mut files = vec![("ascii ply".to_string(), ascii)];
+    for (name, little) in [("binary_little_endian", true), ("binary_big_endian", false)] {
+        let mut f = head(name, "uchar");
+        let int = |v: i32| if little { v.to_le_bytes() } else { v.to_be_bytes() };
+        let float = |v: f32| if little { v.to_le_bytes() } else { v.to_be_bytes() };
+        for face in [&[0, 1, 2][..], &[0, 1, 2, 3]] {
+            f.push(face.len() as u8);
+            face.iter().for_each(|&i| f.extend_from_slice(&int(i)));
+        }
+        for (i, p) in pts.iter().enumerate() {
+            f.extend_from_slice(&float(p.x));
+            f.push(i as u8);
+            f.extend_from_slice(&float(p.y));
+            f.extend_from_slice(&float(p.z));
+            f.extend_from_slice(&[200, 7]);
+        }
+        files.push((format!("{name} ply"), f));
+    }
+    files
+}
+
+/// Small PCD files of the three data kinds, with a packed colour and a
+/// field of COUNT 2.
+fn pcd_bases() -> Vec<(String, Vec<u8>)> {
+    let pts = points();
+    let n = pts.len();
+    let head = |kind: &str| {
+        format!(
+            "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z rgb normal\nSIZE 4 4 4 4 2\nTYPE F F F U I\nCOUNT 1 1 1 1 2\n\
+             WIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {kind}\n"
+        )
+        .into_bytes()
+    };
+    let rgb = |i: usize| 0x0010_2030u32 + i as u32;
+    let mut ascii = head("ascii");
+    for (i, p) in pts.iter().enumerate() {
+        ascii.extend_from_slice(format!("{} {} {} {} -1 {i}\n", p.x, p.y, p.z, rgb(i)).as_bytes());
+    }
+    let fields = |i: usize, p: &Point3| -> [Vec<u8>; 5] {
+        [
+            p.x.to_le_bytes().to_vec(),
+            p.y.to_le_bytes().to_vec(),
+            p.z.to_le_bytes().to_vec(),
+            rgb(i).to_le_bytes().to_vec(),
+            [(-1i16).to_le_bytes(), (i as i16).to_le_bytes()].concat(),
+        ]
+    };
+    let mut binary = head("binary");
+    for (i, p) in pts.iter().enumerate() {
+        fields(i, p).iter().for_each(|f| binary.extend_from_slice(f));
+    }
+    let mut soa = Vec::new();
+    for f in 0..5 {
+        for (i, p) in pts.iter().enumerate() {
+            soa.extend_from_slice(&fields(i, p)[f]);
+        }
+    }
+    let comp = common::lzf_compress(&soa);
+    let mut compressed = head("binary_compressed");
+    compressed.extend_from_slice(&(comp.len() as u32).to_le_bytes());
+    compressed.extend_from_slice(&(soa.len() as u32).to_le_bytes());
+    compressed.extend_from_slice(&comp);
+    vec![("ascii pcd".into(), ascii), ("binary pcd".into(), binary), ("compressed pcd".into(), compressed)]
+}
+
+/// A small binvox grid with runs of both values.
+fn binvox_base() -> Vec<u8> {
+    let mut f = b"#binvox 1\ndim 6 5 4\ntranslate -0.5 0.25 1\nscale 1.5\ndata\n".to_vec();
+    f.extend_from_slice(&[0, 17, 1, 40, 0, 3, 1, 60]);
+    f
+}
+
+#[test]
+fn point_file_and_grid_mutants() {
+    let mut rng = Rng(0x7e_0002);
+    let ply = ply_bases();
+    let pcd = pcd_bases();
+    let grid = vec![("binvox grid".to_string(), binvox_base())];
+    let specials: Vec<(&str, Vec<u8>)> = vec![
+        ("ply: huge empty element", b"ply\nformat ascii 1.0\nelement e 18446744073709551615\nend_header\n".to_vec()),
+        (
+            "ply: huge list",
+            b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty list uint float x\nend_header\n\xff\xff\xff\xff"
+                .to_vec(),
+        ),
+        ("pcd: lying LZF size", [&pcd[2].1[..pcd[2].1.len() - 1], &[0xff]].concat()),
+        ("binvox: huge grid", b"#binvox 1\ndim 2000000 2000000 2000000\ndata\n\x01\xff".to_vec()),
+    ];
+    for (format, bases, floor) in [(Format::Ply, &ply, 1000), (Format::Pcd, &pcd, 1000), (Format::Binvox, &grid, 300)] {
+        let mut tally = Tally::default();
+        let others: Vec<&[u8]> = ply.iter().chain(&pcd).chain(&grid).map(|b| &b.1[..]).collect();
+        for (name, base) in bases {
+            tally.run(format, &format!("{name}: intact"), base);
+            byte_mutants(base, &others, &mut rng, 150, |what, m| tally.run(format, &format!("{name}: {what}"), &m));
+        }
+        for (what, m) in &specials {
+            tally.run(format, what, m);
+        }
+        let prefix = &bases[0].1[..bases[0].1.iter().position(|&b| b == b'\n').unwrap() + 1];
+        junk_mutants(&[prefix], &mut rng, 60, |what, m| tally.run(format, &what, &m));
+        tally.finish(format, floor);
+    }
+}
+
 /// Inputs kept under `tests/regressions/<format>/` (crashes found by
 /// fuzzing or by the mutants above) must now read cleanly.
 #[test]
 fn regressions_replay() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/regressions");
-    for format in [Format::Ot, Format::Bt, Format::Graph, Format::Xyz, Format::Log, Format::Ros] {
+    for format in [
+        Format::Ot,
+        Format::Bt,
+        Format::Graph,
+        Format::Xyz,
+        Format::Log,
+        Format::Ros,
+        Format::Ply,
+        Format::Pcd,
+        Format::Binvox,
+    ] {
         let mut tally = Tally::default();
         let Ok(entries) = std::fs::read_dir(dir.join(format.name())) else { continue };
         let mut paths: Vec<PathBuf> = entries.map(|e| e.unwrap().path()).collect();

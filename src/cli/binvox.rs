@@ -3,6 +3,7 @@
 
 use super::common::{point_arg, save_map};
 use anyhow::{bail, Context, Result};
+use octolinear::formats::binvox::{self, Binvox};
 use octolinear::{InnerNodes, OccupancyTree, Point3};
 use std::path::{Path, PathBuf};
 
@@ -41,81 +42,6 @@ pub struct Args {
     json: bool,
 }
 
-/// A binvox header and its RLE data.
-pub struct Binvox {
-    /// `dim` as written: depth, height, width.
-    pub dim: [usize; 3],
-    pub translate: [f32; 3],
-    pub scale: f32,
-    /// Pairs of (value, count) bytes.
-    pub data: Vec<u8>,
-}
-
-/// A byte cursor reading like a C++ istream with `>>`.
-struct Cursor<'a> {
-    b: &'a [u8],
-    i: usize,
-}
-
-impl Cursor<'_> {
-    fn token(&mut self) -> Option<&str> {
-        while self.i < self.b.len() && self.b[self.i].is_ascii_whitespace() {
-            self.i += 1;
-        }
-        let start = self.i;
-        while self.i < self.b.len() && !self.b[self.i].is_ascii_whitespace() {
-            self.i += 1;
-        }
-        (self.i > start).then(|| std::str::from_utf8(&self.b[start..self.i]).unwrap_or("\u{fffd}"))
-    }
-
-    fn number<T: std::str::FromStr>(&mut self, what: &str) -> Result<T> {
-        let t = self.token().with_context(|| format!("header ends before the {what}"))?;
-        t.parse().ok().with_context(|| format!("header: {what} {t:?} is not a number"))
-    }
-}
-
-/// Parses a binvox file.
-pub fn parse(bytes: &[u8]) -> Result<Binvox> {
-    let mut c = Cursor { b: bytes, i: 0 };
-    match c.token() {
-        Some("#binvox") => {}
-        other => bail!("first token is {:?} instead of \"#binvox\"", other.unwrap_or("")),
-    }
-    let _version: i64 = c.number("version")?;
-    let (mut dim, mut translate, mut scale) = (None, [0f32; 3], 1f32);
-    loop {
-        let Some(t) = c.token() else {
-            bail!("header has no \"data\" line");
-        };
-        match t {
-            "data" => break,
-            "dim" => dim = Some([c.number("dimension")?, c.number("dimension")?, c.number("dimension")?]),
-            "translate" => {
-                for v in &mut translate {
-                    *v = c.number("translation")?;
-                }
-            }
-            "scale" => scale = c.number("scale")?,
-            _ => {
-                while c.i < bytes.len() && bytes[c.i] != b'\n' {
-                    c.i += 1;
-                }
-            }
-        }
-    }
-    let dim = dim.context("header has no \"dim\" line")?;
-    if dim.contains(&0) {
-        bail!("dimension {dim:?} is empty");
-    }
-    if !(scale.is_finite() && scale > 0.0) || translate.iter().any(|t| !t.is_finite()) {
-        bail!("header: scale {scale} / translation {translate:?} not usable");
-    }
-    // the byte after "data" (its line feed) is skipped
-    let data = bytes.get(c.i + 1..).unwrap_or_default().to_vec();
-    Ok(Binvox { dim, translate, scale, data })
-}
-
 #[derive(Default)]
 struct Counts {
     voxels: usize,
@@ -124,12 +50,7 @@ struct Counts {
 
 /// Adds one grid to the tree (creating it at the grid's resolution).
 fn insert(tree: &mut Option<OccupancyTree>, bv: &Binvox, a: &Args, path: &Path, counts: &mut Counts) -> Result<()> {
-    let [depth, height, width] = bv.dim;
-    let size = depth
-        .checked_mul(height)
-        .and_then(|s| s.checked_mul(width))
-        .with_context(|| format!("dimension {:?} is too large", bv.dim))?;
-    let max_side = width.max(height).max(depth) as i32;
+    let max_side = bv.dim.into_iter().max().unwrap_or(1) as i32;
     let res = f64::from(bv.scale) / f64::from(max_side);
     let t = tree.get_or_insert(OccupancyTree::new(res)?);
     let offset = match &a.offset {
@@ -137,19 +58,12 @@ fn insert(tree: &mut Option<OccupancyTree>, bv: &Binvox, a: &Args, path: &Path, 
         None => None,
     };
     let [tx, ty, tz] = bv.translate.map(f64::from);
-    let (mut index, mut pairs) = (0usize, bv.data.chunks_exact(2));
-    while index < size {
-        let Some(&[value, count]) = pairs.next() else {
-            bail!("{}: data ends after {index} of {size} voxels", path.display());
-        };
-        let end = index + usize::from(count);
-        if end > size {
-            bail!("{}: run-length data covers more than the {size} voxels of the grid", path.display());
+    let mut add = |value: u8, voxels: std::ops::Range<usize>| {
+        if value != 0 {
+            counts.voxels += voxels.len();
         }
-        for j in index..end {
-            let y = j % width;
-            let z = (j / width) % height;
-            let x = j / (width * height);
+        for j in voxels {
+            let [x, y, z] = bv.coords(j);
             let mut p = Point3::new(
                 (x as f64 * res + tx + 0.000001) as f32,
                 (y as f64 * res + ty + 0.000001) as f32,
@@ -174,11 +88,8 @@ fn insert(tree: &mut Option<OccupancyTree>, bv: &Binvox, a: &Args, path: &Path, 
                 counts.out_of_box += 1;
             }
         }
-        if value != 0 {
-            counts.voxels += usize::from(count);
-        }
-        index = end;
-    }
+    };
+    bv.for_each_run(&mut add).with_context(|| format!("{}: not a valid binvox file", path.display()))?;
     Ok(())
 }
 
@@ -198,7 +109,7 @@ pub fn run(a: Args) -> Result<()> {
     let mut counts = Counts::default();
     for path in &a.inputs {
         let bytes = std::fs::read(path).with_context(|| format!("cannot open {}", path.display()))?;
-        let bv = parse(&bytes).with_context(|| format!("{}: not a binvox file", path.display()))?;
+        let bv = binvox::read(&bytes).with_context(|| format!("{}: not a binvox file", path.display()))?;
         insert(&mut tree, &bv, &a, path, &mut counts)?;
     }
     let mut tree = tree.context("no input")?;

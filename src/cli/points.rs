@@ -72,7 +72,7 @@ pub fn run(a: Args) -> Result<()> {
     write_output(&a.output, |w| match format.as_str() {
         "xyz" => octolinear::formats::xyz::write(&points.clone().into(), w),
         "pcd" => write_pcd(&points, w),
-        _ => write_ply(&points, a.ascii, w),
+        _ => octolinear::formats::ply::write(&points, a.ascii, w),
     })?;
     eprintln!(
         "wrote {} {} voxel centres to {}",
@@ -93,27 +93,6 @@ fn write_pcd(points: &[Point3], mut w: impl Write) -> std::io::Result<()> {
     )?;
     for p in points {
         writeln!(w, "{} {} {}", format_g6(f64::from(p.x)), format_g6(f64::from(p.y)), format_g6(f64::from(p.z)))?;
-    }
-    Ok(())
-}
-
-fn write_ply(points: &[Point3], ascii: bool, mut w: impl Write) -> std::io::Result<()> {
-    let format = if ascii { "ascii" } else { "binary_little_endian" };
-    write!(
-        w,
-        "ply\nformat {format} 1.0\ncomment written by octolinear\nelement vertex {}\n\
-         property float x\nproperty float y\nproperty float z\nend_header\n",
-        points.len()
-    )?;
-    for p in points {
-        if ascii {
-            use octolinear::formats::xyz::format_f32 as f;
-            writeln!(w, "{} {} {}", f(p.x), f(p.y), f(p.z))?;
-        } else {
-            for c in p.to_array() {
-                w.write_all(&c.to_le_bytes())?;
-            }
-        }
     }
     Ok(())
 }

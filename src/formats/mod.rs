@@ -2,15 +2,20 @@
 //! each writer `impl Write`; writes to a path go through [`write_atomically`]
 //! so a crash never leaves a half-written file.
 
+pub mod binvox;
 pub mod bt;
 pub mod graph;
 mod header;
 pub mod log;
 pub mod ot;
+pub mod pcd;
+pub mod ply;
 pub mod ros;
+mod scalar;
 pub mod xyz;
 
 pub use header::{format_double, Header};
+pub use scalar::ColoredCloud;
 
 use std::fs::File;
 use std::io::{self, BufWriter, Write};

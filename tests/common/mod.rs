@@ -344,3 +344,45 @@ pub fn read_xyz(text: &str) -> Vec<Point3> {
 pub fn point_from_hex(cols: &[&str]) -> Point3 {
     Point3::new(parse_f32hex(cols[0]), parse_f32hex(cols[1]), parse_f32hex(cols[2]))
 }
+
+/// A greedy LZF compressor (liblzf's format, as PCL's `binary_compressed`
+/// uses): literal runs and back references, for building test inputs.
+pub fn lzf_compress(input: &[u8]) -> Vec<u8> {
+    fn flush(out: &mut Vec<u8>, lit: &mut Vec<u8>) {
+        for chunk in lit.chunks(32) {
+            out.push((chunk.len() - 1) as u8);
+            out.extend_from_slice(chunk);
+        }
+        lit.clear();
+    }
+    let (mut out, mut lit, mut i) = (Vec::new(), Vec::new(), 0);
+    while i < input.len() {
+        let mut best = (0, 0);
+        for j in i.saturating_sub(8192)..i {
+            let mut l = 0;
+            while i + l < input.len() && l < 264 && input[j + l] == input[i + l] {
+                l += 1;
+            }
+            if l > best.0 {
+                best = (l, i - j - 1);
+            }
+        }
+        if best.0 >= 3 {
+            flush(&mut out, &mut lit);
+            let (len, off) = (best.0 - 2, best.1);
+            if len < 7 {
+                out.push(((len << 5) | (off >> 8)) as u8);
+            } else {
+                out.push(((7 << 5) | (off >> 8)) as u8);
+                out.push((len - 7) as u8);
+            }
+            out.push((off & 0xff) as u8);
+            i += best.0;
+        } else {
+            lit.push(input[i]);
+            i += 1;
+        }
+    }
+    flush(&mut out, &mut lit);
+    out
+}

@@ -1,0 +1,176 @@
+//! Patrick Min's binvox voxel grids (see `formats/binvox.md`), as
+//! OctoMap's `binvox2bt` reads them: a text header, then run-length pairs.
+
+use std::ops::Range;
+
+/// Why a binvox file could not be read. Offsets count bytes from the start
+/// of the file.
+#[derive(Debug, thiserror::Error)]
+pub enum BinvoxError {
+    #[error("the first token is {found:?} instead of \"#binvox\"")]
+    NotBinvox { found: String },
+    #[error("the header ends before the {what}")]
+    HeaderEnds { what: &'static str },
+    #[error("header, byte {offset}: the {what} {token:?} is not a number")]
+    NotANumber { offset: usize, what: &'static str, token: String },
+    #[error("the header has no \"data\" line")]
+    NoData,
+    #[error("the header has no \"dim\" line")]
+    NoDim,
+    #[error("dimension {0:?} is empty")]
+    EmptyDim([usize; 3]),
+    #[error("dimension {0:?} is too large")]
+    TooLarge([usize; 3]),
+    #[error("scale {scale} / translation {translate:?} is not usable")]
+    BadPlacement { scale: f32, translate: [f32; 3] },
+    #[error("the data ends after {read} of {size} voxels (byte {offset})")]
+    DataEnds { offset: usize, read: usize, size: usize },
+    #[error("the run at byte {offset} goes past the {size} voxels of the grid")]
+    Overrun { offset: usize, size: usize },
+}
+
+/// A binvox header and its run-length data.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Binvox {
+    /// `dim` as written: depth, height, width.
+    pub dim: [usize; 3],
+    pub translate: [f32; 3],
+    pub scale: f32,
+    /// Voxels in the grid (the product of `dim`).
+    pub size: usize,
+    /// Pairs of (value, count) bytes, from byte `data_offset` of the file.
+    data: Vec<u8>,
+    data_offset: usize,
+}
+
+/// A byte cursor reading like a C++ istream with `>>`.
+struct Cursor<'a> {
+    b: &'a [u8],
+    i: usize,
+}
+
+impl Cursor<'_> {
+    fn token(&mut self) -> Option<(usize, &str)> {
+        while self.i < self.b.len() && self.b[self.i].is_ascii_whitespace() {
+            self.i += 1;
+        }
+        let start = self.i;
+        while self.i < self.b.len() && !self.b[self.i].is_ascii_whitespace() {
+            self.i += 1;
+        }
+        (self.i > start).then(|| (start, std::str::from_utf8(&self.b[start..self.i]).unwrap_or("\u{fffd}")))
+    }
+
+    fn number<T: std::str::FromStr>(&mut self, what: &'static str) -> Result<T, BinvoxError> {
+        let (offset, t) = self.token().ok_or(BinvoxError::HeaderEnds { what })?;
+        t.parse().map_err(|_| BinvoxError::NotANumber { offset, what, token: t.to_string() })
+    }
+}
+
+/// Parses a binvox file's header; its runs are checked by
+/// [`Binvox::for_each_run`].
+pub fn read(bytes: &[u8]) -> Result<Binvox, BinvoxError> {
+    let mut c = Cursor { b: bytes, i: 0 };
+    match c.token() {
+        Some((_, "#binvox")) => {}
+        other => return Err(BinvoxError::NotBinvox { found: other.map_or("", |t| t.1).to_string() }),
+    }
+    let _version: i64 = c.number("version")?;
+    let (mut dim, mut translate, mut scale) = (None, [0f32; 3], 1f32);
+    loop {
+        let Some((_, t)) = c.token() else { return Err(BinvoxError::NoData) };
+        match t {
+            "data" => break,
+            "dim" => dim = Some([c.number("dimension")?, c.number("dimension")?, c.number("dimension")?]),
+            "translate" => {
+                for v in &mut translate {
+                    *v = c.number("translation")?;
+                }
+            }
+            "scale" => scale = c.number("scale")?,
+            _ => {
+                while c.i < bytes.len() && bytes[c.i] != b'\n' {
+                    c.i += 1;
+                }
+            }
+        }
+    }
+    let dim: [usize; 3] = dim.ok_or(BinvoxError::NoDim)?;
+    if dim.contains(&0) {
+        return Err(BinvoxError::EmptyDim(dim));
+    }
+    let size = dim[0].checked_mul(dim[1]).and_then(|s| s.checked_mul(dim[2])).ok_or(BinvoxError::TooLarge(dim))?;
+    // the largest side becomes an i32 in binvox2bt's resolution
+    if dim.iter().any(|&d| d > i32::MAX as usize) {
+        return Err(BinvoxError::TooLarge(dim));
+    }
+    if !(scale.is_finite() && scale > 0.0) || translate.iter().any(|t| !t.is_finite()) {
+        return Err(BinvoxError::BadPlacement { scale, translate });
+    }
+    // the byte after "data" (its line feed) is skipped
+    let data_offset = (c.i + 1).min(bytes.len());
+    Ok(Binvox { dim, translate, scale, size, data: bytes[data_offset..].to_vec(), data_offset })
+}
+
+impl Binvox {
+    /// Calls `f` with each run's value and its voxels (linear indices),
+    /// in order; fails when the runs do not cover the grid exactly. Bytes
+    /// after the last needed run are ignored, as binvox2bt does.
+    pub fn for_each_run(&self, mut f: impl FnMut(u8, Range<usize>)) -> Result<(), BinvoxError> {
+        let mut index = 0;
+        let mut pairs = self.data.chunks_exact(2).enumerate();
+        while index < self.size {
+            let Some((n, &[value, count])) = pairs.next() else {
+                let offset = self.data_offset + self.data.len();
+                return Err(BinvoxError::DataEnds { offset, read: index, size: self.size });
+            };
+            let end = index + usize::from(count);
+            if end > self.size {
+                return Err(BinvoxError::Overrun { offset: self.data_offset + 2 * n, size: self.size });
+            }
+            f(value, index..end);
+            index = end;
+        }
+        Ok(())
+    }
+
+    /// The grid coordinates (x, y, z) of voxel `j`, as binvox2bt assigns
+    /// them: y varies fastest, then z, then x.
+    pub fn coords(&self, j: usize) -> [usize; 3] {
+        let [_, height, width] = self.dim;
+        [j / (width * height), j % width, (j / width) % height]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn runs_cover_the_grid_in_order() {
+        let mut f = b"#binvox 1\ndim 2 2 3\ntranslate -1 0.5 2\nscale 3\ndata\n".to_vec();
+        f.extend_from_slice(&[0, 5, 1, 7, 9, 9]);
+        let bv = read(&f).unwrap();
+        assert_eq!((bv.dim, bv.translate, bv.scale, bv.size), ([2, 2, 3], [-1.0, 0.5, 2.0], 3.0, 12));
+        let mut runs = Vec::new();
+        bv.for_each_run(|v, r| runs.push((v, r))).unwrap();
+        assert_eq!(runs, [(0, 0..5), (1, 5..12)]);
+        assert_eq!(bv.coords(7), [1, 1, 0]);
+    }
+
+    #[test]
+    fn bad_files_name_what_is_wrong() {
+        let err = |b: &[u8]| match read(b) {
+            Ok(bv) => bv.for_each_run(|_, _| {}).unwrap_err().to_string(),
+            Err(e) => e.to_string(),
+        };
+        assert!(err(b"#binvox 1\ndim 2 2 3\ndata\n\x00\x05").contains("ends after 5 of 12 voxels (byte 27)"));
+        assert!(err(b"#binvox 1\ndim 2 2 3\ndata\n\x00\x05\x01\x08").contains("run at byte 27 goes past"));
+        assert!(err(b"#binvox 1\ndim 2 x 3\ndata\n").contains("byte 16: the dimension \"x\""));
+        assert!(err(b"#binvox 1\ndim 0 2 3\ndata\n").contains("empty"));
+        assert!(err(b"#binvox 1\ndim 4294967296 4294967296 2\ndata\n").contains("too large"));
+        assert!(err(b"#binvox 1\ndim 1 1 1\nscale -1\ndata\n").contains("not usable"));
+        assert!(err(b"binvox").contains("instead of"));
+        assert!(err(b"#binvox 1\ndim 1 1 1\n").contains("no \"data\" line"));
+    }
+}
