@@ -216,7 +216,8 @@ pub fn read(bytes: &[u8], want_colors: bool) -> Result<ColoredCloud, PcdError> {
         "binary" => {
             let need = n.checked_mul(stride).ok_or(PcdError::Overflow("the data size"))?;
             let have = bytes.len() - data;
-            let d = bytes.get(data..data + need).ok_or(PcdError::ShortBinary { have, points: n, need })?;
+            let d = data.checked_add(need).and_then(|end| bytes.get(data..end));
+            let d = d.ok_or(PcdError::ShortBinary { have, points: n, need })?;
             for row in d.chunks_exact(stride) {
                 // every field lies inside the point: its offset plus its size
                 // is at most the stride
@@ -349,5 +350,8 @@ mod tests {
         assert!(err(b"FIELDS x y z\nSIZE 4 4\nDATA ascii\n").contains("do not match"));
         assert!(err(b"FIELDS x y z\nSIZE 4 4 -4\nDATA ascii\n").contains("byte 13: SIZE value \"-4\""));
         assert!(err(&file("binary_compressed", &compressed(&[0; 16]))).contains("to 16 bytes, 2 points need 32"));
+        // a size that fits a usize, but not once added to the header's
+        let huge = HEAD.replace("POINTS 2", &format!("POINTS {}", usize::MAX / 16)) + "DATA binary\n";
+        assert!(err(huge.as_bytes()).contains("holds 0 bytes"));
     }
 }
