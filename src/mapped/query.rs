@@ -111,9 +111,14 @@ pub(crate) fn trunk_start<N: Nav>(nav: N, trunks: &Trunks<Node>, key: Key, code:
     trunks.start(key, code, depth, |n| nav.mask(n), |n, m, pos| nav.child(n, m, pos))
 }
 
+/// Grid cells a view may always have, whatever its size: 256 KB of heap,
+/// four grid levels below up to eight trunks.
+const VIEW_GRID_CELLS: usize = 1 << 15;
+
 /// The trunks of a mapped tree; `None` when it has no root.
 pub(crate) fn trunks<N: Nav>(nav: N) -> Option<Trunks<Node>> {
     let cells = usize::try_from(nav.node_budget() / crate::tree::GRID_NODES_PER_CELL).unwrap_or(usize::MAX);
+    let cells = cells.max(VIEW_GRID_CELLS);
     nav.root().map(|r| Trunks::build(r, cells, |n| nav.mask(n), |n, m, pos| nav.child(n, m, pos)))
 }
 
