@@ -866,6 +866,37 @@ fn write_cloud_files(f: &Fixture, pts: &[[f32; 3]]) -> Vec<PathBuf> {
     files
 }
 
+/// Two damaged LAZ files found by mutating a small one: the laz crate once
+/// reserved a chunk table of 2^32 entries (aborting the process) for the
+/// first and panicked in its byte slicing on the second.
+fn damaged_laz_files_fail_cleanly(f: &Fixture) {
+    let mut builder = las::Builder::from((1, 2));
+    let t = las::Transform { scale: 0.125, offset: 0.0 };
+    builder.transforms = las::Vector { x: t, y: t, z: t };
+    builder.point_format.is_compressed = true;
+    let path = f.path("m.laz");
+    let mut w = las::Writer::from_path(&path, builder.into_header().unwrap()).unwrap();
+    for i in 0..50 {
+        w.write_point(las::Point { x: f64::from(i), y: 1.0, z: 2.0, ..Default::default() }).unwrap();
+    }
+    w.close().unwrap();
+    drop(w);
+    let good = std::fs::read(&path).unwrap();
+    assert_eq!(good.len(), 451, "the writer's output changed; find new damaging mutations");
+    let mut chunks = good.clone();
+    // the chunk table's offset is the first 8 bytes of the point data
+    let data = u32::from_le_bytes(good[96..100].try_into().unwrap()) as usize;
+    let table = i64::from_le_bytes(good[data..data + 8].try_into().unwrap()) as usize;
+    chunks[table + 4..table + 8].copy_from_slice(&u32::MAX.to_le_bytes());
+    fail(&["build", "--points", f.write("chunks.laz", chunks), "-o", f.p("x.bt")], "chunk table announces");
+    let mut sliced = good;
+    (sliced[50], sliced[317]) = (153, 7);
+    let out = run(&["build", "--points", f.write("sliced.laz", sliced), "-o", f.p("x.bt")]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.trim_end().lines().count() == 1, "{err}");
+    assert!(err.contains("not a valid .laz file") && !err.contains("panicked"), "{err}");
+}
+
 #[test]
 fn build_reads_point_cloud_formats_with_poses() {
     let f = Fixture::new();
@@ -963,6 +994,7 @@ fn build_reads_point_cloud_formats_with_poses() {
         "unknown DATA kind",
     );
     fail(&["build", "--points", f.write("t.las", b"LASF-not-really"), "-o", f.p("x.bt")], "not a valid .las file");
+    damaged_laz_files_fail_cleanly(&f);
     fail(&["build", "--points", f.p("missing.ply"), "-o", f.p("x.bt")], "cannot open");
     fail(
         &["build", "--points", s(&files[0]), "-o", f.p("x.bt"), "--pose", "0", "0", "0", "0", "0", "inf"],

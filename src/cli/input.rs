@@ -18,7 +18,7 @@ pub fn read_scan(path: &Path, colors: bool) -> Result<Scan> {
     let ctx = || format!("{}: not a valid .{ext} file", path.display());
     let plain = |cloud| Scan { cloud, colors: None };
     match ext.as_str() {
-        "las" | "laz" => return read_las(path).map(plain).with_context(ctx),
+        "las" | "laz" => return without_panics(|| read_las(path)).map(plain).with_context(ctx),
         "xyz" | "txt" => {
             let f = std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
             return xyz::read(std::io::BufReader::new(f)).map(plain).with_context(ctx);
@@ -36,14 +36,73 @@ pub fn read_scan(path: &Path, colors: bool) -> Result<Scan> {
 // ----- LAS / LAZ -----------------------------------------------------------
 
 fn read_las(path: &Path) -> Result<PointCloud> {
+    check_laz_chunk_table(path)?;
     let mut reader = las::Reader::from_path(path)?;
-    let data = reader.read_all()?;
+    // in batches: `read_all` reserves what the header's point count says,
+    // which a damaged header makes terabytes (an allocation failure aborts)
+    let mut batch = las::PointDataBuilder::new().for_header(reader.header()).build();
     let mut cloud = PointCloud::new();
-    for p in data.points() {
-        let p = p?;
-        cloud.push(Point3::new(p.x as f32, p.y as f32, p.z as f32));
+    while reader.fill_points(1 << 16, &mut batch)? > 0 {
+        for p in batch.points() {
+            let p = p?;
+            cloud.push(Point3::new(p.x as f32, p.y as f32, p.z as f32));
+        }
     }
     Ok(cloud)
+}
+
+/// Runs the LAS/LAZ reader, whose decompressor panics on some damaged
+/// data (the laz crate's byte slicing), and makes such a panic an error,
+/// without the panic hook's message on stderr.
+fn without_panics<T>(read: impl FnOnce() -> Result<T>) -> Result<T> {
+    let hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(|_| {}));
+    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(read));
+    std::panic::set_hook(hook);
+    r.unwrap_or_else(|p| {
+        let why = p.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| p.downcast_ref::<String>().cloned());
+        bail!("the LAS/LAZ reader failed on damaged data ({})", why.as_deref().unwrap_or("no message"))
+    })
+}
+
+/// Refuses a LAZ file whose chunk table announces more chunks than its
+/// bytes can hold: the laz crate reserves that many entries before reading
+/// them, and an allocation failure aborts the process. Each chunk starts
+/// with one uncompressed point record, so it takes at least that many bytes.
+/// The table is found as the laz crate finds it: its offset is the first
+/// 8 bytes of the point data, or the file's last 8 bytes when those do not
+/// point past them. Other files, and files too short to say, are left to
+/// the las crate's own checks.
+fn check_laz_chunk_table(path: &Path) -> Result<()> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut f = std::fs::File::open(path)?;
+    let len = f.metadata()?.len();
+    let mut at = |offset: u64, buf: &mut [u8]| -> Option<()> {
+        f.seek(SeekFrom::Start(offset)).ok()?;
+        f.read_exact(buf).ok()
+    };
+    let mut head = [0u8; 107];
+    if at(0, &mut head).is_none() || &head[..4] != b"LASF" || head[104] & 0xc0 == 0 {
+        return Ok(());
+    }
+    let data = u64::from(u32::from_le_bytes(head[96..100].try_into().expect("4 bytes")));
+    let record = u64::from(u16::from_le_bytes(head[105..107].try_into().expect("2 bytes"))).max(1);
+    let mut word = [0u8; 8];
+    let Some(()) = at(data, &mut word) else { return Ok(()) };
+    let mut table = i64::from_le_bytes(word);
+    if table <= data as i64 {
+        let Some(()) = at(len.saturating_sub(8), &mut word) else { return Ok(()) };
+        table = i64::from_le_bytes(word);
+    }
+    let mut counts = [0u8; 8];
+    if table <= data as i64 || at(table as u64, &mut counts).is_none() {
+        return Ok(());
+    }
+    let chunks = u64::from(u32::from_le_bytes(counts[4..].try_into().expect("4 bytes")));
+    if chunks > len / record {
+        bail!("the LAZ chunk table announces {chunks} chunks, more than the {len} bytes of the file can hold");
+    }
+    Ok(())
 }
 
 // ----- poses ---------------------------------------------------------------
