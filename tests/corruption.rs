@@ -1,6 +1,7 @@
 //! Damaged inputs for every reader: seeded, deterministic mutants of real
 //! files (golden `.ot` of each kind, `.bt` including `geb079.bt`, `.graph`,
-//! `.xyz`, scan logs, ROS message payloads) and of small trees made here.
+//! `.xyz`, scan logs, ROS message payloads) and of small trees, PLY, PCD and
+//! binvox files made here.
 //!
 //! Each mutant must give `Ok` or a clean `Err` whose byte offset (or line)
 //! lies inside the input and is named by its message; it must never panic,

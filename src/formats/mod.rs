@@ -1,4 +1,5 @@
-//! On-disk formats. Each reader takes `impl BufRead` (or `impl Read`),
+//! On-disk formats. Each reader takes `impl BufRead` (or `impl Read`), or
+//! a byte slice for the files of other tools read whole (PLY, PCD, binvox),
 //! each writer `impl Write`; writes to a path go through [`write_atomically`]
 //! so a crash never leaves a half-written file.
 
