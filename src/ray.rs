@@ -122,7 +122,7 @@ impl RayKeys {
 impl RayKeys {
     /// Calls `f` with the Morton code of every key the iterator would yield,
     /// in a tight loop that steps the interleaved code directly (see
-    /// [`walk_codes`]).
+    /// `walk_codes`).
     #[inline]
     pub fn for_each_code(self, mut f: impl FnMut(u64)) {
         let Some(dda) = self.dda else { return };
@@ -170,7 +170,7 @@ fn walk_codes(
 const AXIS_MASKS: [u64; 3] = [0x2492_4924_9249, 0x2492_4924_9249 << 1, 0x2492_4924_9249 << 2];
 
 /// One ray of `computeRayKeys` walked step by step on Morton codes (see
-/// [`walk_codes`]), from [`RayFan::ray`]: lets a caller interleave rays,
+/// `walk_codes`), from [`RayFan::ray`]: lets a caller interleave rays,
 /// whose steps, each a chain of dependent operations, then overlap in the
 /// processor. [`Self::split`] separates the state that changes at every
 /// step from the per-axis constants, so that two walks can stay in
@@ -248,7 +248,8 @@ impl AxisSteps {
 }
 
 impl WalkState {
-    /// [`FanRay::next_code`], given the ray's [`AxisSteps`].
+    /// The next voxel's Morton code, given the ray's [`AxisSteps`]; `None`
+    /// once the walk has ended.
     #[inline(always)]
     pub fn next_code(&mut self, steps: &AxisSteps) -> Option<u64> {
         // the code in one register; the axis to step comes from compare
@@ -263,7 +264,7 @@ impl WalkState {
     }
 }
 
-/// The DDA's three `t_max` and their increments. [`Self::step`] advances
+/// The DDA's three `t_max` and their increments. `step` advances
 /// the smallest (`min_axis`: ties go to the higher axis) and returns its
 /// axis. The choice is made with
 /// compare masks, not branches: the axis changes irregularly along a ray,

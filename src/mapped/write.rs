@@ -27,7 +27,7 @@ pub struct WriteOptions {
     pub search_blocks: SearchBlocksSection,
 }
 
-/// When [`write`] adds the optional search-blocks section, which makes
+/// When [`write()`] adds the optional search-blocks section, which makes
 /// full-depth searches of large maps about 1.6x faster for about a fifth
 /// more file (`formats/olm.md`). Only a plain map in the full variant with
 /// the rank index, whose voxels take at most 256 values, can have one. Off
