@@ -920,6 +920,21 @@ fn exercise(bytes: &[u8]) -> (bool, bool) {
     olm_fuzz::check(bytes)
 }
 
+/// Files kept under `tests/regressions/olm/` (found by fuzzing) pass the
+/// fuzz target's check.
+#[test]
+fn fuzz_regressions_replay() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/regressions/olm");
+    let mut paths: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()).collect();
+    paths.sort();
+    assert!(!paths.is_empty());
+    for p in paths {
+        let bytes = std::fs::read(&p).unwrap();
+        let result = std::panic::catch_unwind(|| exercise(&bytes));
+        assert!(result.is_ok(), "{} fails the fuzz check", p.display());
+    }
+}
+
 fn mutate(base: &[u8], kind: u64, rng: &mut SplitMix64) -> Vec<u8> {
     let mut b = base.to_vec();
     let len = b.len() as u32;

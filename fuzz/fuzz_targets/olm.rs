@@ -72,9 +72,16 @@ pub fn check(data: &[u8]) -> (bool, bool) {
     // the level-skip index answers as the view (checked where verified)
     let index = mapped::MapSearchIndex::new(view);
     let indexed = answers(|k, d| index.search(k, d), &keys);
-    // batched searches answer as single ones, even on corrupted bytes
+    // batched searches answer as single ones, even on corrupted bytes,
+    // except where a single full-depth search reads the search-blocks
+    // section, which only `verify` checks against the node arrays that the
+    // batched search reads
+    let blocks = view.header().sections.iter().any(|s| s.kind == mapped::SectionKind::SearchBlocks as u16);
     let mut batch = Vec::new();
     for d in [0, 16, 14, 3] {
+        if blocks && !verified && (d == 0 || d == 16) {
+            continue;
+        }
         view.search_many(&keys, d, &mut batch);
         let single: Vec<_> = keys.iter().map(|&k| bits(view.search(k, d))).collect();
         assert_eq!(batch.iter().map(|&f| bits(f)).collect::<Vec<_>>(), single);

@@ -363,7 +363,9 @@ impl<'a> MapView<'a> {
     }
 
     /// [`Self::search`] for many keys at once, answers in `out` in the order
-    /// of `keys` (as [`OccupancyTree::search_many`]).
+    /// of `keys` (as [`OccupancyTree::search_many`]). It reads the node
+    /// arrays only: on a damaged file with a search-blocks section that was
+    /// not verified, its full-depth answers may differ from `search`'s.
     pub fn search_many(&self, keys: &[Key], depth: u8, out: &mut Vec<Option<Found>>) {
         let Some(trunks) = self.trunks() else {
             out.clear();
