@@ -6,8 +6,8 @@
 //! it, whether typed `F`, `U` or `I`; in ASCII files an `F` field is the
 //! float whose bits are the packed colour, as PCL prints it.
 
-pub use super::scalar::ColoredCloud;
 use super::scalar::{capacity, header_lines, point, HeaderEnd, Scalar};
+use super::ColoredCloud;
 use crate::geometry::PointCloud;
 
 /// Header lines read at most before `DATA` must have come.

@@ -7,8 +7,8 @@
 //! (scaled by 255 and rounded). They are decoded only when asked for, so a
 //! file with odd colour values still gives its points.
 
-pub use super::scalar::ColoredCloud;
 use super::scalar::{capacity, header_lines, point, HeaderEnd, Scalar};
+use super::ColoredCloud;
 use crate::geometry::{Point3, PointCloud};
 use std::io::{self, Write};
 
