@@ -12,9 +12,9 @@
 //!   back (the branch predictor learns a walk that repeats).
 //! * `mleaves`: the same for the mapped view's leaf walk.
 //! * `fold`, `search`, `mapped`: the leaf fold 100 times, or 200k searches
-//!   twice, and nothing else timed; for `valgrind --tool=callgrind
-//!   --toggle-collect='*ab_probe::fold*'` (or `*ab_probe::by_key*`,
-//!   `*ab_probe::view_by_key*`).
+//!   twice (`search`: and once by point), and nothing else timed; for
+//!   `valgrind --tool=callgrind --toggle-collect='*ab_probe::fold*'` (or
+//!   `*ab_probe::by_key*`, `*ab_probe::by_point*`, `*ab_probe::view_by_key*`).
 //! * `depths`: how deep the queries' answers lie (the last entry: no answer).
 //!
 //! `compact` compacts the tree first. A probe, not a benchmark of record.
@@ -167,6 +167,7 @@ fn main() {
         "search" => {
             black_box(by_key(&tree, &keys));
             black_box(by_key(&tree, &keys));
+            black_box(by_point(&tree, &points));
         }
         "mapped" => {
             black_box(view_by_key(&view, &keys));

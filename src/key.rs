@@ -33,6 +33,22 @@ impl Key {
         (((self.0[0] >> bit) & 1) | (((self.0[1] >> bit) & 1) << 1) | (((self.0[2] >> bit) & 1) << 2)) as usize
     }
 
+    /// The three coordinates in one word, 16 bits apart (`x | y << 16 |
+    /// z << 32`), for descents that test key bits of all axes at once.
+    #[inline(always)]
+    pub fn packed(self) -> u64 {
+        let [x, y, z] = self.0.map(u64::from);
+        x | (y << 16) | (z << 32)
+    }
+
+    /// [`Self::child_index`] of a [`Self::packed`] key: one multiply
+    /// gathers the three bits (which land 15 bits apart, nothing carries).
+    #[inline(always)]
+    pub fn packed_child_index(packed: u64, depth: u8) -> u64 {
+        let bits = (packed >> (15 - depth)) & 0x0001_0001_0001;
+        (bits.wrapping_mul((1 << 32) | (1 << 17) | (1 << 2)) >> 32) & 7
+    }
+
     /// The key OctoMap's iterators give the child `pos` of a node with key
     /// `self` at `parent_depth` (`computeChildKey`).
     #[inline]

@@ -576,7 +576,7 @@ impl<'a> MapSearchIndex<'a> {
             None => (None, depth),
         };
         with_nav!(self.view.nav, |nav| {
-            let start = start.unwrap_or_else(|| query::trunk_start(nav, trunks, key, code, depth));
+            let start = start.unwrap_or_else(|| query::trunk_start(nav, trunks, key, depth));
             query::search_from(nav, code, depth, start).map(|(f, n)| Found { extra: self.view.extras.get(n), ..f })
         })
     }

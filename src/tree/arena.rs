@@ -700,6 +700,30 @@ impl NodeArena {
         true
     }
 
+    /// The inner pool's child masks, by id.
+    #[inline(always)]
+    pub(crate) fn masks(&self) -> &[u8] {
+        &self.masks
+    }
+
+    /// The inner pool's first-child ids, by id.
+    #[inline(always)]
+    pub(crate) fn first_child_ids(&self) -> &[NodeId] {
+        &self.first_child
+    }
+
+    /// The value of leaf-pool node `n`.
+    #[inline(always)]
+    pub(crate) fn leaf_value(&self, n: NodeId) -> f32 {
+        self.leaf_values[leaf_index(n)]
+    }
+
+    /// The extra of leaf-pool node `n` (0 when extras are off).
+    #[inline(always)]
+    pub(crate) fn leaf_extra(&self, n: NodeId) -> u32 {
+        self.leaf_extras.get(leaf_index(n)).copied().unwrap_or(0)
+    }
+
     /// The arrays of both pools, for read-only passes over the whole tree.
     #[inline]
     pub(crate) fn parts(&self) -> Parts<'_> {

@@ -23,7 +23,7 @@
 //! first search after the trunks are derived again builds it. Answers
 //! above depth 16 (pruned leaves) are left to the arena's descent.
 
-use super::arena::{in_leaf_pool, leaf_index, NodeId, Parts, LEAF_POOL};
+use super::arena::{in_leaf_pool, leaf_index, NodeArena, NodeId, Parts, LEAF_POOL};
 use super::blocks::{self, BlockEnd, Runs, SubtreeRuns, BLOCK_DEPTH};
 use super::trunk::{Trunks, GRID_NODES_PER_CELL};
 use super::ROOT;
@@ -200,8 +200,8 @@ impl LevelIndex {
     /// Where a full-depth search for `key` (Morton `code`) starts (the
     /// grids are built with the index, so the closures only look up).
     #[inline(always)]
-    fn start(&self, key: Key, code: u64) -> (u32, u8) {
-        self.trunks.start(key, code, TREE_DEPTH, |n| Some(self.mask(n)), |n, m, pos| Some(self.child(n, m, pos)))
+    fn start(&self, key: Key) -> (u32, u8) {
+        self.trunks.start(key, TREE_DEPTH, |n| Some(self.mask(n)), |n, m, pos| Some(self.child(n, m, pos)))
     }
 
     /// Child `pos` of index node `i`, or where the path ends there.
@@ -218,7 +218,7 @@ impl LevelIndex {
     /// A full-depth search for `key` (Morton `code`).
     #[inline(always)]
     pub fn search(&self, key: Key, code: u64) -> Reach {
-        let (mut i, from) = self.start(key, code);
+        let (mut i, from) = self.start(key);
         if from == TREE_DEPTH {
             return self.voxel(i);
         }
@@ -265,7 +265,7 @@ impl LevelIndex {
         let mut walking = 0u32;
         for (l, &key) in keys.iter().enumerate() {
             code[l] = MortonCode::encode_table(key).0;
-            let (n, from) = self.start(key, code[l]);
+            let (n, from) = self.start(key);
             if from == TREE_DEPTH {
                 out[l] = self.voxel(n);
             } else {
@@ -497,8 +497,8 @@ impl LevelSlot {
     }
 
     #[inline(always)]
-    pub fn get(&self, p: &Parts<'_>, size: usize) -> Option<&LevelIndex> {
-        Some(self.0.as_ref()?.get_or_init(|| LevelIndex::build(p, size)))
+    pub fn get(&self, a: &NodeArena, size: usize) -> Option<&LevelIndex> {
+        Some(self.0.as_ref()?.get_or_init(|| LevelIndex::build(&a.parts(), size)))
     }
 
     /// Whether full-depth searches go through an index.

@@ -295,8 +295,8 @@ impl OccupancyTree {
     /// Where a search for `key` (Morton `code`, at `depth`) starts; see
     /// [`Trunks::start`].
     #[inline(always)]
-    fn start(&self, p: &Parts<'_>, key: Key, code: u64, depth: u8) -> (NodeId, u8) {
-        self.trunks.start(key, code, depth, |n| Some(p.mask(n)), |n, _, pos| p.descend(n, pos as u64).ok())
+    fn start(&self, p: &Parts<'_>, key: Key, depth: u8) -> (NodeId, u8) {
+        self.trunks.start(key, depth, |n| Some(p.mask(n)), |n, _, pos| p.descend(n, pos as u64).ok())
     }
 
     /// Replaces the content with `arena`, which has no free slots (as
@@ -640,12 +640,39 @@ impl OccupancyTree {
     pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
         let a = self.arena.as_ref()?;
         if depth == 0 || depth >= TREE_DEPTH {
-            let p = a.parts();
-            if let Some(index) = self.levels.get(&p, self.size) {
+            if let Some(index) = self.levels.get(a, self.size) {
                 return self.answer(a, key, index.search(key, MortonCode::encode_table(key).0));
             }
+            return self.search_full(a, key);
         }
         self.search_arena(key, depth)
+    }
+
+    /// [`Self::search`] at depth 16 in the arena, with as few instructions
+    /// as it takes: on a map that fits the caches, the processor overlaps
+    /// consecutive queries as far as its window of instructions reaches.
+    #[inline(always)]
+    fn search_full(&self, a: &NodeArena, key: Key) -> Option<Found> {
+        let (masks, first_child) = (a.masks(), a.first_child_ids());
+        let child = |n: NodeId, pos: u64| -> Result<NodeId, u8> {
+            let m = masks[n as usize];
+            if m & (1 << pos) == 0 {
+                Err(m)
+            } else {
+                Ok(first_child[n as usize] + (u32::from(m) & ((1 << pos) - 1)).count_ones())
+            }
+        };
+        let k = key.packed();
+        let (mut node, from) =
+            self.trunks.start_packed(k, TREE_DEPTH, |n| Some(masks[n as usize]), |n, _, pos| child(n, pos as u64).ok());
+        for d in from..TREE_DEPTH {
+            match child(node, Key::packed_child_index(k, d)) {
+                Ok(c) => node = c,
+                Err(0) => return Some(Found { value: a.value(node), depth: d, is_leaf: true, extra: a.extra(node) }),
+                Err(_) => return None,
+            }
+        }
+        Some(Found { value: a.leaf_value(node), depth: TREE_DEPTH, is_leaf: true, extra: a.leaf_extra(node) })
     }
 
     /// The full-depth answer for `key` from where the level index got.
@@ -669,7 +696,7 @@ impl OccupancyTree {
         if let Some(a) = &self.arena {
             let p = a.parts();
             self.trunks.prepare(|n| Some(p.mask(n)), |n, _, pos| p.descend(n, pos as u64).ok());
-            self.levels.get(&p, self.size);
+            self.levels.get(a, self.size);
         }
     }
 
@@ -696,7 +723,7 @@ impl OccupancyTree {
         // speed of shifts and masks) took 6% off a small-map query
         let code = MortonCode::encode_table(key).0;
         let p = a.parts();
-        let (node, from) = self.start(&p, key, code, depth);
+        let (node, from) = self.start(&p, key, depth);
         descend_to(&p, node, from, depth, code)
     }
 
@@ -714,7 +741,7 @@ impl OccupancyTree {
         };
         let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
         let p = a.parts();
-        if let Some(index) = self.levels.get(&p, self.size).filter(|_| depth == TREE_DEPTH) {
+        if let Some(index) = self.levels.get(a, self.size).filter(|_| depth == TREE_DEPTH) {
             let mut reach = [Reach::Unknown; level_index::LANES];
             for chunk in keys.chunks(level_index::LANES) {
                 index.search_lanes(chunk, &mut reach);
@@ -734,7 +761,7 @@ impl OccupancyTree {
             let mut node = [ROOT; LANES];
             let mut joins = [0u32; TREE_DEPTH as usize + 1];
             for l in 0..chunk.len() {
-                let (n, from) = self.start(&p, key[l], code[l], depth);
+                let (n, from) = self.start(&p, key[l], depth);
                 node[l] = n;
                 joins[from as usize] |= 1 << l;
             }

@@ -208,8 +208,8 @@ impl<'t> SearchIndex<'t> {
     #[inline(always)]
     /// Where a search for `key` (Morton `code`, at `depth`) starts: the
     /// deepest table that answers, or else the trunk end.
-    fn start(&self, p: &Parts<'_>, key: Key, code: u64, depth: u8) -> (NodeId, u8) {
-        self.tables.start(key, depth).unwrap_or_else(|| self.tree.start(p, key, code, depth))
+    fn start(&self, p: &Parts<'_>, key: Key, depth: u8) -> (NodeId, u8) {
+        self.tables.start(key, depth).unwrap_or_else(|| self.tree.start(p, key, depth))
     }
 
     /// `tree.search(key, depth)`: the descent of [`OccupancyTree::search`]
@@ -225,7 +225,7 @@ impl<'t> SearchIndex<'t> {
         let a = self.tree.arena()?;
         let code = MortonCode::encode_table(key).0;
         let p = a.parts();
-        let (node, from) = self.start(&p, key, code, depth);
+        let (node, from) = self.start(&p, key, depth);
         let (node, depth, is_leaf) = descend_to(&p, node, from, depth, code)?;
         Some(found(a, node, depth, is_leaf))
     }
@@ -249,7 +249,7 @@ impl<'t> SearchIndex<'t> {
             let mut begin = [0u32; TREE_DEPTH as usize + 1];
             for (l, q) in chunk.iter().enumerate() {
                 key[l] = if depth == TREE_DEPTH { *q } else { adjust_key_to_depth(*q, depth) };
-                let (n, from) = self.start(&p, key[l], MortonCode::encode_table(key[l]).0, depth);
+                let (n, from) = self.start(&p, key[l], depth);
                 node[l] = n;
                 begin[from as usize] |= 1 << l;
             }

@@ -42,11 +42,37 @@ pub(crate) struct Trunks<N> {
 struct Grids<N> {
     /// Levels each grid spans (0: no grids).
     levels: u8,
-    /// Per child of the root, where its grid starts in `cells`
-    /// ([`NO_GRID`]: none).
-    first: [u32; 8],
+    /// Per child of the root, what [`Trunks::start`] needs of it in one
+    /// place, tested on the key's bits rather than its Morton code.
+    entries: [Entry; 8],
+    /// A grid's key bits in a [`Key::packed`] key shifted down by the
+    /// entry's `shift` (`levels` bits of each axis).
+    field_mask: u64,
+    /// Multiplier gathering those bits into a cell index at bit 32 (z
+    /// lowest, x highest; the fields land apart, nothing carries).
+    gather: u64,
+    cell_mask: u64,
     cells: Vec<Cell<N>>,
 }
+
+/// A trunk as [`Trunks::start`] reads it. Keys are taken as one `u64`,
+/// `x | y << 16 | z << 32`.
+#[derive(Clone, Copy, Debug, Default)]
+struct Entry {
+    /// The key bits of the path to the trunk end, and which bits those are.
+    prefix: u64,
+    prefix_mask: u64,
+    /// Where its grid starts in `cells` ([`NO_GRID`]: none).
+    first: u32,
+    /// The trunk end's depth ([`NO_TRUNK`] when the root lacks the child).
+    end: u8,
+    /// The depth of the grid's cells (end + levels).
+    grid_depth: u8,
+    /// Where the grid's key bits start (16 - grid_depth).
+    shift: u8,
+}
+
+const NO_TRUNK: u8 = u8::MAX;
 
 /// A grid cell: the deepest node on its path, and that node's depth.
 #[derive(Clone, Copy, Debug, Default)]
@@ -111,8 +137,19 @@ impl<N: Copy + Default> Trunks<N> {
     /// 16).
     #[cold]
     fn build_grids(&self, mask: impl Fn(N) -> Option<u8>, child: impl Fn(N, u8, usize) -> Option<N>) -> Grids<N> {
-        let mut g = Grids { levels: 0, first: [NO_GRID; 8], cells: Vec::new() };
         let ends: [u8; 8] = std::array::from_fn(|i| self.end_depth(i));
+        let entries = std::array::from_fn(|i| match ends[i] {
+            0 => Entry { first: NO_GRID, end: NO_TRUNK, ..Entry::default() },
+            end => {
+                // the Morton prefix's bits back on their axes
+                let code = self.ends[i] & ((1 << DEPTH_SHIFT) - 1);
+                let key = crate::morton::MortonCode(code).decode();
+                let top = u64::from(u16::MAX << (TREE_DEPTH - end));
+                let prefix_mask = top | (top << 16) | (top << 32);
+                Entry { prefix: key.packed(), prefix_mask, first: NO_GRID, end, grid_depth: 0, shift: 0 }
+            }
+        });
+        let mut g = Grids { levels: 0, entries, field_mask: 0, gather: 0, cell_mask: 0, cells: Vec::new() };
         // the root children whose trunk ends at least `k` levels above 16
         let gridded = |k: u8| -> Vec<usize> { (0..8).filter(|&i| ends[i] > 0 && ends[i] + k <= TREE_DEPTH).collect() };
         let Some(levels) = (1..=MAX_GRID_LEVELS).rev().find(|&k| {
@@ -122,6 +159,10 @@ impl<N: Copy + Default> Trunks<N> {
             return g;
         };
         let k = u32::from(levels);
+        let m = (1u64 << k) - 1;
+        g.field_mask = m | (m << 16) | (m << 32);
+        g.gather = 1 | (1 << (16 + k)) | (1 << (32 + 2 * k));
+        g.cell_mask = (1 << (3 * k)) - 1;
         // each grid's cells in Morton order, level by level
         let (mut level, mut next) = (Vec::new(), Vec::new());
         for i in gridded(levels) {
@@ -143,11 +184,12 @@ impl<N: Copy + Default> Trunks<N> {
             }
             // stored by the key bits of the grid's levels, x, y, z apart
             let first = g.cells.len();
-            g.first[i] = first as u32;
+            let e = &mut g.entries[i];
+            (e.first, e.grid_depth, e.shift) = (first as u32, end + levels, TREE_DEPTH - end - levels);
             g.cells.resize(first + level.len(), Cell::default());
             for (morton, c) in level.iter().enumerate() {
                 let axis = |a: u32| (0..k).fold(0, |v, b| v | (((morton >> (3 * b + a)) & 1) << b));
-                g.cells[first + (axis(0) | (axis(1) << k) | (axis(2) << (2 * k)))] = *c;
+                g.cells[first + (axis(2) | (axis(1) << k) | (axis(0) << (2 * k)))] = *c;
             }
         }
         g.levels = levels;
@@ -177,47 +219,45 @@ impl<N: Copy + Default> Trunks<N> {
         present.min().unwrap_or(0)
     }
 
-    /// The node a search for `key` (whose Morton code is `code`) at `depth`
-    /// can start from, and its depth: the cell of its trunk's grid, else
-    /// the trunk end, else the root. `mask` and `child` (as for
-    /// [`Self::build`]) build the grids when this is the first search.
+    /// The node a search for `key` at `depth` can start from, and its
+    /// depth: the cell of its trunk's grid, else the trunk end, else the
+    /// root. `mask` and `child` (as for [`Self::build`]) build the grids
+    /// when this is the first search. Kept to few instructions: on maps
+    /// that fit the caches, fewer instructions a query let the processor
+    /// overlap more consecutive queries.
     #[inline(always)]
     pub fn start(
         &self,
         key: Key,
-        code: u64,
         depth: u8,
         mask: impl Fn(N) -> Option<u8>,
         child: impl Fn(N, u8, usize) -> Option<N>,
     ) -> (N, u8) {
-        let [x, y, z] = key.0.map(u32::from);
-        // the root child from the key's top bits, not from `code`
-        let i = ((x >> 15) | ((y >> 15) << 1) | ((z >> 15) << 2)) as usize;
-        if !self.on_trunk(i, code, depth) {
-            return (self.root, 0);
-        }
-        let end = self.end_depth(i);
-        let g = self.grids.get_or_init(|| self.build_grids(mask, child));
-        let (first, k) = (g.first[i], u32::from(g.levels));
-        if first == NO_GRID || u32::from(end) + k > u32::from(depth) {
-            return (self.nodes[i], end);
-        }
-        let shift = u32::from(TREE_DEPTH - end) - k;
-        let m = (1 << k) - 1;
-        let cell = ((x >> shift) & m) | (((y >> shift) & m) << k) | (((z >> shift) & m) << (2 * k));
-        let c = g.cells[first as usize + cell as usize];
-        (c.node, c.depth)
+        self.start_packed(key.packed(), depth, mask, child)
     }
 
-    /// Does the search for `code` at `depth` pass the end of root child
-    /// `i`'s chain (which exists)?
+    /// [`Self::start`] for a [`Key::packed`] key.
     #[inline(always)]
-    fn on_trunk(&self, i: usize, code: u64, depth: u8) -> bool {
-        let end = self.ends[i];
-        let end_depth = (end >> DEPTH_SHIFT) as u8;
-        let shift = 3 * u32::from(TREE_DEPTH - end_depth);
-        // the prefix bits without the depth byte
-        end_depth > 0 && end_depth <= depth && ((code ^ end) & ((1 << DEPTH_SHIFT) - 1)) >> shift == 0
+    pub fn start_packed(
+        &self,
+        k: u64,
+        depth: u8,
+        mask: impl Fn(N) -> Option<u8>,
+        child: impl Fn(N, u8, usize) -> Option<N>,
+    ) -> (N, u8) {
+        let g = self.grids.get_or_init(|| self.build_grids(mask, child));
+        // the root child from the key's top bits
+        let i = ((k >> 15) & 1 | (k >> 30) & 2 | (k >> 45) & 4) as usize;
+        let e = g.entries[i];
+        if (k ^ e.prefix) & e.prefix_mask != 0 || e.end > depth {
+            return (self.root, 0);
+        }
+        if e.first == NO_GRID || e.grid_depth > depth {
+            return (self.nodes[i], e.end);
+        }
+        let cell = (((k >> e.shift) & g.field_mask).wrapping_mul(g.gather) >> 32) & g.cell_mask;
+        let c = g.cells[e.first as usize + cell as usize];
+        (c.node, c.depth)
     }
 }
 
@@ -281,14 +321,14 @@ mod tests {
                 let code = MortonCode::encode(*key).0;
                 let i = code as usize >> 45 & 7;
                 for depth in 0..=TREE_DEPTH {
-                    let (node, d) = t.start(*key, code, depth, mask, child);
+                    let (node, d) = t.start(*key, depth, mask, child);
                     assert!(d <= depth, "{key} depth {depth}");
                     assert_eq!(walk(code, d), (node, d), "{key} depth {depth}: not on the path");
                     let end = t.end_depth(i);
                     let on_trunk = end > 0 && walk(code, end).1 == end && t.nodes[i] == walk(code, end).0;
                     let want = if !on_trunk || end > depth {
                         0
-                    } else if g.first[i] != NO_GRID && end + k <= depth {
+                    } else if g.entries[i].first != NO_GRID && end + k <= depth {
                         walk(code, end + k).1
                     } else {
                         end
