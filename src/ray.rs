@@ -11,6 +11,7 @@ use crate::key::{Key, KeyError, KeySpace};
 use crate::morton::MortonCode;
 use crate::sensor::SensorModel;
 use crate::tree::{Found, OccupancyTree};
+use std::hint::select_unpredictable;
 
 /// `origin + direction * (float) range`, in float.
 #[inline(always)]
@@ -230,11 +231,9 @@ impl AxisSteps {
         let mut fill = [0u64; 3];
         let mut add = [0u64; 3];
         for i in 0..3 {
-            (fill[i], add[i]) = match step[i] {
-                1 => (!AXIS_MASKS[i], 1 << i),
-                -1 => (0, (1u64 << i).wrapping_neg()),
-                _ => (0, 0),
-            };
+            // without branches (see `RayFan::ray`): -1, 0 or +1 times 1 << i
+            fill[i] = !AXIS_MASKS[i] & u64::from(step[i] == 1).wrapping_neg();
+            add[i] = (i64::from(step[i]) << i) as u64;
         }
         AxisSteps { fill, add }
     }
@@ -425,20 +424,19 @@ impl RayFan {
         let d = end - self.origin;
         let length = d.norm() as f32;
         let dir = [d.x / length, d.y / length, d.z / length];
+        // per axis without branches: a direction's signs are as good as
+        // random from one ray to the next, and the divisions of an axis
+        // that does not move are computed and dropped
         let mut step = [0i32; 3];
         let mut t_max = [f64::MAX; 3];
         let mut t_delta = [f64::MAX; 3];
         for i in 0..3 {
-            let s = if dir[i] > 0.0 {
-                1
-            } else if dir[i] < 0.0 {
-                0
-            } else {
-                continue;
-            };
-            step[i] = 2 * s as i32 - 1;
-            t_max[i] = self.to_border[i][s] / f64::from(dir[i]);
-            t_delta[i] = self.resolution / f64::from(dir[i].abs());
+            let (up, down) = (dir[i] > 0.0, dir[i] < 0.0);
+            let moves = up | down;
+            let border = self.to_border[i][usize::from(up)];
+            step[i] = i32::from(up) - i32::from(down);
+            t_max[i] = select_unpredictable(moves, border / f64::from(dir[i]), f64::MAX);
+            t_delta[i] = select_unpredictable(moves, self.resolution / f64::from(dir[i].abs()), f64::MAX);
         }
         Some(FanRay::new(self.origin_code, step, t_max, t_delta, end_code, f64::from(length)))
     }
