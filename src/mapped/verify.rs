@@ -148,7 +148,7 @@ fn verify_ml(nav: MlNav<'_>, meta: &Meta) -> Result<VerifyReport, OlmError> {
     let records = h.inner_count;
     padding_is_zero(nav.labels, 2 * records as usize, SectionKind::Labels)?;
     // occupancy bits past the last record
-    if records % 64 != 0 {
+    if !records.is_multiple_of(64) {
         let last = u64_at(nav.occupancy, 8 * (records / 64) as usize).unwrap_or(0);
         if last >> (records % 64) != 0 {
             return Err(OlmError::Section {

@@ -252,7 +252,7 @@ fn write_source<W: Write + Seek>(
             let mut children = 0u64;
             for_each_level(src.root, TREE_DEPTH, |n| {
                 let mask = n.child_mask();
-                if i % block == 0 {
+                if i.is_multiple_of(block) {
                     sinks[r].put(w, &(children as u32).to_le_bytes())?;
                 }
                 sinks[m].put(w, &[mask])?;
@@ -262,7 +262,7 @@ fn write_source<W: Write + Seek>(
                 i += 1;
                 Ok(())
             })?;
-            if i % block == 0 {
+            if i.is_multiple_of(block) {
                 sinks[r].put(w, &(children as u32).to_le_bytes())?;
             }
             sinks[m].pad(w, round8(nodes) - nodes)?;
@@ -293,7 +293,7 @@ fn write_source<W: Write + Seek>(
                     let label = if c.has_children() { 3 } else { ml_label(c, sensor.clamping_max) };
                     word |= u16::from(label) << (2 * pos);
                 }
-                if j % block == 0 {
+                if j.is_multiple_of(block) {
                     sinks[r].put(w, &(inner_children as u32).to_le_bytes())?;
                 }
                 sinks[l].put(w, &word.to_le_bytes())?;
@@ -302,17 +302,17 @@ fn write_source<W: Write + Seek>(
                 }
                 inner_children += u64::from(super::nav::count_inner(u64::from(word)));
                 j += 1;
-                if j % 64 == 0 {
+                if j.is_multiple_of(64) {
                     sinks[o].put(w, &bits.to_le_bytes())?;
                     bits = 0;
                 }
                 Ok(())
             })?;
             debug_assert_eq!(j, inner);
-            if j % block == 0 {
+            if j.is_multiple_of(block) {
                 sinks[r].put(w, &(inner_children as u32).to_le_bytes())?;
             }
-            if j % 64 != 0 {
+            if !j.is_multiple_of(64) {
                 sinks[o].put(w, &bits.to_le_bytes())?;
             }
             sinks[l].pad(w, round8(2 * inner) - 2 * inner)?;
