@@ -81,15 +81,9 @@ impl Casting {
     /// common origin; `None` when it lies outside the map (no rays then).
     #[inline]
     fn cast(&mut self, keys: &KeySpace, fan: Option<&RayFan>, p: Point3, origin: Point3, opts: &ScanOptions) {
-        let max_range = opts.max_range.unwrap_or(-1.0);
-        let within = max_range < 0.0 || (p - origin).norm() <= max_range;
-        let end = if within { p } else { point_along(origin, (p - origin).normalized(), max_range) };
+        let (within, end) = cut_to_range(p, origin, opts);
         let Some(bbx) = opts.bbx else {
-            let Ok(end_key) = keys.key(end) else { return };
-            let end_code = MortonCode::encode(end_key).0;
-            if within {
-                self.occupied.insert(end_code);
-            }
+            let Some(end_code) = self.end_voxel(keys, end, within) else { return };
             if let Some(fan) = fan {
                 fan.for_each_code(end, end_code, |c| self.free.insert(c));
             }
@@ -188,15 +182,9 @@ impl Casting {
         origin: Point3,
         opts: &ScanOptions,
     ) {
-        let max_range = opts.max_range.unwrap_or(-1.0);
         for &p in points.take(RayQueue::CAPACITY) {
-            let within = max_range < 0.0 || (p - origin).norm() <= max_range;
-            let end = if within { p } else { point_along(origin, (p - origin).normalized(), max_range) };
-            let Ok(end_key) = keys.key(end) else { continue };
-            let end_code = MortonCode::encode(end_key).0;
-            if within {
-                self.occupied.insert(end_code);
-            }
+            let (within, end) = cut_to_range(p, origin, opts);
+            let Some(end_code) = self.end_voxel(keys, end, within) else { continue };
             if let Some(ray) = fan.ray(end, end_code) {
                 ready.push(ray);
             }
@@ -204,6 +192,17 @@ impl Casting {
         if !ready.is_empty() {
             self.free.insert(fan.origin_code());
         }
+    }
+
+    /// The Morton code of the ray end's voxel, marked occupied when the
+    /// end is the point itself (`within` range); `None` outside the map.
+    #[inline(always)]
+    fn end_voxel(&mut self, keys: &KeySpace, end: Point3, within: bool) -> Option<u64> {
+        let end_code = MortonCode::encode(keys.key(end).ok()?).0;
+        if within {
+            self.occupied.insert(end_code);
+        }
+        Some(end_code)
     }
 
     /// Both sets as sorted lists; the free one keeps the occupied voxels
@@ -216,6 +215,15 @@ impl Casting {
     fn into_update(self) -> ScanUpdate {
         ScanUpdate { free: self.free.sorted_codes(Some(&self.occupied)), occupied: self.occupied.sorted_codes(None) }
     }
+}
+
+/// Whether `p` lies within the maximum range of `origin`, and the ray's
+/// end: `p`, or the point at that range towards it.
+#[inline(always)]
+fn cut_to_range(p: Point3, origin: Point3, opts: &ScanOptions) -> (bool, Point3) {
+    let max_range = opts.max_range.unwrap_or(-1.0);
+    let within = max_range < 0.0 || (p - origin).norm() <= max_range;
+    (within, if within { p } else { point_along(origin, (p - origin).normalized(), max_range) })
 }
 
 /// Rays set up and waiting for a walk (a stack: the order of the walks
