@@ -15,6 +15,8 @@
 //!   twice (`search`: and once by point), and nothing else timed; for
 //!   `valgrind --tool=callgrind --toggle-collect='*ab_probe::fold*'` (or
 //!   `*ab_probe::by_key*`, `*ab_probe::by_point*`, `*ab_probe::view_by_key*`).
+//! * `sorted`: by key on the mixed queries, then on the same grouped by
+//!   answer depth (the difference: the descent's mispredicted exits).
 //! * `depths`: how deep the queries' answers lie (the last entry: no answer).
 //!
 //! `compact` compacts the tree first. A probe, not a benchmark of record.
@@ -172,6 +174,16 @@ fn main() {
         "mapped" => {
             black_box(view_by_key(&view, &keys));
             black_box(view_by_key(&view, &keys));
+        }
+        "sorted" => {
+            // the same keys grouped by answer depth: how much of a query's
+            // time is the descent's mispredicted exits
+            let mut sorted = keys.clone();
+            sorted.sort_by_key(|&k| tree.search(k, 0).map_or(17, |f| f.depth));
+            let best = |k: &[Key]| {
+                (0..9).map(|_| micros(|| by_key(&tree, k)).0 * 1e3 / k.len() as f64).fold(f64::MAX, f64::min)
+            };
+            println!("ns per query by key: mixed {:6.2}, grouped by answer depth {:6.2}", best(&keys), best(&sorted));
         }
         "depths" => {
             let mut hist = [0usize; 18];

@@ -188,39 +188,65 @@ impl KeySpace {
         self.key_per_axis(p)
     }
 
+    /// [`Self::key`] with the key's child index at depth 1 (its root child,
+    /// which picks a search's trunk), taken from the products' signs: a
+    /// search can start looking up its trunk while the key's bits are still
+    /// on their way out of the vector unit.
+    #[inline(always)]
+    pub fn key_and_octant(&self, p: Point3) -> Result<(Key, usize), KeyError> {
+        #[cfg(all(target_arch = "x86_64", target_feature = "sse4.1"))]
+        if let Some(k) = self.key_sse41_octant(p) {
+            return Ok(k);
+        }
+        let key = self.key_per_axis(p)?;
+        Ok((key, key.child_index(0)))
+    }
+
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse4.1"))]
+    #[inline(always)]
+    fn key_sse41(&self, p: Point3) -> Option<Key> {
+        self.key_sse41_octant(p).map(|(k, _)| k)
+    }
+
     /// [`Self::key`] for points inside the map, two axes per instruction:
     /// the same double products, `floor`s and range tests as
     /// [`Self::coord_to_key`], in half the instructions of three scalar
     /// passes (a point query's conversion is on its critical path).
     /// `None` when an axis is out of range or not finite.
+    /// With the octant of [`Self::key_and_octant`]: a key's top bit is set
+    /// exactly when the product is at least zero (-0.0 included).
     #[cfg(all(target_arch = "x86_64", target_feature = "sse4.1"))]
     #[inline(always)]
-    fn key_sse41(&self, p: Point3) -> Option<Key> {
+    fn key_sse41_octant(&self, p: Point3) -> Option<(Key, usize)> {
         use std::arch::x86_64::*;
         // SAFETY: SSE2 and SSE4.1 are enabled for this build (the `cfg`
         // above); the intrinsics touch registers only.
-        let (ok, xy, z) = unsafe {
+        let (ok, octant, xy, z) = unsafe {
             let factor = _mm_set1_pd(self.resolution_factor);
-            let xy = _mm_floor_pd(_mm_mul_pd(factor, _mm_cvtps_pd(_mm_set_ps(0.0, 0.0, p.y, p.x))));
+            let xy = _mm_mul_pd(factor, _mm_cvtps_pd(_mm_set_ps(0.0, 0.0, p.y, p.x)));
             // z in lane 0 alone (lane 1 converts 0.0, which is in range): a
             // broadcast was compiled into a 16-byte load of a 12-byte
             // point copied to the stack, which the processor cannot
             // forward from the copy's two stores (13 ns a point instead of 2)
-            let z = _mm_floor_pd(_mm_mul_pd(factor, _mm_cvtps_pd(_mm_set_ss(p.z))));
+            let z = _mm_mul_pd(factor, _mm_cvtps_pd(_mm_set_ss(p.z)));
+            let zero = _mm_setzero_pd();
+            let octant = _mm_movemask_pd(_mm_cmpge_pd(xy, zero)) | (_mm_movemask_pd(_mm_cmpge_sd(z, zero)) & 1) << 2;
+            let (xy, z) = (_mm_floor_pd(xy), _mm_floor_pd(z));
             let (lo, hi) = (_mm_set1_pd(-f64::from(KEY_CENTER)), _mm_set1_pd(f64::from(KEY_CENTER)));
             // false for NaN, as the scalar range test
             let in_range = |v| _mm_and_pd(_mm_cmpge_pd(v, lo), _mm_cmplt_pd(v, hi));
             let ok = _mm_movemask_pd(_mm_and_pd(in_range(xy), in_range(z))) == 3;
             let (xy, z) = (_mm_cvttpd_epi32(xy), _mm_cvttpd_epi32(z));
-            (ok, _mm_cvtsi128_si64(xy) as u64, _mm_cvtsi128_si32(z) as u32)
+            (ok, octant as usize, _mm_cvtsi128_si64(xy) as u64, _mm_cvtsi128_si32(z) as u32)
         };
         let c = KEY_CENTER;
         ok.then(|| {
-            Key([
+            let key = Key([
                 (xy as u32).wrapping_add(c) as u16,
                 ((xy >> 32) as u32).wrapping_add(c) as u16,
                 z.wrapping_add(c) as u16,
-            ])
+            ]);
+            (key, octant)
         })
     }
 
@@ -417,13 +443,17 @@ mod tests {
 
     /// The two-lane conversion gives the per-axis keys and errors for
     /// values at and one ulp beside voxel borders and the map's edges, for
-    /// -0.0, NaN and infinities, on every axis, at several resolutions.
+    /// -0.0, the smallest values either side of zero, NaN and infinities,
+    /// on every axis, at several resolutions; with the octant, the key's
+    /// root child.
     #[test]
     fn point_keys_equal_per_axis_keys() {
         for res in [0.01, 0.05, 0.1, 0.2, 0.3, 1.0] {
             let ks = KeySpace::new(res);
             let edge = (ks.node_size(0) / 2.0) as f32;
-            let mut values = vec![0.0f32, -0.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, f32::MAX, f32::MIN];
+            let tiny = f32::from_bits(1);
+            let mut values =
+                vec![0.0f32, -0.0, tiny, -tiny, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, f32::MAX, f32::MIN];
             for base in [edge, -edge, res as f32, -(res as f32), 1.5 * res as f32, 17.0 * res as f32, 0.5] {
                 values.extend([base, f32::from_bits(base.to_bits() + 1), f32::from_bits(base.to_bits() - 1)]);
             }
@@ -431,6 +461,8 @@ mod tests {
                 for &b in &[0.0f32, a, -edge, 3.7] {
                     for p in [Point3::new(a, b, b), Point3::new(b, a, b), Point3::new(b, b, a)] {
                         let expected = ks.key_per_axis(p);
+                        let with_octant = ks.key_and_octant(p).map(|(k, o)| (k, o == k.child_index(0)));
+                        assert_eq!(with_octant.ok(), expected.as_ref().ok().map(|&k| (k, true)), "{p:?} at {res}");
                         match (ks.key(p), expected) {
                             (Ok(k), Ok(e)) => assert_eq!(k, e, "{p:?} at {res}"),
                             // NaN payloads compare unequal: compare the kinds and bits

@@ -318,6 +318,12 @@ impl<'a> MapView<'a> {
     /// `Found::extra` holds the node's colour or stamp, as the tree's.
     #[inline(always)]
     pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
+        self.search_in((key, key.child_index(0)), depth)
+    }
+
+    /// [`Self::search`] given the key's root child.
+    #[inline(always)]
+    fn search_in(&self, key: (Key, usize), depth: u8) -> Option<Found> {
         let trunks = self.trunks()?;
         if let (Some(blocks), AnyNav::Rank(nav)) = (&self.blocks, &self.nav) {
             if query::normalize_depth(depth) == TREE_DEPTH {
@@ -359,7 +365,7 @@ impl<'a> MapView<'a> {
     /// [`Self::search`] at the voxel containing `p`.
     #[inline]
     pub fn search_point(&self, p: Point3, depth: u8) -> Result<Option<Found>, KeyError> {
-        Ok(self.search(self.meta.keys.key(p)?, depth))
+        Ok(self.search_in(self.meta.keys.key_and_octant(p)?, depth))
     }
 
     /// [`Self::search`] for many keys at once, answers in `out` in the order
@@ -576,7 +582,7 @@ impl<'a> MapSearchIndex<'a> {
             None => (None, depth),
         };
         with_nav!(self.view.nav, |nav| {
-            let start = start.unwrap_or_else(|| query::trunk_start(nav, trunks, key, depth));
+            let start = start.unwrap_or_else(|| query::trunk_start(nav, trunks, (key, key.child_index(0)), depth));
             query::search_from(nav, code, depth, start).map(|(f, n)| Found { extra: self.view.extras.get(n), ..f })
         })
     }

@@ -76,9 +76,15 @@ pub(crate) fn search_from<N: Nav>(nav: N, code: u64, depth: u8, start: (Node, u8
 /// `search` on any layout from the trunk end above the key (see
 /// [`Trunks`]), the node's colour or stamp filled in.
 #[inline(always)]
-pub(crate) fn search<N: Nav>(nav: N, extras: Extras<'_>, trunks: &Trunks<Node>, key: Key, depth: u8) -> Option<Found> {
+pub(crate) fn search<N: Nav>(
+    nav: N,
+    extras: Extras<'_>,
+    trunks: &Trunks<Node>,
+    (key, octant): (Key, usize),
+    depth: u8,
+) -> Option<Found> {
     let (code, depth) = search_target(key, depth);
-    search_from(nav, code, depth, trunk_start(nav, trunks, key, depth))
+    search_from(nav, code, depth, trunk_start(nav, trunks, (key, octant), depth))
         .map(|(f, n)| Found { extra: extras.get(n), ..f })
 }
 
@@ -89,10 +95,10 @@ pub(crate) fn search_through_blocks(
     nav: RankNav<'_>,
     blocks: &SearchBlocks<'_>,
     trunks: &Trunks<Node>,
-    key: Key,
+    (key, octant): (Key, usize),
 ) -> Option<Found> {
     let (code, depth) = search_target(key, TREE_DEPTH);
-    let start = trunk_start(nav, trunks, key, BLOCK_DEPTH);
+    let start = trunk_start(nav, trunks, (key, octant), BLOCK_DEPTH);
     let (node, d, mask) = nav.descend(start.0, start.1, BLOCK_DEPTH, code)?;
     if d == BLOCK_DEPTH && mask != 0 {
         match blocks.below(node.idx, code) {
@@ -104,11 +110,12 @@ pub(crate) fn search_through_blocks(
     Some(Found { value: nav.get(node)?.0, depth: d, is_leaf: mask == 0, extra: 0 })
 }
 
-/// Where a search for `key` at `depth` starts; see
-/// [`Trunks::start`].
+/// Where a search for `key` (with its root child, see
+/// [`crate::KeySpace::key_and_octant`]) at `depth` starts; see
+/// [`Trunks::start_in`].
 #[inline(always)]
-pub(crate) fn trunk_start<N: Nav>(nav: N, trunks: &Trunks<Node>, key: Key, depth: u8) -> (Node, u8) {
-    trunks.start(key, depth, |n| nav.mask(n), |n, m, pos| nav.child(n, m, pos))
+pub(crate) fn trunk_start<N: Nav>(nav: N, trunks: &Trunks<Node>, (key, octant): (Key, usize), depth: u8) -> (Node, u8) {
+    trunks.start_in(key.packed(), octant, depth, |n| nav.mask(n), |n, m, pos| nav.child(n, m, pos))
 }
 
 /// Grid cells a view may always have, whatever its size: 256 KB of heap,
@@ -152,7 +159,7 @@ pub(crate) fn search_many<N: Nav>(
         let mut ends = [depth; LANES];
         let mut ended = (1u32 << chunk.len()) - 1;
         for l in 0..chunk.len() {
-            let (node, from) = trunk_start(nav, trunks, key[l], depth);
+            let (node, from) = trunk_start(nav, trunks, (key[l], key[l].child_index(0)), depth);
             match nav.mask(node) {
                 Some(mask) => {
                     at[l] = (node, mask);

@@ -197,11 +197,13 @@ impl LevelIndex {
         }
     }
 
-    /// Where a full-depth search for `key` (Morton `code`) starts (the
-    /// grids are built with the index, so the closures only look up).
+    /// Where a full-depth search for `key` (in root child `octant`)
+    /// starts (the grids are built with the index, so the closures only
+    /// look up).
     #[inline(always)]
-    fn start(&self, key: Key) -> (u32, u8) {
-        self.trunks.start(key, TREE_DEPTH, |n| Some(self.mask(n)), |n, m, pos| Some(self.child(n, m, pos)))
+    fn start(&self, key: Key, octant: usize) -> (u32, u8) {
+        let (mask, child) = (|n| Some(self.mask(n)), |n, m, pos| Some(self.child(n, m, pos)));
+        self.trunks.start_in(key.packed(), octant, TREE_DEPTH, mask, child)
     }
 
     /// Child `pos` of index node `i`, or where the path ends there.
@@ -217,8 +219,15 @@ impl LevelIndex {
 
     /// A full-depth search for `key` (Morton `code`).
     #[inline(always)]
+    #[cfg(test)]
     pub fn search(&self, key: Key, code: u64) -> Reach {
-        let (mut i, from) = self.start(key);
+        self.search_in(key, key.child_index(0), code)
+    }
+
+    /// [`Self::search`] given the key's root child.
+    #[inline(always)]
+    pub fn search_in(&self, key: Key, octant: usize, code: u64) -> Reach {
+        let (mut i, from) = self.start(key, octant);
         if from == TREE_DEPTH {
             return self.voxel(i);
         }
@@ -265,7 +274,7 @@ impl LevelIndex {
         let mut walking = 0u32;
         for (l, &key) in keys.iter().enumerate() {
             code[l] = MortonCode::encode_table(key).0;
-            let (n, from) = self.start(key);
+            let (n, from) = self.start(key, key.child_index(0));
             if from == TREE_DEPTH {
                 out[l] = self.voxel(n);
             } else {

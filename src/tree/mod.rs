@@ -638,12 +638,19 @@ impl OccupancyTree {
     /// when the path ends at an inner node lacking the needed child.
     #[inline(always)]
     pub fn search(&self, key: Key, depth: u8) -> Option<Found> {
+        self.search_in(key, key.child_index(0), depth)
+    }
+
+    /// [`Self::search`] given the key's root child (its child index at
+    /// depth 1).
+    #[inline(always)]
+    fn search_in(&self, key: Key, octant: usize, depth: u8) -> Option<Found> {
         let a = self.arena.as_ref()?;
         if depth == 0 || depth >= TREE_DEPTH {
             if let Some(index) = self.levels.get(a, self.size) {
-                return self.answer(a, key, index.search(key, MortonCode::encode_table(key).0));
+                return self.answer(a, key, index.search_in(key, octant, MortonCode::encode_table(key).0));
             }
-            return self.search_full(a, key);
+            return self.search_full(a, key, octant);
         }
         self.search_arena(key, depth)
     }
@@ -652,7 +659,7 @@ impl OccupancyTree {
     /// as it takes: on a map that fits the caches, the processor overlaps
     /// consecutive queries as far as its window of instructions reaches.
     #[inline(always)]
-    fn search_full(&self, a: &NodeArena, key: Key) -> Option<Found> {
+    fn search_full(&self, a: &NodeArena, key: Key, octant: usize) -> Option<Found> {
         let (masks, first_child) = (a.masks(), a.first_child_ids());
         let child = |n: NodeId, pos: u64| -> Result<NodeId, u8> {
             let m = masks[n as usize];
@@ -663,8 +670,13 @@ impl OccupancyTree {
             }
         };
         let k = key.packed();
-        let (mut node, from) =
-            self.trunks.start_packed(k, TREE_DEPTH, |n| Some(masks[n as usize]), |n, _, pos| child(n, pos as u64).ok());
+        let (mut node, from) = self.trunks.start_in(
+            k,
+            octant,
+            TREE_DEPTH,
+            |n| Some(masks[n as usize]),
+            |n, _, pos| child(n, pos as u64).ok(),
+        );
         for d in from..TREE_DEPTH {
             match child(node, Key::packed_child_index(k, d)) {
                 Ok(c) => node = c,
@@ -805,7 +817,8 @@ impl OccupancyTree {
     /// [`Self::search`] at the voxel containing `p`.
     #[inline]
     pub fn search_point(&self, p: Point3, depth: u8) -> Result<Option<Found>, KeyError> {
-        Ok(self.search(self.keys.key(p)?, depth))
+        let (key, octant) = self.keys.key_and_octant(p)?;
+        Ok(self.search_in(key, octant, depth))
     }
 
     // ----- colour trees (`ColorOcTree`) -------------------------------------

@@ -245,15 +245,29 @@ impl<N: Copy + Default> Trunks<N> {
         mask: impl Fn(N) -> Option<u8>,
         child: impl Fn(N, u8, usize) -> Option<N>,
     ) -> (N, u8) {
-        let g = self.grids.get_or_init(|| self.build_grids(mask, child));
         // the root child from the key's top bits
         let i = ((k >> 15) & 1 | (k >> 30) & 2 | (k >> 45) & 4) as usize;
-        let e = g.entries[i];
+        self.start_in(k, i, depth, mask, child)
+    }
+
+    /// [`Self::start_packed`] given the key's root child `i` (its child
+    /// index at depth 1), when the caller has it sooner than the key.
+    #[inline(always)]
+    pub fn start_in(
+        &self,
+        k: u64,
+        i: usize,
+        depth: u8,
+        mask: impl Fn(N) -> Option<u8>,
+        child: impl Fn(N, u8, usize) -> Option<N>,
+    ) -> (N, u8) {
+        let g = self.grids.get_or_init(|| self.build_grids(mask, child));
+        let e = g.entries[i & 7];
         if (k ^ e.prefix) & e.prefix_mask != 0 || e.end > depth {
             return (self.root, 0);
         }
         if e.first == NO_GRID || e.grid_depth > depth {
-            return (self.nodes[i], e.end);
+            return (self.nodes[i & 7], e.end);
         }
         let cell = (((k >> e.shift) & g.field_mask).wrapping_mul(g.gather) >> 32) & g.cell_mask;
         let c = g.cells[e.first as usize + cell as usize];
