@@ -41,14 +41,6 @@ impl Key {
         x | (y << 16) | (z << 32)
     }
 
-    /// [`Self::child_index`] of a [`Self::packed`] key: one multiply
-    /// gathers the three bits (which land 15 bits apart, nothing carries).
-    #[inline(always)]
-    pub fn packed_child_index(packed: u64, depth: u8) -> u64 {
-        let bits = (packed >> (15 - depth)) & 0x0001_0001_0001;
-        (bits.wrapping_mul((1 << 32) | (1 << 17) | (1 << 2)) >> 32) & 7
-    }
-
     /// The key OctoMap's iterators give the child `pos` of a node with key
     /// `self` at `parent_depth` (`computeChildKey`).
     #[inline]

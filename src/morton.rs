@@ -57,6 +57,15 @@ impl MortonCode {
         MortonCode(spread_bits(x) | (spread_bits(y) << 1) | (spread_bits(z) << 2))
     }
 
+    /// The code's low 24 bits (depths 8 to 15: the low byte of each axis)
+    /// of a [`Key::packed`] key, by three table look-ups: what a descent
+    /// from depth 8 or deeper needs.
+    #[inline(always)]
+    pub fn low_levels(packed: u64) -> u64 {
+        let spread = |shift: u32| u64::from(SPREAD_TABLE[((packed >> shift) & 0xff) as usize]);
+        spread(0) | (spread(16) << 1) | (spread(32) << 2)
+    }
+
     /// Encodes with a 256-entry lookup table (one load per byte and axis).
     #[inline]
     pub fn encode_table(key: Key) -> Self {
@@ -188,6 +197,7 @@ mod tests {
             let key = Key([s as u16, (s >> 16) as u16, (s >> 32) as u16]);
             let m = MortonCode::encode(key);
             assert_eq!(MortonCode::encode_table(key), m);
+            assert_eq!(MortonCode::low_levels(key.packed()), m.0 & 0xff_ffff);
             assert_eq!(MortonCode::encode_bmi2(key), m);
             assert_eq!(m.decode(), key);
             assert_eq!(m.decode_bmi2(), key);

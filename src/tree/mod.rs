@@ -677,12 +677,19 @@ impl OccupancyTree {
             |n| Some(masks[n as usize]),
             |n, _, pos| child(n, pos as u64).ok(),
         );
+        // the child positions from depth `from` on, the next one on top
+        let mut positions = if from >= 8 {
+            (MortonCode::low_levels(k) << 40) << (3 * u32::from(from - 8))
+        } else {
+            (MortonCode::encode_table(key).0 << 16) << (3 * u32::from(from))
+        };
         for d in from..TREE_DEPTH {
-            match child(node, Key::packed_child_index(k, d)) {
+            match child(node, positions >> 61) {
                 Ok(c) => node = c,
                 Err(0) => return Some(Found { value: a.value(node), depth: d, is_leaf: true, extra: a.extra(node) }),
                 Err(_) => return None,
             }
+            positions <<= 3;
         }
         Some(Found { value: a.leaf_value(node), depth: TREE_DEPTH, is_leaf: true, extra: a.leaf_extra(node) })
     }
