@@ -183,7 +183,14 @@ fn main() {
             let best = |k: &[Key]| {
                 (0..9).map(|_| micros(|| by_key(&tree, k)).0 * 1e3 / k.len() as f64).fold(f64::MAX, f64::min)
             };
-            println!("ns per query by key: mixed {:6.2}, grouped by answer depth {:6.2}", best(&keys), best(&sorted));
+            let mut by_octant = keys.clone();
+            by_octant.sort_by_key(|&k| k.child_index(0));
+            println!(
+                "ns per query by key: mixed {:6.2}, grouped by answer depth {:6.2}, by root child {:6.2}",
+                best(&keys),
+                best(&sorted),
+                best(&by_octant)
+            );
         }
         "depths" => {
             let mut hist = [0usize; 18];
