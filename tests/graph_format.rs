@@ -49,7 +49,7 @@ static GLOBAL: TrackingAlloc = TrackingAlloc;
 fn golden() -> Option<PathBuf> {
     let dir = std::env::var_os("OCTOLINEAR_GOLDEN")
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("/work/shared/golden"));
+        .unwrap_or_else(|| std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/golden"));
     if dir.join("manifest.json").exists() {
         Some(dir)
     } else {
