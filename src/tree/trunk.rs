@@ -233,25 +233,12 @@ impl<N: Copy + Default> Trunks<N> {
         mask: impl Fn(N) -> Option<u8>,
         child: impl Fn(N, u8, usize) -> Option<N>,
     ) -> (N, u8) {
-        self.start_packed(key.packed(), depth, mask, child)
+        self.start_in(key.packed(), key.child_index(0), depth, mask, child)
     }
 
-    /// [`Self::start`] for a [`Key::packed`] key.
-    #[inline(always)]
-    pub fn start_packed(
-        &self,
-        k: u64,
-        depth: u8,
-        mask: impl Fn(N) -> Option<u8>,
-        child: impl Fn(N, u8, usize) -> Option<N>,
-    ) -> (N, u8) {
-        // the root child from the key's top bits
-        let i = ((k >> 15) & 1 | (k >> 30) & 2 | (k >> 45) & 4) as usize;
-        self.start_in(k, i, depth, mask, child)
-    }
-
-    /// [`Self::start_packed`] given the key's root child `i` (its child
-    /// index at depth 1), when the caller has it sooner than the key.
+    /// [`Self::start`] for a [`Key::packed`] key `k` and its root child
+    /// `i` (its child index at depth 1), which a caller may have sooner
+    /// than the key.
     #[inline(always)]
     pub fn start_in(
         &self,
