@@ -403,7 +403,7 @@ fn race_search(
 /// The map written to `.olm` and queried in place (from a `Vec`; an mmap'd
 /// file runs the same code) against OctoMap's in-memory tree.
 fn mapped_rows(args: &Args, om: &OracleTree, ol: &OccupancyTree, queries: &[Point3], scans: &[Scan]) {
-    // with the search blocks where they pay (2^18+ nodes at depths 13-15)
+    // with the search blocks where they pay (2^17+ nodes at depths 13-15)
     let opts = mapped::WriteOptions { search_blocks: mapped::SearchBlocksSection::Auto, ..Default::default() };
     let bytes = mapped::to_bytes(ol, opts).expect("write .olm");
     let plain = mapped::to_bytes(ol, mapped::WriteOptions::default()).expect("write .olm").len();

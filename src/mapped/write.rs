@@ -36,7 +36,7 @@ pub struct WriteOptions {
 pub enum SearchBlocksSection {
     #[default]
     Never,
-    /// For maps with 2^18 or more nodes at depths 13–15, where the rank
+    /// For maps with 2^17 or more nodes at depths 13–15, where the rank
     /// layout's last levels no longer stay in the processor's caches.
     Auto,
     /// Whenever the map can have one.
