@@ -170,6 +170,16 @@ fn walk_codes(
 /// The dilated bits of each axis in a Morton code.
 const AXIS_MASKS: [u64; 3] = [0x2492_4924_9249, 0x2492_4924_9249 << 1, 0x2492_4924_9249 << 2];
 
+/// Per-axis values in the order of the slots [`StepClock::step`] returns
+/// (z, x, y, and z again): its compare masks' sign bits are the slot, with
+/// no instruction to turn them into an axis.
+const fn slots(per_axis: [u64; 3]) -> [u64; 4] {
+    [per_axis[2], per_axis[0], per_axis[1], per_axis[2]]
+}
+
+/// [`AXIS_MASKS`] by slot.
+const AXIS_MASK_SLOTS: [u64; 4] = slots(AXIS_MASKS);
+
 /// One ray of `computeRayKeys` walked step by step on Morton codes (see
 /// `walk_codes`), from [`RayFan::ray`]: lets a caller interleave rays,
 /// whose steps, each a chain of dependent operations, then overlap in the
@@ -197,12 +207,12 @@ pub struct WalkState {
     clock: StepClock,
 }
 
-/// Per axis, what a step adds to a Morton code: `((code & mask | fill) +
-/// add) & mask` are the axis's new bits.
+/// Per axis (by [`StepClock::step`]'s slot), what a step adds to a Morton
+/// code: `((code & mask | fill) + add) & mask` are the axis's new bits.
 #[derive(Clone, Copy)]
 pub struct AxisSteps {
-    fill: [u64; 3],
-    add: [u64; 3],
+    fill: [u64; 4],
+    add: [u64; 4],
 }
 
 impl FanRay {
@@ -235,14 +245,15 @@ impl AxisSteps {
             fill[i] = !AXIS_MASKS[i] & u64::from(step[i] == 1).wrapping_neg();
             add[i] = (i64::from(step[i]) << i) as u64;
         }
-        AxisSteps { fill, add }
+        AxisSteps { fill: slots(fill), add: slots(add) }
     }
 
-    /// `code` moved one voxel along `dim`.
+    /// `code` moved one voxel along the axis of `slot`.
     #[inline(always)]
-    fn apply(&self, code: u64, dim: usize) -> u64 {
-        let m = AXIS_MASKS[dim];
-        ((((code & m) | self.fill[dim]).wrapping_add(self.add[dim])) & m) | (code & !m)
+    fn apply(&self, code: u64, slot: usize) -> u64 {
+        let slot = slot & 3;
+        let m = AXIS_MASK_SLOTS[slot];
+        ((((code & m) | self.fill[slot]).wrapping_add(self.add[slot])) & m) | (code & !m)
     }
 }
 
@@ -253,8 +264,7 @@ impl WalkState {
     pub fn next_code(&mut self, steps: &AxisSteps) -> Option<u64> {
         // the code in one register; the axis to step comes from compare
         // masks (no branch on it), its constants from small tables
-        let dim = self.clock.step().min(2);
-        self.code = steps.apply(self.code, dim);
+        self.code = steps.apply(self.code, self.clock.step());
         if self.code == self.end_code || self.clock.min() > self.length {
             self.length = f64::NEG_INFINITY; // stays done
             return None;
@@ -265,7 +275,7 @@ impl WalkState {
 
 /// The DDA's three `t_max` and their increments. `step` advances
 /// the smallest (`min_axis`: ties go to the higher axis) and returns its
-/// axis. The choice is made with
+/// axis's slot (x 1, y 2, z 0; see [`slots`]). The choice is made with
 /// compare masks, not branches: the axis changes irregularly along a ray,
 /// and a mispredicted branch would cost more than the whole step.
 /// Adding a masked-out increment adds +0.0, which leaves a `t_max`
@@ -303,14 +313,14 @@ impl StepClock {
             let lt01 = _mm_cmplt_sd(t0, t1);
             let s0 = _mm_and_pd(lt01, _mm_cmplt_sd(t0, t2));
             let s1 = _mm_andnot_pd(lt01, _mm_cmplt_sd(t1, t2));
-            let s2 = _mm_andnot_pd(_mm_or_pd(s0, s1), _mm_castsi128_pd(_mm_set1_epi32(-1)));
             self.t = [
                 _mm_add_sd(t0, _mm_and_pd(s0, self.dt[0])),
                 _mm_add_sd(t1, _mm_and_pd(s1, self.dt[1])),
-                _mm_add_sd(t2, _mm_and_pd(s2, self.dt[2])),
+                // z steps when neither x nor y does
+                _mm_add_sd(t2, _mm_andnot_pd(_mm_or_pd(s0, s1), self.dt[2])),
             ];
-            // the sign bits of (s1, s2): 0, 1 or 2, the axis stepped
-            _mm_movemask_pd(_mm_unpacklo_pd(s1, s2)) as usize & 3
+            // the sign bits of (s0, s1): the slot
+            _mm_movemask_pd(_mm_unpacklo_pd(s0, s1)) as usize
         }
     }
 
@@ -346,11 +356,9 @@ impl StepClock {
         let s1 = !lt01 & (t1 < t2);
         let s = [s0, s1, !(s0 | s1)];
         for i in 0..3 {
-            // a plain select (`select_unpredictable` would need Rust 1.88, the
-            // crate keeps 1.85)
-            self.t[i] += if s[i] { self.dt[i] } else { 0.0 };
+            self.t[i] += select_unpredictable(s[i], self.dt[i], 0.0);
         }
-        usize::from(s1) | (usize::from(s[2]) << 1)
+        usize::from(s0) | (usize::from(s1) << 1)
     }
 
     #[inline(always)]
@@ -602,11 +610,11 @@ pub(crate) fn cast_ray_with(
     let steps = AxisSteps::new(dda.step);
     // per axis, its bits in a code at the last key before leaving the map
     // (an axis that does not step is never chosen, and no code matches)
-    let edge: [u64; 3] = std::array::from_fn(|i| match dda.step[i] {
+    let edge = slots(std::array::from_fn(|i| match dda.step[i] {
         1 => AXIS_MASKS[i],
         -1 => 0,
         _ => u64::MAX,
-    });
+    }));
     let mut clock = StepClock::new(dda.t_max, dda.t_delta);
     let max_range = opts.max_range.unwrap_or(-1.0);
     let max_range_set = max_range > 0.0;
@@ -619,11 +627,11 @@ pub(crate) fn cast_ray_with(
     loop {
         // the smallest t_max is where the next voxel is entered
         let t_entry = clock.min();
-        let dim = clock.step().min(2);
-        if code & AXIS_MASKS[dim] == edge[dim] {
+        let slot = clock.step() & 3;
+        if code & AXIS_MASK_SLOTS[slot] == edge[slot] {
             return Ok(CastOutcome::LeftMap { end: center_of(code) });
         }
-        code = steps.apply(code, dim);
+        code = steps.apply(code, slot);
         if max_range_set && t_entry >= surely_inside {
             let end = center_of(code);
             let e = [end.x, end.y, end.z];
