@@ -174,7 +174,7 @@ impl KeySpace {
     #[inline(always)]
     pub fn key(&self, p: Point3) -> Result<Key, KeyError> {
         #[cfg(all(target_arch = "x86_64", target_feature = "sse4.1"))]
-        if let Some(k) = self.key_sse41(p) {
+        if let Some((k, _)) = self.key_sse41(p) {
             return Ok(k);
         }
         self.key_per_axis(p)
@@ -187,17 +187,11 @@ impl KeySpace {
     #[inline(always)]
     pub fn key_and_octant(&self, p: Point3) -> Result<(Key, usize), KeyError> {
         #[cfg(all(target_arch = "x86_64", target_feature = "sse4.1"))]
-        if let Some(k) = self.key_sse41_octant(p) {
+        if let Some(k) = self.key_sse41(p) {
             return Ok(k);
         }
         let key = self.key_per_axis(p)?;
         Ok((key, key.child_index(0)))
-    }
-
-    #[cfg(all(target_arch = "x86_64", target_feature = "sse4.1"))]
-    #[inline(always)]
-    fn key_sse41(&self, p: Point3) -> Option<Key> {
-        self.key_sse41_octant(p).map(|(k, _)| k)
     }
 
     /// [`Self::key`] for points inside the map, two axes per instruction:
@@ -209,7 +203,7 @@ impl KeySpace {
     /// exactly when the product is at least zero (-0.0 included).
     #[cfg(all(target_arch = "x86_64", target_feature = "sse4.1"))]
     #[inline(always)]
-    fn key_sse41_octant(&self, p: Point3) -> Option<(Key, usize)> {
+    fn key_sse41(&self, p: Point3) -> Option<(Key, usize)> {
         use std::arch::x86_64::*;
         // SAFETY: SSE2 and SSE4.1 are enabled for this build (the `cfg`
         // above); the intrinsics touch registers only.
