@@ -11,8 +11,11 @@
 
 use std::ops::{Add, AddAssign, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 
-/// A point in metres, single precision like OctoMap's `point3d`.
+/// A point in metres, single precision like OctoMap's `point3d`. Laid
+/// out as three consecutive floats (the vectorised ray set-up loads
+/// points as a float array).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C)]
 pub struct Point3 {
     pub x: f32,
     pub y: f32,

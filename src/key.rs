@@ -117,6 +117,11 @@ impl KeySpace {
         self.resolution
     }
 
+    /// `1 / resolution`, the factor of `coordToKey`.
+    pub(crate) fn resolution_factor(&self) -> f64 {
+        self.resolution_factor
+    }
+
     /// Edge length of a node at `depth` (0 = root).
     #[inline]
     pub fn node_size(&self, depth: u8) -> f64 {

@@ -13,6 +13,9 @@ use crate::sensor::SensorModel;
 use crate::tree::{Found, OccupancyTree};
 use std::hint::select_unpredictable;
 
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod wide;
+
 /// `origin + direction * (float) range`, in float.
 #[inline(always)]
 pub(crate) fn point_along(origin: Point3, direction: Point3, range: f64) -> Point3 {

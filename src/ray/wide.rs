@@ -1,0 +1,637 @@
+//! Eight rays of one fan walked at once, one per lane of AVX-512 registers.
+//!
+//! A ray's steps form one chain of dependent operations (compare the three
+//! `t_max`, add the chosen increment, move the Morton code), so a scalar
+//! walk waits on latency; two walks interleaved (`Casting::cast_all`'s
+//! scalar path) still leave most of the machine idle. Here every lane runs
+//! [`WalkState::next_code`](super::WalkState::next_code)'s arithmetic on
+//! its own ray: the same double compares (ties to the higher axis), the
+//! same double additions and the same end tests, so each lane visits
+//! exactly the voxels of the scalar walk. A lane whose ray ends takes the
+//! next waiting ray in the same step, without a branch (an expanding load
+//! under the mask of ended lanes), and the codes of the lanes still going
+//! are packed into a buffer that is handed on in batches.
+//!
+//! Only on x86-64 processors with AVX-512F, chosen at run time
+//! ([`available`]); the scalar walk remains for the others.
+
+use super::{FanRay, RayFan, AXIS_MASKS};
+use crate::geometry::Point3;
+use crate::key::KeySpace;
+use std::arch::x86_64::*;
+
+/// Rays in flight at once.
+const LANES: usize = 8;
+
+/// Codes gathered before they are handed on.
+const BUFFER: usize = 512;
+
+/// Whether this processor can run the lanes.
+pub(crate) fn available() -> bool {
+    std::arch::is_x86_feature_detected!("avx512f")
+}
+
+/// Rays set up and waiting for a lane, as a structure of arrays with room
+/// for [`Self::CAPACITY`] rays and the [`LANES`] finished rays that
+/// [`walk`] needs after the last one (so that refills past the last ray
+/// read rays that end at once).
+pub(crate) struct LaneRays {
+    t: [Box<[f64]>; 3],
+    dt: [Box<[f64]>; 3],
+    /// Per axis, what a step subtracts from the axis's bits of a code: the
+    /// axis's mask for a step up, one for a step down (see [`step_code`]).
+    sub: [Box<[u64]>; 3],
+    end: Box<[u64]>,
+    length: Box<[f64]>,
+    /// Rays before the padding.
+    len: usize,
+    padded: bool,
+}
+
+impl Default for LaneRays {
+    fn default() -> Self {
+        let n = Self::CAPACITY + LANES;
+        let f = || vec![0.0; n].into_boxed_slice();
+        let u = || vec![0; n].into_boxed_slice();
+        LaneRays {
+            t: [f(), f(), f()],
+            dt: [f(), f(), f()],
+            sub: [u(), u(), u()],
+            end: u(),
+            length: f(),
+            len: 0,
+            padded: false,
+        }
+    }
+}
+
+impl LaneRays {
+    /// Rays a set-up may hold (88 bytes each: the arrays stay in L1).
+    pub(crate) const CAPACITY: usize = 256;
+
+    /// No ray waiting, and no padding: [`Self::push`] or [`set_up`] rays,
+    /// then [`Self::pad`].
+    pub(crate) fn clear(&mut self) {
+        self.len = 0;
+        self.padded = false;
+    }
+
+    pub(crate) fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Adds `ray` after the waiting ones (before [`Self::pad`]).
+    #[inline(always)]
+    pub(crate) fn push(&mut self, ray: FanRay) {
+        assert!(!self.padded && self.len < Self::CAPACITY, "LaneRays full or padded");
+        let n = self.len;
+        for (i, mask) in AXIS_MASKS.into_iter().enumerate() {
+            // the slot of axis i in `AxisSteps` (x 1, y 2, z 0)
+            let up = (ray.steps.add[(i + 1) % 3] as i64) > 0;
+            self.t[i][n] = ray.t_max[i];
+            self.dt[i][n] = ray.t_delta[i];
+            self.sub[i][n] = if up { mask } else { 1 };
+        }
+        self.end[n] = ray.end_code;
+        self.length[n] = ray.length;
+        self.len += 1;
+    }
+
+    /// Appends the [`LANES`] rays that end at their first step
+    /// (`min(t_max) > -inf` holds) which [`walk`] reads past the last.
+    pub(crate) fn pad(&mut self) {
+        let n = self.len;
+        for i in 0..3 {
+            self.t[i][n..n + LANES].fill(0.0);
+            self.dt[i][n..n + LANES].fill(1.0);
+            self.sub[i][n..n + LANES].fill(1);
+        }
+        self.end[n..n + LANES].fill(u64::MAX);
+        self.length[n..n + LANES].fill(f64::NEG_INFINITY);
+        self.padded = true;
+    }
+}
+
+/// [`RayFan::ray`] for every point of `points` (at most
+/// [`LaneRays::CAPACITY`] less the rays already in `rays`), with
+/// `Casting::cast`'s end voxel: `occupied` is called with the code of each
+/// point's voxel, the non-empty rays join `rays`. Points without a key are
+/// skipped. Eight points at a time, with the scalar code's operations in
+/// the same precision and order (every one correctly rounded), so the rays
+/// are the same to the bit; points are not cut to a maximum range.
+///
+/// # Safety
+/// The processor must support AVX-512F ([`available`]).
+#[target_feature(enable = "avx512f")]
+pub(crate) unsafe fn set_up(
+    rays: &mut LaneRays,
+    fan: &RayFan,
+    keys: &KeySpace,
+    points: &[Point3],
+    mut occupied: impl FnMut(u64),
+) {
+    assert!(!rays.padded && rays.len + points.len() <= LaneRays::CAPACITY, "LaneRays full or padded");
+    let mut eight = points.chunks_exact(LANES);
+    for batch in eight.by_ref() {
+        // x, y and z of the eight points: 24 consecutive floats
+        // (`Point3` is `repr(C)`), the first 16 in `lo`
+        // SAFETY: `batch` holds 8 points, 96 bytes
+        let floats = batch.as_ptr().cast::<f32>();
+        let lo = _mm512_loadu_ps(floats);
+        let hi = _mm512_castps256_ps512(_mm256_loadu_ps(floats.add(16)));
+        let axis = |first: i32| {
+            let idx = _mm512_setr_epi32(
+                first,
+                first + 3,
+                first + 6,
+                first + 9,
+                first + 12,
+                first + 15,
+                first + 18,
+                first + 21,
+                0,
+                0,
+                0,
+                0,
+                0,
+                0,
+                0,
+                0,
+            );
+            _mm512_castps512_ps256(_mm512_permutex2var_ps(lo, idx, hi))
+        };
+        let p = [axis(0), axis(1), axis(2)];
+
+        // the end voxel: `coordToKeyChecked` per axis, then its Morton code
+        let factor = _mm512_set1_pd(keys.resolution_factor());
+        let center = f64::from(crate::key::KEY_CENTER);
+        let mut in_map: __mmask8 = 0xff;
+        let mut code = _mm512_setzero_si512();
+        for (i, &pa) in p.iter().enumerate() {
+            let floored = _mm512_roundscale_pd::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(_mm512_mul_pd(
+                factor,
+                _mm512_cvtps_pd(pa),
+            ));
+            in_map &= _mm512_cmp_pd_mask::<_CMP_GE_OQ>(floored, _mm512_set1_pd(-center))
+                & _mm512_cmp_pd_mask::<_CMP_LT_OQ>(floored, _mm512_set1_pd(center));
+            let key = _mm256_add_epi32(_mm512_cvttpd_epi32(floored), _mm256_set1_epi32(center as i32));
+            let spread = spread_bits(_mm512_cvtepu32_epi64(key));
+            code = _mm512_or_si512(code, _mm512_sll_epi64(spread, _mm_cvtsi32_si128(i as i32)));
+        }
+        let mut codes = [0u64; LANES];
+        _mm512_storeu_si512(codes.as_mut_ptr().cast(), _mm512_maskz_compress_epi64(in_map, code));
+        codes[..in_map.count_ones() as usize].iter().for_each(|&c| occupied(c));
+
+        // the ray (`RayFan::ray`): direction, length, per axis the step,
+        // the first border's distance and the distance between borders
+        let o = [fan.origin.x, fan.origin.y, fan.origin.z].map(|v| _mm256_set1_ps(v));
+        let d = [_mm256_sub_ps(p[0], o[0]), _mm256_sub_ps(p[1], o[1]), _mm256_sub_ps(p[2], o[2])];
+        // `Point3::norm`: the float sum of squares, a double root
+        let sum = _mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(d[0], d[0]), _mm256_mul_ps(d[1], d[1])),
+            _mm256_mul_ps(d[2], d[2]),
+        );
+        let length = _mm512_cvtpd_ps(_mm512_sqrt_pd(_mm512_cvtps_pd(sum)));
+        let kept = in_map & _mm512_cmpneq_epu64_mask(code, _mm512_set1_epi64(fan.origin_code as i64));
+        let n = rays.len;
+        let store_pd = |v: __m512d, to: &mut [f64]| {
+            let to = &mut to[n..n + LANES];
+            _mm512_storeu_pd(to.as_mut_ptr(), _mm512_maskz_compress_pd(kept, v));
+        };
+        let store_epi = |v: __m512i, to: &mut [u64]| {
+            let to = &mut to[n..n + LANES];
+            _mm512_storeu_si512(to.as_mut_ptr().cast(), _mm512_maskz_compress_epi64(kept, v));
+        };
+        for i in 0..3 {
+            let dir = _mm512_cvtps_pd(_mm256_div_ps(d[i], length));
+            let up = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(dir, _mm512_setzero_pd());
+            let moves = up | _mm512_cmp_pd_mask::<_CMP_LT_OQ>(dir, _mm512_setzero_pd());
+            let border =
+                _mm512_mask_blend_pd(up, _mm512_set1_pd(fan.to_border[i][0]), _mm512_set1_pd(fan.to_border[i][1]));
+            let never = _mm512_set1_pd(f64::MAX);
+            store_pd(_mm512_mask_div_pd(never, moves, border, dir), &mut rays.t[i]);
+            store_pd(
+                _mm512_mask_div_pd(never, moves, _mm512_set1_pd(fan.resolution), _mm512_abs_pd(dir)),
+                &mut rays.dt[i],
+            );
+            let sub = _mm512_mask_blend_epi64(up, _mm512_set1_epi64(1), _mm512_set1_epi64(AXIS_MASKS[i] as i64));
+            store_epi(sub, &mut rays.sub[i]);
+        }
+        store_epi(code, &mut rays.end);
+        store_pd(_mm512_cvtps_pd(length), &mut rays.length);
+        rays.len += kept.count_ones() as usize;
+    }
+    for &p in eight.remainder() {
+        let Ok(key) = keys.key(p) else { continue };
+        let end_code = crate::morton::MortonCode::encode(key).0;
+        occupied(end_code);
+        if let Some(ray) = fan.ray(p, end_code) {
+            rays.push(ray);
+        }
+    }
+}
+
+/// [`crate::morton::spread_bits`] in every lane (values below 2^16).
+#[inline(always)]
+unsafe fn spread_bits(v: __m512i) -> __m512i {
+    let step = |x: __m512i, shift: u32, mask: u64| {
+        _mm512_and_si512(
+            _mm512_or_si512(x, _mm512_sll_epi64(x, _mm_cvtsi32_si128(shift as i32))),
+            _mm512_set1_epi64(mask as i64),
+        )
+    };
+    let x = step(v, 16, 0x0000_ff00_00ff);
+    let x = step(x, 8, 0x00f0_0f00_f00f);
+    let x = step(x, 4, 0x0c30_c30c_30c3);
+    step(x, 2, 0x2492_4924_9249)
+}
+
+/// The rays in the lanes between two calls of [`walk`]: two groups of
+/// [`LANES`], stepped alternately so that one group's chain of compares and
+/// additions overlaps the other's.
+#[derive(Clone, Copy)]
+pub(crate) struct Lanes {
+    groups: [Saved; 2],
+}
+
+/// One group's registers, stored.
+#[derive(Clone, Copy)]
+struct Saved {
+    t: [[f64; LANES]; 3],
+    dt: [[f64; LANES]; 3],
+    sub: [[u64; LANES]; 3],
+    code: [u64; LANES],
+    end: [u64; LANES],
+    length: [f64; LANES],
+}
+
+impl Default for Lanes {
+    /// Every lane holds a finished ray.
+    fn default() -> Self {
+        let saved = Saved {
+            t: [[0.0; LANES]; 3],
+            dt: [[1.0; LANES]; 3],
+            sub: [[1; LANES]; 3],
+            code: [0; LANES],
+            end: [u64::MAX; LANES],
+            length: [f64::NEG_INFINITY; LANES],
+        };
+        Lanes { groups: [saved; 2] }
+    }
+}
+
+/// [`LANES`] rays in registers (named fields: arrays of vectors would be
+/// kept in memory).
+#[derive(Clone, Copy)]
+struct Group {
+    t0: __m512d,
+    t1: __m512d,
+    t2: __m512d,
+    dt0: __m512d,
+    dt1: __m512d,
+    dt2: __m512d,
+    sub0: __m512i,
+    sub1: __m512i,
+    sub2: __m512i,
+    code: __m512i,
+    end: __m512i,
+    length: __m512d,
+}
+
+impl Group {
+    #[inline(always)]
+    unsafe fn load(s: &Saved) -> Self {
+        // SAFETY: each array holds LANES values
+        let pd = |a: &[f64; LANES]| _mm512_loadu_pd(a.as_ptr());
+        let epi = |a: &[u64; LANES]| _mm512_loadu_si512(a.as_ptr().cast());
+        Group {
+            t0: pd(&s.t[0]),
+            t1: pd(&s.t[1]),
+            t2: pd(&s.t[2]),
+            dt0: pd(&s.dt[0]),
+            dt1: pd(&s.dt[1]),
+            dt2: pd(&s.dt[2]),
+            sub0: epi(&s.sub[0]),
+            sub1: epi(&s.sub[1]),
+            sub2: epi(&s.sub[2]),
+            code: epi(&s.code),
+            end: epi(&s.end),
+            length: pd(&s.length),
+        }
+    }
+
+    #[inline(always)]
+    unsafe fn store(&self, s: &mut Saved) {
+        // SAFETY: each array holds LANES values
+        let pd = |v: __m512d, a: &mut [f64; LANES]| _mm512_storeu_pd(a.as_mut_ptr(), v);
+        let epi = |v: __m512i, a: &mut [u64; LANES]| _mm512_storeu_si512(a.as_mut_ptr().cast(), v);
+        pd(self.t0, &mut s.t[0]);
+        pd(self.t1, &mut s.t[1]);
+        pd(self.t2, &mut s.t[2]);
+        pd(self.dt0, &mut s.dt[0]);
+        pd(self.dt1, &mut s.dt[1]);
+        pd(self.dt2, &mut s.dt[2]);
+        epi(self.sub0, &mut s.sub[0]);
+        epi(self.sub1, &mut s.sub[1]);
+        epi(self.sub2, &mut s.sub[2]);
+        epi(self.code, &mut s.code);
+        epi(self.end, &mut s.end);
+        pd(self.length, &mut s.length);
+    }
+
+    /// One step of every lane (`WalkState::next_code`): the axis of the
+    /// smallest `t_max`, ties to the higher axis (`min_axis`). Returns the
+    /// lanes whose ray has ended: the new voxel is the end voxel, or every
+    /// `t_max` lies beyond the ray's length (OctoMap's `min(min(..), ..) >
+    /// length`, with no NaN among them).
+    #[inline(always)]
+    unsafe fn step(&mut self) -> __mmask8 {
+        let (t0, t1, t2) = (self.t0, self.t1, self.t2);
+        let lt01 = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(t0, t1);
+        let lt02 = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(t0, t2);
+        let lt12 = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(t1, t2);
+        let s0 = lt01 & lt02;
+        let s1 = !lt01 & lt12;
+        let s2 = !(s0 | s1);
+        self.t0 = _mm512_mask_add_pd(t0, s0, t0, self.dt0);
+        self.t1 = _mm512_mask_add_pd(t1, s1, t1, self.dt1);
+        self.t2 = _mm512_mask_add_pd(t2, s2, t2, self.dt2);
+        let mask = _mm512_mask_blend_epi64(
+            s0,
+            _mm512_mask_blend_epi64(
+                s1,
+                _mm512_set1_epi64(AXIS_MASKS[2] as i64),
+                _mm512_set1_epi64(AXIS_MASKS[1] as i64),
+            ),
+            _mm512_set1_epi64(AXIS_MASKS[0] as i64),
+        );
+        let by = _mm512_mask_blend_epi64(s0, _mm512_mask_blend_epi64(s1, self.sub2, self.sub1), self.sub0);
+        self.code = step_code(self.code, mask, by);
+        let beyond = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(self.t0, self.length)
+            & _mm512_cmp_pd_mask::<_CMP_GT_OQ>(self.t1, self.length)
+            & _mm512_cmp_pd_mask::<_CMP_GT_OQ>(self.t2, self.length);
+        _mm512_cmpeq_epi64_mask(self.code, self.end) | beyond
+    }
+
+    /// The lanes in `ended` take the rays of `rays` from `at` on, in order.
+    #[inline(always)]
+    unsafe fn refill(&mut self, ended: __mmask8, rays: &LaneRays, at: usize, origin: __m512i) {
+        // SAFETY: the caller keeps `at <= rays.len`, and `rays` is padded
+        // with LANES rays
+        let k = ended;
+        self.t0 = _mm512_mask_expandloadu_pd(self.t0, k, rays.t[0].as_ptr().add(at));
+        self.t1 = _mm512_mask_expandloadu_pd(self.t1, k, rays.t[1].as_ptr().add(at));
+        self.t2 = _mm512_mask_expandloadu_pd(self.t2, k, rays.t[2].as_ptr().add(at));
+        self.dt0 = _mm512_mask_expandloadu_pd(self.dt0, k, rays.dt[0].as_ptr().add(at));
+        self.dt1 = _mm512_mask_expandloadu_pd(self.dt1, k, rays.dt[1].as_ptr().add(at));
+        self.dt2 = _mm512_mask_expandloadu_pd(self.dt2, k, rays.dt[2].as_ptr().add(at));
+        self.sub0 = _mm512_mask_expandloadu_epi64(self.sub0, k, rays.sub[0].as_ptr().add(at).cast());
+        self.sub1 = _mm512_mask_expandloadu_epi64(self.sub1, k, rays.sub[1].as_ptr().add(at).cast());
+        self.sub2 = _mm512_mask_expandloadu_epi64(self.sub2, k, rays.sub[2].as_ptr().add(at).cast());
+        self.end = _mm512_mask_expandloadu_epi64(self.end, k, rays.end.as_ptr().add(at).cast());
+        self.length = _mm512_mask_expandloadu_pd(self.length, k, rays.length.as_ptr().add(at));
+        self.code = _mm512_mask_mov_epi64(self.code, k, origin);
+    }
+
+    /// Whether every lane holds a finished ray (the padding's).
+    #[inline(always)]
+    unsafe fn finished(&self) -> bool {
+        _mm512_cmp_pd_mask::<_CMP_EQ_OQ>(self.length, _mm512_set1_pd(f64::NEG_INFINITY)) == 0xff
+    }
+}
+
+/// Appends the codes of the lanes not in `ended` to `buffer` at `filled`,
+/// less a lane's that repeats the code its neighbour below appends (rays
+/// next to each other in a scan often enter the same voxel at the same
+/// step); returns the new `filled`.
+#[inline(always)]
+unsafe fn append(buffer: &mut [u64; BUFFER + LANES], filled: usize, code: __m512i, ended: __mmask8) -> usize {
+    let going = !ended;
+    let below = _mm512_alignr_epi64::<7>(code, code);
+    let repeat = _mm512_cmpeq_epi64_mask(code, below) & (going << 1);
+    let kept = going & !repeat;
+    // SAFETY: `filled <= BUFFER`, and the buffer has LANES more slots
+    _mm512_storeu_si512(buffer.as_mut_ptr().add(filled).cast(), _mm512_maskz_compress_epi64(kept, code));
+    filled + kept.count_ones() as usize
+}
+
+/// Walks the rays of `rays` (all from the voxel `origin_code`) through the
+/// lanes, calling `visit` with the codes of the voxels they step into, in
+/// batches and in no particular order (a voxel may come more than once).
+/// Returns once every ray of `rays` has entered a lane; with `drain`, once
+/// every lane's ray has ended. Rays still in the lanes stay in `lanes` for
+/// the next call.
+///
+/// # Safety
+/// The processor must support AVX-512F ([`available`]).
+#[target_feature(enable = "avx512f")]
+pub(crate) unsafe fn walk(
+    lanes: &mut Lanes,
+    rays: &LaneRays,
+    origin_code: u64,
+    drain: bool,
+    mut visit: impl FnMut(&[u64]),
+) {
+    assert!(rays.padded, "LaneRays::pad before walk");
+    let mut buffer = [0u64; BUFFER + LANES];
+    let mut filled = 0usize;
+    let origin = _mm512_set1_epi64(origin_code as i64);
+    let mut a = Group::load(&lanes.groups[0]);
+    let mut b = Group::load(&lanes.groups[1]);
+    let len = rays.len;
+    let mut next = 0usize;
+    loop {
+        let ended_a = a.step();
+        let ended_b = b.step();
+        filled = append(&mut buffer, filled, a.code, ended_a);
+        filled = append(&mut buffer, filled, b.code, ended_b);
+        // ended lanes take the next rays, in order
+        a.refill(ended_a, rays, next, origin);
+        next = (next + ended_a.count_ones() as usize).min(len);
+        b.refill(ended_b, rays, next, origin);
+        next = (next + ended_b.count_ones() as usize).min(len);
+        if filled > BUFFER - LANES {
+            visit(&buffer[..filled]);
+            filled = 0;
+        }
+        if next == len && (!drain || (a.finished() && b.finished())) {
+            break;
+        }
+    }
+    visit(&buffer[..filled]);
+    a.store(&mut lanes.groups[0]);
+    b.store(&mut lanes.groups[1]);
+}
+
+/// `code` moved one voxel along the axis whose bits are `mask`: the axis's
+/// bits minus `by` (the mask itself for a step up: `x - mask` is `(x |
+/// !mask) + 1`, whose carry runs through the other axes' bits; one for a
+/// step down, whose borrow runs through them), the other bits kept.
+#[inline(always)]
+unsafe fn step_code(code: __m512i, mask: __m512i, by: __m512i) -> __m512i {
+    let moved = _mm512_sub_epi64(_mm512_and_si512(code, mask), by);
+    // bitwise `mask ? moved : code`
+    _mm512_ternarylogic_epi64::<0xe4>(moved, code, mask)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::morton::MortonCode;
+
+    /// A deterministic generator (64-bit LCG, high bits).
+    struct Lcg(u64);
+
+    impl Lcg {
+        fn next(&mut self) -> u64 {
+            self.0 = self.0.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+            self.0 >> 11
+        }
+
+        fn float(&mut self, lo: f32, hi: f32) -> f32 {
+            lo + (hi - lo) * (self.next() % 1_000_000) as f32 / 1e6
+        }
+    }
+
+    /// End points that probe the set-up's corners: voxel borders, rays along
+    /// axes and diagonals, ends inside the origin's voxel, points outside
+    /// the map, plain random ones.
+    fn points(rng: &mut Lcg, origin: Point3, res: f64, n: usize) -> Vec<Point3> {
+        let res = res as f32;
+        (0..n)
+            .map(|i| {
+                let mut p = Point3::new(rng.float(-6.0, 6.0), rng.float(-6.0, 6.0), rng.float(-3.0, 3.0));
+                let (a, b) = (p.x, p.y.abs().max(0.5));
+                match i % 12 {
+                    0 => p = Point3::new((p.x / res).round() * res, (p.y / res).round() * res, p.z),
+                    1 => p = Point3::new(p.x, origin.y, origin.z),
+                    2 => p = Point3::new(origin.x, origin.y, p.z),
+                    // diagonals: from a voxel centre, equal t_max on two or
+                    // three axes at every step (the ties)
+                    3 => p = Point3::new(origin.x + a, origin.y + a, origin.z - a),
+                    9 => p = Point3::new(origin.x, origin.y + a, origin.z + a),
+                    10 => p = Point3::new(origin.x + b, origin.y, origin.z - b),
+                    11 => p = Point3::new(origin.x - a, origin.y + a, origin.z),
+                    // along z to a border: t_max may equal the length
+                    8 => {
+                        let up = if i % 2 == 0 { 1.0 } else { -1.0 };
+                        p = Point3::new(origin.x, origin.y, origin.z + up * ((i % 7) as f32 + 0.5) * res)
+                    }
+                    4 => p = Point3::new(origin.x + 0.1 * res, origin.y - 0.1 * res, origin.z),
+                    5 if i % 4 == 1 => p.x = 4.0e6,
+                    6 => p = Point3::new(-p.x * 1e-3, p.y * 1e-3, 0.0),
+                    _ => {}
+                }
+                p
+            })
+            .collect()
+    }
+
+    /// The scalar set-up's rays and occupied codes, in point order.
+    fn scalar_set_up(fan: &RayFan, keys: &KeySpace, points: &[Point3]) -> (LaneRays, Vec<u64>) {
+        let mut rays = LaneRays::default();
+        let mut occupied = Vec::new();
+        for &p in points {
+            let Ok(key) = keys.key(p) else { continue };
+            let code = MortonCode::encode(key).0;
+            occupied.push(code);
+            if let Some(ray) = fan.ray(p, code) {
+                rays.push(ray);
+            }
+        }
+        (rays, occupied)
+    }
+
+    fn bits(v: &[f64]) -> Vec<u64> {
+        v.iter().map(|x| x.to_bits()).collect()
+    }
+
+    /// The vectorised set-up gives the scalar one's rays, bit for bit, and
+    /// the same occupied codes, at resolutions from 1 cm to 1 m.
+    #[test]
+    fn set_up_matches_the_scalar_set_up() {
+        if !available() {
+            eprintln!("skipped: no AVX-512F");
+            return;
+        }
+        let mut rng = Lcg(3);
+        for res in [0.01, 0.05, 0.1, 0.2, 0.37, 1.0] {
+            let keys = KeySpace::new(res);
+            for round in 0..20 {
+                let mut origin = Point3::new(rng.float(-2.0, 2.0), rng.float(-2.0, 2.0), rng.float(-1.0, 1.0));
+                if round % 2 == 0 {
+                    origin = keys.key_to_point(keys.key(origin).unwrap());
+                }
+                let fan = RayFan::new(&keys, origin).unwrap();
+                let pts = points(&mut rng, origin, res, 253); // not a multiple of eight
+                let (want, want_occupied) = scalar_set_up(&fan, &keys, &pts);
+                let mut got = LaneRays::default();
+                let mut got_occupied = Vec::new();
+                // SAFETY: AVX-512F is available (checked above)
+                unsafe { set_up(&mut got, &fan, &keys, &pts, |c| got_occupied.push(c)) };
+                assert_eq!(got_occupied, want_occupied, "res {res}");
+                let n = want.len();
+                assert_eq!(got.len(), n, "res {res}");
+                for i in 0..3 {
+                    assert_eq!(bits(&got.t[i][..n]), bits(&want.t[i][..n]), "t_max, axis {i}, res {res}");
+                    assert_eq!(bits(&got.dt[i][..n]), bits(&want.dt[i][..n]), "t_delta, axis {i}, res {res}");
+                    assert_eq!(got.sub[i][..n], want.sub[i][..n], "steps, axis {i}, res {res}");
+                }
+                assert_eq!(got.end[..n], want.end[..n], "res {res}");
+                assert_eq!(bits(&got.length[..n]), bits(&want.length[..n]), "res {res}");
+            }
+        }
+    }
+
+    /// The voxels a ray enters past the origin's, by the scalar walk.
+    fn scalar_walk(fan: &RayFan, keys: &KeySpace, p: Point3) -> Vec<u64> {
+        let Ok(key) = keys.key(p) else { return Vec::new() };
+        let mut codes = Vec::new();
+        fan.for_each_code(p, MortonCode::encode(key).0, |c| codes.push(c));
+        codes.into_iter().skip(1).collect()
+    }
+
+    /// Walked alone, each ray enters exactly the scalar walk's voxels, in
+    /// its order; walked together, over several set-ups (rays stay in the
+    /// lanes from one call to the next), the scan enters the same set of
+    /// voxels, every ray's first and last included.
+    #[test]
+    fn walks_match_the_scalar_walk() {
+        if !available() {
+            eprintln!("skipped: no AVX-512F");
+            return;
+        }
+        let mut rng = Lcg(11);
+        for res in [0.01, 0.1, 0.2, 1.0] {
+            let keys = KeySpace::new(res);
+            let origin = Point3::new(rng.float(-1.0, 1.0), rng.float(-1.0, 1.0), rng.float(-1.0, 1.0));
+            // a voxel's centre, where diagonal rays tie at every border
+            let origin = keys.key_to_point(keys.key(origin).unwrap());
+            let fan = RayFan::new(&keys, origin).unwrap();
+            let pts = points(&mut rng, origin, res, 700);
+            let mut rays = LaneRays::default();
+            for &p in &pts {
+                rays.clear();
+                // SAFETY (both calls): AVX-512F is available (checked above)
+                unsafe { set_up(&mut rays, &fan, &keys, &[p], |_| {}) };
+                rays.pad();
+                let mut got = Vec::new();
+                unsafe { walk(&mut Lanes::default(), &rays, fan.origin_code, true, |c| got.extend_from_slice(c)) };
+                assert_eq!(got, scalar_walk(&fan, &keys, p), "res {res}, end {p:?}");
+            }
+            let want: std::collections::BTreeSet<u64> = pts.iter().flat_map(|&p| scalar_walk(&fan, &keys, p)).collect();
+            let mut got = std::collections::BTreeSet::new();
+            let mut lanes = Lanes::default();
+            let chunks: Vec<&[Point3]> = pts.chunks(97).collect();
+            for (i, chunk) in chunks.iter().enumerate() {
+                rays.clear();
+                unsafe { set_up(&mut rays, &fan, &keys, chunk, |_| {}) };
+                rays.pad();
+                let last = i + 1 == chunks.len();
+                unsafe { walk(&mut lanes, &rays, fan.origin_code, last, |c| got.extend(c.iter().copied())) };
+            }
+            assert!(want.len() > 300, "the rays enter many voxels ({})", want.len());
+            assert_eq!(got, want, "res {res}");
+        }
+    }
+}
