@@ -22,8 +22,9 @@ const RECENT_BITS: u32 = 8;
 pub(crate) struct BlockSet {
     /// Block (code >> [`BLOCK_BITS`]) to its number in `words`.
     index: HashMap<u64, u32, BuildHasherDefault<KeyHasher>>,
-    /// Recently used blocks and their numbers, before `index`.
-    recent: Vec<(u64, u32)>,
+    /// Recently used blocks and their numbers, before `index` (a fixed
+    /// array: a slot needs no bounds test).
+    recent: Box<[(u64, u32); 1 << RECENT_BITS]>,
     /// [`WORDS`] words per block, in the order the blocks were first used.
     words: Vec<u64>,
 }
@@ -38,7 +39,7 @@ fn recent_slot(block: u64) -> usize {
 
 impl Default for BlockSet {
     fn default() -> Self {
-        BlockSet { index: HashMap::default(), recent: vec![(u64::MAX, 0); 1 << RECENT_BITS], words: Vec::new() }
+        BlockSet { index: HashMap::default(), recent: Box::new([(u64::MAX, 0); 1 << RECENT_BITS]), words: Vec::new() }
     }
 }
 
