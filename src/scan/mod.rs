@@ -530,8 +530,9 @@ impl OccupancyTree {
     /// scan's report once it is in. With more than one thread the work is
     /// pipelined: while one scan's update is applied to the tree, the
     /// following scans are cast, each whole on one thread (a scan's update
-    /// depends on the map's key space only, never on its content), and the
-    /// thread that applies casts too whenever the next update is not ready.
+    /// depends on the map's key space only, never on its content), and
+    /// every thread applies the next update when it is ready and casts
+    /// otherwise.
     /// Stops at the first scan that is refused, with its position in
     /// `scans`; the scans before it are in.
     pub fn insert_point_clouds<I, P>(
@@ -574,14 +575,17 @@ impl OccupancyTree {
         }
     }
 
-    /// [`Self::insert_point_clouds`] on `threads` threads: `threads - 1`
-    /// casters take scans in order and cast each on one thread; this
-    /// thread applies the updates in order and casts too whenever the next
-    /// update is not ready. Each scan is cast whole by one thread, so there
-    /// is no merge of per-thread lists, and the thread that applies never
-    /// waits while there is a scan to cast. At most `threads + 1` scans are
-    /// cast ahead of the tree (twice the threads raised the peak memory of
-    /// a 2-thread build from 22 to 24 MB).
+    /// [`Self::insert_point_clouds`] on `threads` threads, all alike: a
+    /// thread applies the next scan's update to the tree when it has been
+    /// cast and nobody is applying, else takes the next scan and casts it
+    /// whole. Updates are applied in scan order, each by whichever thread
+    /// finds it ready, so no thread waits while there is work: a pipeline
+    /// where one thread did all the applying left the others idle behind
+    /// its casting, and left its own casting behind the tree on large maps
+    /// (`docs/benchmarks.md`, session 15). Each scan is cast whole by one
+    /// thread, so there is no merge of per-thread lists. At most `threads
+    /// + 1` scans are cast ahead of the tree (twice the threads raised the
+    /// peak memory of a 2-thread build from 22 to 24 MB).
     fn insert_pipelined<S, P>(
         &mut self,
         scans: S,
@@ -600,42 +604,51 @@ impl OccupancyTree {
                 scans: scans.fuse(),
                 taken: 0,
                 applied: 0,
+                applying: false,
                 exhausted: false,
                 stopped: false,
+                refused: None,
                 cast: BTreeMap::new(),
             }),
             changed: Condvar::new(),
             lookahead: threads.max(1) + 1,
         };
-        let cast = |(i, (points, origin)): (usize, (P, Point3))| {
-            let result = compute_update(&keys, points.as_ref(), origin, &cast_opts);
-            pipeline.lock().cast.insert(i, result);
-            pipeline.changed.notify_all();
+        // used by one thread at a time: the one applying
+        let tree = Mutex::new((self, after_each));
+        let work = || {
+            // a panicking thread stops the others
+            let _stop = StopOnDrop { pipeline: &pipeline };
+            while let Some(job) = pipeline.next_job() {
+                match job {
+                    Job::Cast(i, (points, origin)) => {
+                        let result = compute_update(&keys, points.as_ref(), origin, &cast_opts);
+                        pipeline.lock().cast.insert(i, result);
+                        pipeline.changed.notify_all();
+                    }
+                    Job::Apply(update, report) => {
+                        let mut guard = tree.lock().unwrap_or_else(|e| e.into_inner());
+                        let (tree, after_each) = &mut *guard;
+                        let report = tree.apply_update(&update, report, opts.inner);
+                        drop(update);
+                        after_each(tree, report);
+                        drop(guard);
+                        let mut s = pipeline.lock();
+                        s.applied += 1;
+                        s.applying = false;
+                        drop(s);
+                        pipeline.changed.notify_all();
+                    }
+                }
+            }
         };
         rayon::scope(|scope| {
             for _ in 1..threads {
-                scope.spawn(|_| {
-                    // a panicking caster stops the others and this thread
-                    let _stop = StopOnDrop { pipeline: &pipeline, only_on_panic: true };
-                    while let Some(scan) = pipeline.take() {
-                        cast(scan);
-                    }
-                });
+                scope.spawn(|_| work());
             }
-            // stops the casters however this thread leaves (a panic in
-            // `after_each` included), so that the scope can end
-            let _stop = StopOnDrop { pipeline: &pipeline, only_on_panic: false };
-            for k in 0.. {
-                let Some(result) = pipeline.next_update(k, &cast) else { return Ok(()) };
-                let (update, report) = result.map_err(|e| (k, e))?;
-                let report = self.apply_update(&update, report, opts.inner);
-                drop(update);
-                pipeline.lock().applied = k + 1;
-                pipeline.changed.notify_all();
-                after_each(self, report);
-            }
-            Ok(())
-        })
+            work();
+        });
+        let refused = pipeline.lock().refused.take();
+        refused.map_or(Ok(()), Err)
     }
 
     /// Integrates a coloured scan into a colour tree: the scan as
@@ -767,81 +780,87 @@ struct PipelineState<S> {
     /// Scans taken for casting (they are taken in order).
     taken: usize,
     applied: usize,
+    /// Whether a thread is applying scan `applied`.
+    applying: bool,
     exhausted: bool,
     stopped: bool,
+    /// The first scan refused, once it is the next to apply.
+    refused: Option<(usize, ScanError)>,
     /// Cast scans waiting to be applied, by position.
     cast: BTreeMap<usize, CastResult>,
 }
 
-impl<S: Iterator> Pipeline<S> {
+/// A thread's next piece of work.
+enum Job<T> {
+    /// Cast the scan at this position.
+    Cast(usize, T),
+    /// Apply the update of the next scan in order.
+    Apply(ScanUpdate, ScanReport),
+}
+
+impl<S, T> Pipeline<S>
+where
+    S: Iterator<Item = (usize, T)>,
+{
     fn lock(&self) -> std::sync::MutexGuard<'_, PipelineState<S>> {
         // a panicking thread stops the pipeline (`StopOnDrop`); the state
         // stays consistent, so a poisoned lock is still usable
         self.state.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// The next scan to cast, if the look-ahead allows one now.
-    fn try_take(&self, s: &mut PipelineState<S>) -> Option<S::Item> {
-        if s.stopped || s.exhausted || s.taken - s.applied >= self.lookahead {
-            return None;
-        }
-        let scan = s.scans.next();
-        match scan {
-            Some(_) => s.taken += 1,
-            None => s.exhausted = true,
-        }
-        scan
-    }
-
-    /// A caster's next scan, waiting while the look-ahead is full; `None`
-    /// when the scans are all taken or the pipeline stopped.
-    fn take(&self) -> Option<S::Item> {
+    /// The next job, waiting while there is none yet: applying the next
+    /// update when it is ready and nobody applies, else casting the next
+    /// scan when the look-ahead allows; `None` once every scan is in, or
+    /// the pipeline stopped (a refused scan or a panic).
+    fn next_job(&self) -> Option<Job<T>> {
         let mut s = self.lock();
         loop {
-            if let Some(scan) = self.try_take(&mut s) {
-                return Some(scan);
+            if s.stopped {
+                return None;
             }
-            if s.stopped || s.exhausted {
+            let next = s.applied;
+            if !s.applying {
+                match s.cast.remove(&next) {
+                    Some(Ok((update, report))) => {
+                        s.applying = true;
+                        return Some(Job::Apply(update, report));
+                    }
+                    Some(Err(e)) => {
+                        s.refused = Some((next, e));
+                        s.stopped = true;
+                        drop(s);
+                        self.changed.notify_all();
+                        return None;
+                    }
+                    None => {}
+                }
+            }
+            if !s.exhausted && s.taken - s.applied < self.lookahead {
+                match s.scans.next() {
+                    Some((i, scan)) => {
+                        s.taken += 1;
+                        return Some(Job::Cast(i, scan));
+                    }
+                    None => s.exhausted = true,
+                }
+            }
+            if s.exhausted && s.applied == s.taken {
                 return None;
             }
             s = self.changed.wait(s).unwrap_or_else(|e| e.into_inner());
         }
     }
-
-    /// The cast of scan `k`, casting other scans (with `cast`) while it is
-    /// not ready; `None` after the last scan.
-    fn next_update(&self, k: usize, cast: &impl Fn(S::Item)) -> Option<CastResult> {
-        let mut s = self.lock();
-        loop {
-            if let Some(result) = s.cast.remove(&k) {
-                return Some(result);
-            }
-            // after the last scan, or a caster's panic (which the scope
-            // then raises here)
-            if (s.exhausted && s.taken == k) || s.stopped {
-                return None;
-            }
-            if let Some(scan) = self.try_take(&mut s) {
-                drop(s);
-                cast(scan);
-                s = self.lock();
-            } else if !(s.stopped || s.exhausted && s.taken == k) {
-                s = self.changed.wait(s).unwrap_or_else(|e| e.into_inner());
-            }
-        }
-    }
 }
 
-/// Stops a [`Pipeline`] when dropped, or only when dropped by a panic.
-struct StopOnDrop<'a, S: Iterator> {
+/// Stops a [`Pipeline`] when dropped by a panic.
+struct StopOnDrop<'a, S> {
     pipeline: &'a Pipeline<S>,
-    only_on_panic: bool,
 }
 
-impl<S: Iterator> Drop for StopOnDrop<'_, S> {
+impl<S> Drop for StopOnDrop<'_, S> {
     fn drop(&mut self) {
-        if !self.only_on_panic || std::thread::panicking() {
-            self.pipeline.lock().stopped = true;
+        if std::thread::panicking() {
+            self.pipeline.state.lock().unwrap_or_else(|e| e.into_inner()).stopped = true;
             self.pipeline.changed.notify_all();
         }
     }
