@@ -583,9 +583,9 @@ impl OccupancyTree {
     /// where one thread did all the applying left the others idle behind
     /// its casting, and left its own casting behind the tree on large maps
     /// (`docs/benchmarks.md`, session 15). Each scan is cast whole by one
-    /// thread, so there is no merge of per-thread lists. At most `threads
-    /// + 1` scans are cast ahead of the tree (twice the threads raised the
-    /// peak memory of a 2-thread build from 22 to 24 MB).
+    /// thread, so there is no merge of per-thread lists. At most one scan
+    /// more than there are threads is cast ahead of the tree (twice the
+    /// threads raised the peak memory of a 2-thread build from 22 to 24 MB).
     fn insert_pipelined<S, P>(
         &mut self,
         scans: S,
