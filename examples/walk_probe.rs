@@ -3,12 +3,15 @@
 //! every ray of the bench's scans (as `insert_point_cloud` does), then walks
 //! them all, one at a time and two in lockstep, XOR-ing the voxel codes
 //! (no key lists, no filter, no sort, no tree). Prints the ray set-up cost
-//! per ray and the walk cost per step. A probe, not a benchmark of record.
+//! per ray and the walk cost per step, and the cost per step of the whole
+//! casting as insertion runs it (`compute_update`: on AVX-512 processors
+//! the vector set-up and walk, with the scan's sets). A probe, not a
+//! benchmark of record.
 
 #[path = "../benches/common/mod.rs"]
 mod common;
 
-use octolinear::{MortonCode, OccupancyTree, RayFan};
+use octolinear::{MortonCode, OccupancyTree, RayFan, ScanOptions};
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -83,7 +86,24 @@ fn main() {
         }
         x
     });
+    // the whole casting as insertion runs it (on AVX-512 processors the
+    // vector set-up and walk): rays set up and walked, voxels gathered in
+    // the scan's sets, and the sets read out in Morton order
+    let opts = ScanOptions { threads: Some(1), ..ScanOptions::default() };
+    let cast = best(&|| {
+        let mut n = 0;
+        for (points, origin) in &scans {
+            let (update, _) = tree.compute_update(points, *origin, &opts).expect("scan");
+            n += update.free.len() as u64;
+        }
+        n
+    });
     let ns = |s: f64, n: u64| s * 1e9 / n as f64;
+    println!(
+        "casting as insertion does (compute_update, 1 thread): {:.2} ms ({:.2} ns a step, set-up and sets included)",
+        cast * 1e3,
+        ns(cast, steps)
+    );
     println!(
         "{} rays, {steps} steps: set-up {:.2} ms ({:.1} ns a ray); walks one at a time {:.2} ms ({:.2} ns a step), \
          two in lockstep {:.2} ms ({:.2} ns a step)",

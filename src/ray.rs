@@ -210,7 +210,7 @@ pub struct WalkState {
     clock: StepClock,
 }
 
-/// Per axis (by [`StepClock::step`]'s slot), what a step adds to a Morton
+/// Per axis (by `StepClock::step`'s slot), what a step adds to a Morton
 /// code: `((code & mask | fill) + add) & mask` are the axis's new bits.
 #[derive(Clone, Copy)]
 pub struct AxisSteps {
@@ -278,7 +278,7 @@ impl WalkState {
 
 /// The DDA's three `t_max` and their increments. `step` advances
 /// the smallest (`min_axis`: ties go to the higher axis) and returns its
-/// axis's slot (x 1, y 2, z 0; see [`slots`]). The choice is made with
+/// axis's slot (x 1, y 2, z 0; see `slots`). The choice is made with
 /// compare masks, not branches: the axis changes irregularly along a ray,
 /// and a mispredicted branch would cost more than the whole step.
 /// Adding a masked-out increment adds +0.0, which leaves a `t_max`

@@ -911,7 +911,7 @@ impl Slots {
 
 /// Fills an arena from nodes given in depth-first pre-order (children
 /// 0..7): each node's child group is allocated when the node is given, so
-/// the result has the layout of [`NodeArena::compacted`] and no free slots.
+/// the result has the layout of `NodeArena::compacted` and no free slots.
 ///
 /// Open child groups are kept on a fixed stack, one per depth: the group
 /// at index `d` holds the nodes of depth `d + 1`; groups whose nodes have

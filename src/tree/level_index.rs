@@ -224,7 +224,7 @@ impl LevelIndex {
         self.search_in(key, key.child_index(0), code)
     }
 
-    /// [`Self::search`] given the key's root child.
+    /// A full-depth search given the key's root child.
     #[inline(always)]
     pub fn search_in(&self, key: Key, octant: usize, code: u64) -> Reach {
         let (mut i, from) = self.start(key, octant);
@@ -262,7 +262,7 @@ impl LevelIndex {
         }
     }
 
-    /// [`Self::search`] for up to [`LANES`] keys in lockstep, answers in
+    /// [`Self::search_in`] for up to [`LANES`] keys in lockstep, answers in
     /// `out`: each round steps every lane still walking one level, so the
     /// lanes' cache misses overlap (on the largest maps the processor does
     /// not overlap one search after another as well).
