@@ -1,4 +1,5 @@
-//! Eight rays of one fan walked at once, one per lane of AVX-512 registers.
+//! Rays of one fan set up eight at a time and walked sixteen at a time,
+//! one per lane of AVX-512 registers (two groups of eight lanes).
 //!
 //! A ray's steps form one chain of dependent operations (compare the three
 //! `t_max`, add the chosen increment, move the Morton code), so a scalar
@@ -20,7 +21,7 @@ use crate::geometry::Point3;
 use crate::key::KeySpace;
 use std::arch::x86_64::*;
 
-/// Rays in flight at once.
+/// Lanes of a group (doubles in a 512-bit register).
 const LANES: usize = 8;
 
 /// Codes gathered before they are handed on.

@@ -162,10 +162,10 @@ impl Casting {
         }
     }
 
-    /// [`Self::cast_all`] with eight rays walked at once in the lanes of
-    /// AVX-512 registers (`ray::wide`): the rays are set up a chunk at a
-    /// time, each chunk walked while the lanes still hold the previous
-    /// chunk's last rays.
+    /// [`Self::cast_all`] in the lanes of AVX-512 registers (`ray::wide`):
+    /// the rays are set up a chunk at a time (eight at once unless they are
+    /// cut to a maximum range), each chunk walked sixteen rays at once while
+    /// the lanes still hold the previous chunk's last rays.
     ///
     /// # Safety
     /// The processor must support AVX-512F.
