@@ -23,6 +23,15 @@ pub(crate) fn point_along(origin: Point3, direction: Point3, range: f64) -> Poin
     Point3::new(origin.x + direction.x * r, origin.y + direction.y * r, origin.z + direction.z * r)
 }
 
+/// Whether `p` lies within `max_range` of `origin` (always, when it is
+/// negative), and the end of the ray `insertPointCloud` casts towards it:
+/// `p`, or the point at that range towards it.
+#[inline(always)]
+pub(crate) fn cut_to_range(p: Point3, origin: Point3, max_range: f64) -> (bool, Point3) {
+    let within = max_range < 0.0 || (p - origin).norm() <= max_range;
+    (within, if within { p } else { point_along(origin, (p - origin).normalized(), max_range) })
+}
+
 /// `std::min` on doubles.
 #[inline(always)]
 fn min(a: f64, b: f64) -> f64 {

@@ -115,11 +115,13 @@ impl LaneRays {
 
 /// [`RayFan::ray`] for every point of `points` (at most
 /// [`LaneRays::CAPACITY`] less the rays already in `rays`), with
-/// `Casting::cast`'s end voxel: `occupied` is called with the code of each
-/// point's voxel, the non-empty rays join `rays`. Points without a key are
-/// skipped. Eight points at a time, with the scalar code's operations in
-/// the same precision and order (every one correctly rounded), so the rays
-/// are the same to the bit; points are not cut to a maximum range.
+/// `Casting::cast`'s end voxel: rays longer than `max_range` (when it is
+/// not negative) are cut there ([`super::cut_to_range`]); `occupied` is
+/// called with the code of the voxel of each point within range, and the
+/// non-empty rays join `rays`. Ends without a key are skipped. Eight points
+/// at a time, with the scalar code's operations in the same precision and
+/// order (every one correctly rounded), so the rays are the same to the
+/// bit; the last `points.len() % 8` by the scalar code.
 ///
 /// # Safety
 /// The processor must support AVX-512F ([`available`]).
@@ -129,6 +131,7 @@ pub(crate) unsafe fn set_up(
     fan: &RayFan,
     keys: &KeySpace,
     points: &[Point3],
+    max_range: f64,
     mut occupied: impl FnMut(u64),
 ) {
     assert!(!rays.padded && rays.len + points.len() <= LaneRays::CAPACITY, "LaneRays full or padded");
@@ -162,13 +165,37 @@ pub(crate) unsafe fn set_up(
             _mm512_castps512_ps256(_mm512_permutex2var_ps(lo, idx, hi))
         };
         let p = [axis(0), axis(1), axis(2)];
+        let o = [fan.origin.x, fan.origin.y, fan.origin.z].map(|v| _mm256_set1_ps(v));
+
+        // `cut_to_range`: within range when `(p - origin).norm() <= max_range`
+        // (`Point3::norm`: the float sum of squares, a double root), else
+        // the end is `origin + (p - origin).normalized() * (float) max_range`
+        let v = [_mm256_sub_ps(p[0], o[0]), _mm256_sub_ps(p[1], o[1]), _mm256_sub_ps(p[2], o[2])];
+        let norm = _mm512_sqrt_pd(_mm512_cvtps_pd(squared_norm(v)));
+        let within: __mmask8 =
+            if max_range < 0.0 { 0xff } else { _mm512_cmp_pd_mask::<_CMP_LE_OQ>(norm, _mm512_set1_pd(max_range)) };
+        let mut end = p;
+        if within != 0xff {
+            // the norm rounded to float, as `Point3::normalize` divides
+            let (norm, range) = (_mm512_cvtpd_ps(norm), _mm256_set1_ps(max_range as f32));
+            for i in 0..3 {
+                let cut = _mm256_add_ps(o[i], _mm256_mul_ps(_mm256_div_ps(v[i], norm), range));
+                // `p` in the lanes within range (a 512-bit blend: the
+                // 256-bit one would need AVX-512VL)
+                end[i] = _mm512_castps512_ps256(_mm512_mask_blend_ps(
+                    __mmask16::from(within),
+                    _mm512_castps256_ps512(cut),
+                    _mm512_castps256_ps512(p[i]),
+                ));
+            }
+        }
 
         // the end voxel: `coordToKeyChecked` per axis, then its Morton code
         let factor = _mm512_set1_pd(keys.resolution_factor());
         let center = f64::from(crate::key::KEY_CENTER);
         let mut in_map: __mmask8 = 0xff;
         let mut code = _mm512_setzero_si512();
-        for (i, &pa) in p.iter().enumerate() {
+        for (i, &pa) in end.iter().enumerate() {
             let floored = _mm512_roundscale_pd::<{ _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC }>(_mm512_mul_pd(
                 factor,
                 _mm512_cvtps_pd(pa),
@@ -180,19 +207,18 @@ pub(crate) unsafe fn set_up(
             code = _mm512_or_si512(code, _mm512_sll_epi64(spread, _mm_cvtsi32_si128(i as i32)));
         }
         let mut codes = [0u64; LANES];
-        _mm512_storeu_si512(codes.as_mut_ptr().cast(), _mm512_maskz_compress_epi64(in_map, code));
-        codes[..in_map.count_ones() as usize].iter().for_each(|&c| occupied(c));
+        let hit = in_map & within;
+        _mm512_storeu_si512(codes.as_mut_ptr().cast(), _mm512_maskz_compress_epi64(hit, code));
+        codes[..hit.count_ones() as usize].iter().for_each(|&c| occupied(c));
 
         // the ray (`RayFan::ray`): direction, length, per axis the step,
         // the first border's distance and the distance between borders
-        let o = [fan.origin.x, fan.origin.y, fan.origin.z].map(|v| _mm256_set1_ps(v));
-        let d = [_mm256_sub_ps(p[0], o[0]), _mm256_sub_ps(p[1], o[1]), _mm256_sub_ps(p[2], o[2])];
-        // `Point3::norm`: the float sum of squares, a double root
-        let sum = _mm256_add_ps(
-            _mm256_add_ps(_mm256_mul_ps(d[0], d[0]), _mm256_mul_ps(d[1], d[1])),
-            _mm256_mul_ps(d[2], d[2]),
-        );
-        let length = _mm512_cvtpd_ps(_mm512_sqrt_pd(_mm512_cvtps_pd(sum)));
+        let d = if within == 0xff {
+            v
+        } else {
+            [_mm256_sub_ps(end[0], o[0]), _mm256_sub_ps(end[1], o[1]), _mm256_sub_ps(end[2], o[2])]
+        };
+        let length = _mm512_cvtpd_ps(_mm512_sqrt_pd(_mm512_cvtps_pd(squared_norm(d))));
         let kept = in_map & _mm512_cmpneq_epu64_mask(code, _mm512_set1_epi64(fan.origin_code as i64));
         let n = rays.len;
         let store_pd = |v: __m512d, to: &mut [f64]| {
@@ -223,13 +249,23 @@ pub(crate) unsafe fn set_up(
         rays.len += kept.count_ones() as usize;
     }
     for &p in eight.remainder() {
-        let Ok(key) = keys.key(p) else { continue };
-        let end_code = crate::morton::MortonCode::encode(key).0;
-        occupied(end_code);
-        if let Some(ray) = fan.ray(p, end_code) {
+        let (within, end) = super::cut_to_range(p, fan.origin, max_range);
+        let Ok(key) = keys.key(end) else { continue };
+        let code = crate::morton::MortonCode::encode(key).0;
+        if within {
+            occupied(code);
+        }
+        if let Some(ray) = fan.ray(end, code) {
             rays.push(ray);
         }
     }
+}
+
+/// `Point3::norm_sq` of eight vectors given by axis: `(x * x + y * y) + z * z`
+/// in float.
+#[inline(always)]
+unsafe fn squared_norm(v: [__m256; 3]) -> __m256 {
+    _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(v[0], v[0]), _mm256_mul_ps(v[1], v[1])), _mm256_mul_ps(v[2], v[2]))
 }
 
 /// [`crate::morton::spread_bits`] in every lane (values below 2^16).
@@ -528,15 +564,19 @@ mod tests {
             .collect()
     }
 
-    /// The scalar set-up's rays and occupied codes, in point order.
-    fn scalar_set_up(fan: &RayFan, keys: &KeySpace, points: &[Point3]) -> (LaneRays, Vec<u64>) {
+    /// The scalar set-up's rays and occupied codes, in point order
+    /// (`Casting::cast`'s end voxel and `RayFan::ray`).
+    fn scalar_set_up(fan: &RayFan, keys: &KeySpace, points: &[Point3], max_range: f64) -> (LaneRays, Vec<u64>) {
         let mut rays = LaneRays::default();
         let mut occupied = Vec::new();
         for &p in points {
-            let Ok(key) = keys.key(p) else { continue };
+            let (within, end) = super::super::cut_to_range(p, fan.origin, max_range);
+            let Ok(key) = keys.key(end) else { continue };
             let code = MortonCode::encode(key).0;
-            occupied.push(code);
-            if let Some(ray) = fan.ray(p, code) {
+            if within {
+                occupied.push(code);
+            }
+            if let Some(ray) = fan.ray(end, code) {
                 rays.push(ray);
             }
         }
@@ -548,7 +588,8 @@ mod tests {
     }
 
     /// The vectorised set-up gives the scalar one's rays, bit for bit, and
-    /// the same occupied codes, at resolutions from 1 cm to 1 m.
+    /// the same occupied codes, at resolutions from 1 cm to 1 m, with and
+    /// without a maximum range (rays cut at it, ends beyond it not marked).
     #[test]
     fn set_up_matches_the_scalar_set_up() {
         if !available() {
@@ -565,11 +606,13 @@ mod tests {
                 }
                 let fan = RayFan::new(&keys, origin).unwrap();
                 let pts = points(&mut rng, origin, res, 253); // not a multiple of eight
-                let (want, want_occupied) = scalar_set_up(&fan, &keys, &pts);
+                                                              // no range, one that cuts most rays, one that cuts a few
+                let max_range = [-1.0, 0.0, 1.5, 5.0][round % 4];
+                let (want, want_occupied) = scalar_set_up(&fan, &keys, &pts, max_range);
                 let mut got = LaneRays::default();
                 let mut got_occupied = Vec::new();
                 // SAFETY: AVX-512F is available (checked above)
-                unsafe { set_up(&mut got, &fan, &keys, &pts, |c| got_occupied.push(c)) };
+                unsafe { set_up(&mut got, &fan, &keys, &pts, max_range, |c| got_occupied.push(c)) };
                 assert_eq!(got_occupied, want_occupied, "res {res}");
                 let n = want.len();
                 assert_eq!(got.len(), n, "res {res}");
@@ -614,7 +657,7 @@ mod tests {
             for &p in &pts {
                 rays.clear();
                 // SAFETY (both calls): AVX-512F is available (checked above)
-                unsafe { set_up(&mut rays, &fan, &keys, &[p], |_| {}) };
+                unsafe { set_up(&mut rays, &fan, &keys, &[p], -1.0, |_| {}) };
                 rays.pad();
                 let mut got = Vec::new();
                 unsafe { walk(&mut Lanes::default(), &rays, fan.origin_code, true, |c| got.extend_from_slice(c)) };
@@ -626,7 +669,7 @@ mod tests {
             let chunks: Vec<&[Point3]> = pts.chunks(97).collect();
             for (i, chunk) in chunks.iter().enumerate() {
                 rays.clear();
-                unsafe { set_up(&mut rays, &fan, &keys, chunk, |_| {}) };
+                unsafe { set_up(&mut rays, &fan, &keys, chunk, -1.0, |_| {}) };
                 rays.pad();
                 let last = i + 1 == chunks.len();
                 unsafe { walk(&mut lanes, &rays, fan.origin_code, last, |c| got.extend(c.iter().copied())) };

@@ -122,7 +122,7 @@ impl Casting {
         #[cfg(target_arch = "x86_64")]
         if crate::ray::wide::available() {
             // SAFETY: the processor has AVX-512F
-            unsafe { self.cast_all_wide(keys, fan, points, origin, opts) };
+            unsafe { self.cast_all_wide(keys, fan, points, opts) };
             return;
         }
         self.cast_all_pairs(keys, fan, points, origin, opts);
@@ -163,22 +163,15 @@ impl Casting {
     }
 
     /// [`Self::cast_all`] in the lanes of AVX-512 registers (`ray::wide`):
-    /// the rays are set up a chunk at a time (eight at once unless they are
-    /// cut to a maximum range), each chunk walked sixteen rays at once while
-    /// the lanes still hold the previous chunk's last rays.
+    /// the rays are set up a chunk at a time, eight at once, each chunk
+    /// walked sixteen rays at once while the lanes still hold the previous
+    /// chunk's last rays.
     ///
     /// # Safety
     /// The processor must support AVX-512F.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
-    unsafe fn cast_all_wide(
-        &mut self,
-        keys: &KeySpace,
-        fan: &RayFan,
-        points: &[Point3],
-        origin: Point3,
-        opts: &ScanOptions,
-    ) {
+    unsafe fn cast_all_wide(&mut self, keys: &KeySpace, fan: &RayFan, points: &[Point3], opts: &ScanOptions) {
         use crate::ray::wide::{set_up, walk, LaneRays, Lanes};
         let mut rays = LaneRays::default();
         let mut lanes = Lanes::default();
@@ -186,17 +179,7 @@ impl Casting {
         let mut chunks = points.chunks(LaneRays::CAPACITY).peekable();
         while let Some(chunk) = chunks.next() {
             rays.clear();
-            if opts.max_range.is_none() {
-                set_up(&mut rays, fan, keys, chunk, |c| self.occupied.insert(c));
-            } else {
-                for &p in chunk {
-                    let (within, end) = cut_to_range(p, origin, opts);
-                    let Some(end_code) = self.end_voxel(keys, end, within) else { continue };
-                    if let Some(ray) = fan.ray(end, end_code) {
-                        rays.push(ray);
-                    }
-                }
-            }
+            set_up(&mut rays, fan, keys, chunk, opts.max_range.unwrap_or(-1.0), |c| self.occupied.insert(c));
             any |= rays.len() > 0;
             rays.pad();
             let last = chunks.peek().is_none();
@@ -276,13 +259,10 @@ impl Casting {
     }
 }
 
-/// Whether `p` lies within the maximum range of `origin`, and the ray's
-/// end: `p`, or the point at that range towards it.
+/// [`crate::ray::cut_to_range`] with the scan's maximum range.
 #[inline(always)]
 fn cut_to_range(p: Point3, origin: Point3, opts: &ScanOptions) -> (bool, Point3) {
-    let max_range = opts.max_range.unwrap_or(-1.0);
-    let within = max_range < 0.0 || (p - origin).norm() <= max_range;
-    (within, if within { p } else { point_along(origin, (p - origin).normalized(), max_range) })
+    crate::ray::cut_to_range(p, origin, opts.max_range.unwrap_or(-1.0))
 }
 
 /// Rays set up and waiting for a walk (a stack: the order of the walks
