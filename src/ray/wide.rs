@@ -171,22 +171,24 @@ pub(crate) unsafe fn set_up(
         // (`Point3::norm`: the float sum of squares, a double root), else
         // the end is `origin + (p - origin).normalized() * (float) max_range`
         let v = [_mm256_sub_ps(p[0], o[0]), _mm256_sub_ps(p[1], o[1]), _mm256_sub_ps(p[2], o[2])];
-        let norm = _mm512_sqrt_pd(_mm512_cvtps_pd(squared_norm(v)));
-        let within: __mmask8 =
-            if max_range < 0.0 { 0xff } else { _mm512_cmp_pd_mask::<_CMP_LE_OQ>(norm, _mm512_set1_pd(max_range)) };
+        let mut within: __mmask8 = 0xff;
         let mut end = p;
-        if within != 0xff {
-            // the norm rounded to float, as `Point3::normalize` divides
-            let (norm, range) = (_mm512_cvtpd_ps(norm), _mm256_set1_ps(max_range as f32));
-            for i in 0..3 {
-                let cut = _mm256_add_ps(o[i], _mm256_mul_ps(_mm256_div_ps(v[i], norm), range));
-                // `p` in the lanes within range (a 512-bit blend: the
-                // 256-bit one would need AVX-512VL)
-                end[i] = _mm512_castps512_ps256(_mm512_mask_blend_ps(
-                    __mmask16::from(within),
-                    _mm512_castps256_ps512(cut),
-                    _mm512_castps256_ps512(p[i]),
-                ));
+        if max_range >= 0.0 {
+            let norm = _mm512_sqrt_pd(_mm512_cvtps_pd(squared_norm(v)));
+            within = _mm512_cmp_pd_mask::<_CMP_LE_OQ>(norm, _mm512_set1_pd(max_range));
+            if within != 0xff {
+                // the norm rounded to float, as `Point3::normalize` divides
+                let (norm, range) = (_mm512_cvtpd_ps(norm), _mm256_set1_ps(max_range as f32));
+                for i in 0..3 {
+                    let cut = _mm256_add_ps(o[i], _mm256_mul_ps(_mm256_div_ps(v[i], norm), range));
+                    // `p` in the lanes within range (a 512-bit blend: the
+                    // 256-bit one would need AVX-512VL)
+                    end[i] = _mm512_castps512_ps256(_mm512_mask_blend_ps(
+                        __mmask16::from(within),
+                        _mm512_castps256_ps512(cut),
+                        _mm512_castps256_ps512(p[i]),
+                    ));
+                }
             }
         }
 
