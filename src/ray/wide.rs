@@ -607,8 +607,9 @@ mod tests {
                     origin = keys.key_to_point(keys.key(origin).unwrap());
                 }
                 let fan = RayFan::new(&keys, origin).unwrap();
-                let pts = points(&mut rng, origin, res, 253); // not a multiple of eight
-                                                              // no range, one that cuts most rays, one that cuts a few
+                // not a multiple of eight
+                let pts = points(&mut rng, origin, res, 253);
+                // no range, a zero one, one that cuts most rays, one that cuts a few
                 let max_range = [-1.0, 0.0, 1.5, 5.0][round % 4];
                 let (want, want_occupied) = scalar_set_up(&fan, &keys, &pts, max_range);
                 let mut got = LaneRays::default();
