@@ -248,7 +248,7 @@ fn run_case(args: &Args, kind: SceneKind, res: f64, scans: &[Scan]) {
     let runs = t_om.len();
     let (om_ins, ol1, ol2) = (median(t_om), median(t_1), median(t_2));
     for (job, d) in [("insert, 1 thread", ol1), ("insert, 2 threads", ol2)] {
-        let job = format!("{job} ({runs} runs)");
+        let job = format!("{job} ({runs} run{})", if runs == 1 { "" } else { "s" });
         Row { job, octomap: om_ins, octolinear: d, work: npoints as f64, unit: "pt" }.print();
     }
 
