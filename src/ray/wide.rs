@@ -85,31 +85,43 @@ impl LaneRays {
     #[inline(always)]
     pub(crate) fn push(&mut self, ray: FanRay) {
         assert!(!self.padded && self.len < Self::CAPACITY, "LaneRays full or padded");
-        let n = self.len;
-        for (i, mask) in AXIS_MASKS.into_iter().enumerate() {
-            // the slot of axis i in `AxisSteps` (x 1, y 2, z 0)
-            let up = (ray.steps.add[(i + 1) % 3] as i64) > 0;
-            self.t[i][n] = ray.t_max[i];
-            self.dt[i][n] = ray.t_delta[i];
-            self.sub[i][n] = if up { mask } else { 1 };
-        }
-        self.end[n] = ray.end_code;
-        self.length[n] = ray.length;
+        self.write(self.len, &ray);
         self.len += 1;
     }
 
-    /// Appends the [`LANES`] rays that end at their first step
-    /// (`min(t_max) > -inf` holds) which [`walk`] reads past the last.
+    /// Appends the [`LANES`] rays that [`walk`] reads past the last:
+    /// [`FanRay::finished`], which ends at its first step.
     pub(crate) fn pad(&mut self) {
-        let n = self.len;
-        for i in 0..3 {
-            self.t[i][n..n + LANES].fill(0.0);
-            self.dt[i][n..n + LANES].fill(1.0);
-            self.sub[i][n..n + LANES].fill(1);
+        let finished = FanRay::finished();
+        for n in self.len..self.len + LANES {
+            self.write(n, &finished);
         }
-        self.end[n..n + LANES].fill(u64::MAX);
-        self.length[n..n + LANES].fill(f64::NEG_INFINITY);
         self.padded = true;
+    }
+
+    /// `ray` at position `n` of the arrays.
+    #[inline(always)]
+    fn write(&mut self, n: usize, ray: &FanRay) {
+        for i in 0..3 {
+            self.t[i][n] = ray.t_max[i];
+            self.dt[i][n] = ray.t_delta[i];
+            self.sub[i][n] = sub(ray, i);
+        }
+        self.end[n] = ray.end_code;
+        self.length[n] = ray.length;
+    }
+}
+
+/// What a step of `ray` along `axis` subtracts from that axis's bits of a
+/// code (see [`step_code`]): the axis's mask for a step up, else one.
+#[inline(always)]
+fn sub(ray: &FanRay, axis: usize) -> u64 {
+    // the slot of the axis in `AxisSteps` (x 1, y 2, z 0)
+    let up = (ray.steps.add[(axis + 1) % 3] as i64) > 0;
+    if up {
+        AXIS_MASKS[axis]
+    } else {
+        1
     }
 }
 
@@ -305,15 +317,16 @@ struct Saved {
 }
 
 impl Default for Lanes {
-    /// Every lane holds a finished ray.
+    /// Every lane holds [`FanRay::finished`].
     fn default() -> Self {
+        let r = FanRay::finished();
         let saved = Saved {
-            t: [[0.0; LANES]; 3],
-            dt: [[1.0; LANES]; 3],
-            sub: [[1; LANES]; 3],
-            code: [0; LANES],
-            end: [u64::MAX; LANES],
-            length: [f64::NEG_INFINITY; LANES],
+            t: r.t_max.map(|t| [t; LANES]),
+            dt: r.t_delta.map(|dt| [dt; LANES]),
+            sub: [0, 1, 2].map(|axis| [sub(&r, axis); LANES]),
+            code: [r.code; LANES],
+            end: [r.end_code; LANES],
+            length: [r.length; LANES],
         };
         Lanes { groups: [saved; 2] }
     }
