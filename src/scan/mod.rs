@@ -491,16 +491,34 @@ impl OccupancyTree {
             return self.insert_point_cloud_in_octomap_order(points, origin, opts);
         }
         let (update, report) = self.compute_update(points, origin, opts)?;
-        Ok(self.apply_update(&update, report, opts.inner))
+        Ok(match opts.threads {
+            Some(1) => self.apply_update(&update, report, opts.inner),
+            None => self.apply_update_on(&update, report, opts.inner, rayon::current_num_threads(), &|| {}),
+            Some(n) => thread_pool(n)?.install(|| self.apply_update_on(&update, report, opts.inner, n, &|| {})),
+        })
     }
 
     /// Applies a scan's update (from [`Self::compute_update`]): misses, then
     /// hits, each list in one batched walk. Completes `report` with the
     /// update counts.
     pub fn apply_update(&mut self, update: &ScanUpdate, report: ScanReport, inner: InnerNodes) -> ScanReport {
+        self.apply_update_on(update, report, inner, 1, &|| {})
+    }
+
+    /// [`Self::apply_update`] with large batches shared by `workers`
+    /// threads of the current rayon pool (see
+    /// [`Self::update_batch_split`]).
+    fn apply_update_on(
+        &mut self,
+        update: &ScanUpdate,
+        report: ScanReport,
+        inner: InnerNodes,
+        workers: usize,
+        announce: &(dyn Fn() + Sync),
+    ) -> ScanReport {
         let sensor = *self.sensor();
-        self.update_batch(&update.free, sensor.miss, inner);
-        self.update_batch(&update.occupied, sensor.hit, inner);
+        self.update_batch_split(&update.free, sensor.miss, inner, workers, announce);
+        self.update_batch_split(&update.occupied, sensor.hit, inner, workers, announce);
         ScanReport { free_updates: update.free.len(), occupied_updates: update.occupied.len(), ..report }
     }
 
@@ -589,6 +607,7 @@ impl OccupancyTree {
                 stopped: false,
                 refused: None,
                 cast: BTreeMap::new(),
+                offers: 0,
             }),
             changed: Condvar::new(),
             lookahead: threads.max(1) + 1,
@@ -608,7 +627,8 @@ impl OccupancyTree {
                     Job::Apply(update, report) => {
                         let mut guard = tree.lock().unwrap_or_else(|e| e.into_inner());
                         let (tree, after_each) = &mut *guard;
-                        let report = tree.apply_update(&update, report, opts.inner);
+                        let report =
+                            tree.apply_update_on(&update, report, opts.inner, threads, &|| pipeline.announce());
                         drop(update);
                         after_each(tree, report);
                         drop(guard);
@@ -621,12 +641,10 @@ impl OccupancyTree {
                 }
             }
         };
-        rayon::scope(|scope| {
-            for _ in 1..threads {
-                scope.spawn(|_| work());
-            }
-            work();
-        });
+        // one loop per thread of the pool, each bound to its thread: a
+        // spawned loop could be stolen late by a thread waiting inside a
+        // shared tree update, which would then wait on itself
+        rayon::broadcast(|_| work());
         let refused = pipeline.lock().refused.take();
         refused.map_or(Ok(()), Err)
     }
@@ -768,6 +786,9 @@ struct PipelineState<S> {
     refused: Option<(usize, ScanError)>,
     /// Cast scans waiting to be applied, by position.
     cast: BTreeMap<usize, CastResult>,
+    /// Counts the times the applying thread offered part of its work to
+    /// the pool (a shared tree update).
+    offers: usize,
 }
 
 /// A thread's next piece of work.
@@ -827,8 +848,26 @@ where
             if s.exhausted && s.applied == s.taken {
                 return None;
             }
+            // nothing here: help with the pool's work (the applying
+            // thread's shared tree update) while there is some
+            let offers = s.offers;
+            if s.applying {
+                drop(s);
+                while rayon::yield_now() == Some(rayon::Yield::Executed) {}
+                s = self.lock();
+                if s.offers != offers {
+                    continue;
+                }
+            }
             s = self.changed.wait(s).unwrap_or_else(|e| e.into_inner());
         }
+    }
+
+    /// Tells waiting threads that the applying thread has work for the
+    /// pool to take.
+    fn announce(&self) {
+        self.lock().offers += 1;
+        self.changed.notify_all();
     }
 }
 
@@ -1051,6 +1090,27 @@ mod tests {
             bytes.push(ot(&t));
         }
         assert!(bytes[0] == bytes[1] && bytes[1] == bytes[2]);
+    }
+
+    /// Outdoor scans' free-space batches are large enough to be shared by
+    /// the threads (`update_batch_split`), inside the pipeline, where the
+    /// thread waiting for work helps: the tree stays the one-thread tree.
+    #[test]
+    fn shared_tree_updates_in_the_pipeline_give_the_same_tree() {
+        let cfg = crate::simulate::LidarConfig::outdoor();
+        let g = crate::simulate::simulate(crate::simulate::SceneKind::Outdoor, 3, 5, &cfg).unwrap();
+        let scans: Vec<_> = g.nodes.iter().map(|n| n.graph2tree()).map(|(c, o)| (c.points, o)).collect();
+        let mut trees = Vec::new();
+        for threads in [Some(1), Some(2), Some(8)] {
+            let mut t = OccupancyTree::new(0.1).unwrap();
+            let opts = ScanOptions { threads, ..Default::default() };
+            let mut largest = 0;
+            let input = scans.iter().map(|(p, o)| (p.as_slice(), *o));
+            t.insert_point_clouds(input, &opts, |_, r| largest = largest.max(r.free_updates)).unwrap();
+            assert!(largest >= crate::tree::PARALLEL_MIN_CODES, "{largest} codes: nothing to share");
+            trees.push(ot(&t));
+        }
+        assert!(trees[0] == trees[1] && trees[1] == trees[2]);
     }
 
     #[test]

@@ -25,6 +25,7 @@
 //! empty and pay nothing for them.
 
 use crate::key::TREE_DEPTH;
+use std::sync::atomic::{AtomicU32, AtomicU8, AtomicUsize, Ordering::Relaxed};
 
 /// Id of a node in the arena.
 pub type NodeId = u32;
@@ -68,11 +69,16 @@ pub struct NodeArena {
     leaf_free: FreeRuns,
     /// The extra of a newly created node; `None` when extras are off.
     default_extra: Option<u32>,
+    /// Initialised slots at the end of each pool's arrays that are not in
+    /// use yet: what a parallel update made room for and did not claim
+    /// ([`NodeArena::with_shared`]), taken by later runs.
+    spare: usize,
+    leaf_spare: usize,
 }
 
 /// The free slot runs of one pool, by length (index 1..=8), as ids.
 #[derive(Clone, Debug, Default)]
-struct FreeRuns {
+pub(crate) struct FreeRuns {
     runs: [Vec<NodeId>; 9],
     slots: usize,
 }
@@ -95,6 +101,205 @@ impl FreeRuns {
 
     fn bytes(&self) -> usize {
         self.runs.iter().map(|r| r.capacity() * std::mem::size_of::<NodeId>()).sum()
+    }
+
+    /// Deals the runs of each length out to `parts` lists.
+    fn deal(mut self, parts: usize) -> Vec<FreeRuns> {
+        let mut out = vec![FreeRuns::default(); parts];
+        for len in 1..9 {
+            let runs = std::mem::take(&mut self.runs[len]);
+            let share = runs.len().div_ceil(parts).max(1);
+            for (part, runs) in out.iter_mut().zip(runs.chunks(share)) {
+                part.runs[len].extend_from_slice(runs);
+                part.slots += len * runs.len();
+            }
+        }
+        out
+    }
+
+    fn append(&mut self, other: FreeRuns) {
+        for (mine, theirs) in self.runs.iter_mut().zip(other.runs) {
+            mine.extend(theirs);
+        }
+        self.slots += other.slots;
+    }
+
+    /// Frees `len` consecutive slots from `start` as runs of at most 8.
+    fn push_span(&mut self, mut start: NodeId, mut len: usize) {
+        while len > 0 {
+            let run = len.min(8);
+            self.push(start, run);
+            start += run as NodeId;
+            len -= run;
+        }
+    }
+}
+
+/// Node storage as a batch update sees it: the [`NodeArena`] itself, or one
+/// worker's share of it while several threads update disjoint subtrees
+/// ([`ArenaWorker`]). The structural operations are written once, here,
+/// over the slot primitives.
+pub(crate) trait NodeStore {
+    fn value(&self, n: NodeId) -> f32;
+    fn set_value(&mut self, n: NodeId, v: f32);
+    /// 0 when extras are off.
+    fn extra(&self, n: NodeId) -> u32;
+    /// Does nothing when extras are off.
+    fn set_extra(&mut self, n: NodeId, v: u32);
+    /// 0 in the leaf pool.
+    fn mask(&self, n: NodeId) -> u8;
+    /// Meaningless for nodes without children.
+    fn first_child(&self, n: NodeId) -> NodeId;
+    /// Sets the child mask and first child of inner-pool node `n`.
+    fn set_children(&mut self, n: NodeId, mask: u8, first: NodeId);
+    /// The extra of a new node; `None` when extras are off.
+    fn default_extra(&self) -> Option<u32>;
+    /// A run of `len` (1..=8) slots in the leaf pool (`leaf`) or the inner
+    /// pool, each to be written by [`Self::init_slot`] or
+    /// [`Self::copy_slot`] before it is read.
+    fn alloc_run(&mut self, len: usize, leaf: bool) -> NodeId;
+    fn free_run(&mut self, start: NodeId, len: usize);
+    /// Copies a slot to another of the same pool.
+    fn copy_slot(&mut self, from: NodeId, to: NodeId);
+    /// Makes slot `id` a fresh leaf holding `value` and `extra`.
+    fn init_slot(&mut self, id: NodeId, value: f32, extra: Option<u32>);
+
+    #[inline(always)]
+    fn has_children(&self, n: NodeId) -> bool {
+        self.mask(n) != 0
+    }
+
+    /// Gives a leaf `n` at `depth` the children in `mask`, each a new leaf
+    /// holding `value` and `extra`; returns the id of the first.
+    #[inline]
+    fn add_children(&mut self, n: NodeId, mask: u8, value: f32, extra: Option<u32>, depth: u8) -> NodeId {
+        debug_assert_eq!(self.mask(n), 0);
+        let len = mask.count_ones();
+        let new = if len == 0 { NO_CHILD } else { self.alloc_run(len as usize, leaf_group(depth)) };
+        for i in 0..len {
+            self.init_slot(new + i, value, extra);
+        }
+        self.set_children(n, mask, new);
+        new
+    }
+
+    /// Adds the children in `add` (none of which exists yet) to `n`, which
+    /// lies at `depth`, as leaves holding `value`, moving its group once;
+    /// returns the first id.
+    #[inline]
+    fn add_missing_children(&mut self, n: NodeId, add: u8, value: f32, depth: u8) -> NodeId {
+        let m = self.mask(n);
+        debug_assert_eq!(m & add, 0);
+        if m == 0 {
+            return self.add_children(n, add, value, self.default_extra(), depth);
+        }
+        if add == 0 {
+            return self.first_child(n);
+        }
+        let old = self.first_child(n);
+        let new_mask = m | add;
+        let new = self.alloc_run(new_mask.count_ones() as usize, leaf_group(depth));
+        let (mut from, mut to) = (old, new);
+        for i in 0..8 {
+            if m & (1 << i) != 0 {
+                self.copy_slot(from, to);
+                from += 1;
+                to += 1;
+            } else if add & (1 << i) != 0 {
+                self.init_slot(to, value, self.default_extra());
+                to += 1;
+            }
+        }
+        self.free_run(old, m.count_ones() as usize);
+        self.set_children(n, new_mask, new);
+        new
+    }
+
+    /// Expands a leaf `n` at `depth`: eight children holding its value and
+    /// extra (OctoMap's `expandNode` copies the node's data).
+    #[inline]
+    fn expand_node(&mut self, n: NodeId, depth: u8) {
+        let extra = self.default_extra().map(|_| self.extra(n));
+        self.add_children(n, 0xff, self.value(n), extra, depth);
+    }
+
+    /// Removes all children of `n` (and their subtrees); returns the number
+    /// of nodes freed.
+    #[inline]
+    fn remove_all_children(&mut self, n: NodeId) -> usize {
+        let freed = self.free_subtree_children(n);
+        self.set_children(n, 0, NO_CHILD);
+        freed
+    }
+
+    /// Frees every descendant run below `n` (not `n` itself).
+    fn free_subtree_children(&mut self, n: NodeId) -> usize {
+        let m = self.mask(n);
+        if m == 0 {
+            return 0;
+        }
+        let len = m.count_ones() as usize;
+        let first = self.first_child(n);
+        let mut freed = len;
+        if !in_leaf_pool(first) {
+            for i in 0..len as u32 {
+                freed += self.free_subtree_children(first + i);
+            }
+        }
+        self.free_run(first, len);
+        freed
+    }
+}
+
+impl NodeStore for NodeArena {
+    #[inline(always)]
+    fn value(&self, n: NodeId) -> f32 {
+        NodeArena::value(self, n)
+    }
+    #[inline(always)]
+    fn set_value(&mut self, n: NodeId, v: f32) {
+        NodeArena::set_value(self, n, v)
+    }
+    #[inline(always)]
+    fn extra(&self, n: NodeId) -> u32 {
+        NodeArena::extra(self, n)
+    }
+    #[inline(always)]
+    fn set_extra(&mut self, n: NodeId, v: u32) {
+        NodeArena::set_extra(self, n, v)
+    }
+    #[inline(always)]
+    fn mask(&self, n: NodeId) -> u8 {
+        NodeArena::mask(self, n)
+    }
+    #[inline(always)]
+    fn first_child(&self, n: NodeId) -> NodeId {
+        NodeArena::first_child(self, n)
+    }
+    #[inline(always)]
+    fn set_children(&mut self, n: NodeId, mask: u8, first: NodeId) {
+        self.masks[n as usize] = mask;
+        self.first_child[n as usize] = first;
+    }
+    #[inline(always)]
+    fn default_extra(&self) -> Option<u32> {
+        self.default_extra
+    }
+    #[inline(always)]
+    fn alloc_run(&mut self, len: usize, leaf: bool) -> NodeId {
+        NodeArena::alloc_run(self, len, leaf)
+    }
+    #[inline(always)]
+    fn free_run(&mut self, start: NodeId, len: usize) {
+        NodeArena::free_run(self, start, len)
+    }
+    #[inline(always)]
+    fn copy_slot(&mut self, from: NodeId, to: NodeId) {
+        NodeArena::copy_slot(self, from, to)
+    }
+    #[inline(always)]
+    fn init_slot(&mut self, id: NodeId, value: f32, extra: Option<u32>) {
+        NodeArena::init_slot(self, id, value, extra)
     }
 }
 
@@ -194,7 +399,59 @@ impl NodeArena {
     /// Slots held in both pools (live and free).
     #[inline]
     pub fn slot_count(&self) -> usize {
-        self.values.len() + self.leaf_values.len()
+        self.inner_len() + self.leaf_len()
+    }
+
+    /// Slots of the inner pool (its arrays may hold spare slots beyond).
+    #[inline(always)]
+    fn inner_len(&self) -> usize {
+        self.values.len() - self.spare
+    }
+
+    #[inline(always)]
+    fn leaf_len(&self) -> usize {
+        self.leaf_values.len() - self.leaf_spare
+    }
+
+    /// Takes `len` spare slots of a pool as default slots; when fewer are
+    /// left, drops them (so the pool's arrays end at its slots).
+    #[cold]
+    #[inline(never)]
+    fn take_spare(&mut self, len: usize, leaf: bool) -> Option<NodeId> {
+        let extra = self.default_extra.unwrap_or(0);
+        if leaf {
+            let start = self.leaf_len();
+            if self.leaf_spare < len {
+                self.leaf_values.truncate(start);
+                self.leaf_extras.truncate(if self.default_extra.is_some() { start } else { 0 });
+                self.leaf_spare = 0;
+                return None;
+            }
+            self.leaf_values[start..start + len].fill(0.0);
+            if let Some(e) = self.leaf_extras.get_mut(start..start + len) {
+                e.fill(extra);
+            }
+            self.leaf_spare -= len;
+            Some(LEAF_POOL | start as NodeId)
+        } else {
+            let start = self.inner_len();
+            if self.spare < len {
+                self.values.truncate(start);
+                self.masks.truncate(start);
+                self.first_child.truncate(start);
+                self.extras.truncate(if self.default_extra.is_some() { start } else { 0 });
+                self.spare = 0;
+                return None;
+            }
+            self.values[start..start + len].fill(0.0);
+            self.masks[start..start + len].fill(0);
+            self.first_child[start..start + len].fill(NO_CHILD);
+            if let Some(e) = self.extras.get_mut(start..start + len) {
+                e.fill(extra);
+            }
+            self.spare -= len;
+            Some(start as NodeId)
+        }
     }
 
     /// Slots on the free lists (0 after compaction or when read from a file).
@@ -211,7 +468,8 @@ impl NodeArena {
     /// The extra of `n` (0 when extras are off).
     #[inline(always)]
     pub fn extra(&self, n: NodeId) -> u32 {
-        self.parts().extra(n)
+        let e = if in_leaf_pool(n) { self.leaf_extras.get(leaf_index(n)) } else { self.extras.get(n as usize) };
+        e.copied().unwrap_or(0)
     }
 
     #[inline(always)]
@@ -224,7 +482,11 @@ impl NodeArena {
 
     #[inline(always)]
     pub fn value(&self, n: NodeId) -> f32 {
-        self.parts().value(n)
+        if in_leaf_pool(n) {
+            self.leaf_values[leaf_index(n)]
+        } else {
+            self.values[n as usize]
+        }
     }
 
     #[inline(always)]
@@ -238,7 +500,11 @@ impl NodeArena {
 
     #[inline(always)]
     pub fn mask(&self, n: NodeId) -> u8 {
-        self.parts().mask(n)
+        if in_leaf_pool(n) {
+            0
+        } else {
+            self.masks[n as usize]
+        }
     }
 
     #[inline(always)]
@@ -301,6 +567,11 @@ impl NodeArena {
     /// Appends `len` default slots to the inner pool; returns the first id.
     #[inline]
     fn push_run(&mut self, len: usize) -> NodeId {
+        if self.spare != 0 {
+            if let Some(id) = self.take_spare(len, false) {
+                return id;
+            }
+        }
         let start = self.values.len();
         if len > 8 || start + 8 > self.values.capacity() {
             return self.push_run_growing(len);
@@ -351,6 +622,11 @@ impl NodeArena {
     /// first id.
     #[inline]
     fn push_leaf_run(&mut self, len: usize) -> NodeId {
+        if self.leaf_spare != 0 {
+            if let Some(id) = self.take_spare(len, true) {
+                return id;
+            }
+        }
         let start = self.leaf_values.len();
         if start + len > self.leaf_values.capacity() {
             self.grow_leaves(len);
@@ -469,58 +745,20 @@ impl NodeArena {
     /// Gives a leaf `n` at `depth` the children in `mask`, each a new leaf
     /// holding `value`; returns the id of the first.
     pub fn add_children(&mut self, n: NodeId, mask: u8, value: f32, depth: u8) -> NodeId {
-        self.add_children_with(n, mask, value, self.default_extra, depth)
-    }
-
-    fn add_children_with(&mut self, n: NodeId, mask: u8, value: f32, extra: Option<u32>, depth: u8) -> NodeId {
-        debug_assert_eq!(self.masks[n as usize], 0);
-        let len = mask.count_ones();
-        let new = if len == 0 { NO_CHILD } else { self.alloc_run(len as usize, leaf_group(depth)) };
-        for i in 0..len {
-            self.init_slot(new + i, value, extra);
-        }
-        self.masks[n as usize] = mask;
-        self.first_child[n as usize] = new;
-        new
+        NodeStore::add_children(self, n, mask, value, self.default_extra, depth)
     }
 
     /// Adds the children in `add` (none of which exists yet) to `n`, which
     /// lies at `depth`, as leaves holding `value`, moving its group once;
     /// returns the first id.
     pub fn add_missing_children(&mut self, n: NodeId, add: u8, value: f32, depth: u8) -> NodeId {
-        let m = self.masks[n as usize];
-        debug_assert_eq!(m & add, 0);
-        if m == 0 {
-            return self.add_children(n, add, value, depth);
-        }
-        if add == 0 {
-            return self.first_child[n as usize];
-        }
-        let old = self.first_child[n as usize];
-        let new_mask = m | add;
-        let new = self.alloc_run(new_mask.count_ones() as usize, leaf_group(depth));
-        let (mut from, mut to) = (old, new);
-        for i in 0..8 {
-            if m & (1 << i) != 0 {
-                self.copy_slot(from, to);
-                from += 1;
-                to += 1;
-            } else if add & (1 << i) != 0 {
-                self.init_slot(to, value, self.default_extra);
-                to += 1;
-            }
-        }
-        self.free_run(old, m.count_ones() as usize);
-        self.masks[n as usize] = new_mask;
-        self.first_child[n as usize] = new;
-        new
+        NodeStore::add_missing_children(self, n, add, value, depth)
     }
 
     /// Expands a leaf `n` at `depth`: eight children holding its value and
     /// extra (OctoMap's `expandNode` copies the node's data).
     pub fn expand_node(&mut self, n: NodeId, depth: u8) {
-        let extra = self.default_extra.map(|_| self.extra(n));
-        self.add_children_with(n, 0xff, self.value(n), extra, depth);
+        NodeStore::expand_node(self, n, depth)
     }
 
     /// Removes child `pos` of `n` and its whole subtree; returns the number
@@ -531,7 +769,7 @@ impl NodeArena {
         let old_len = m.count_ones() as usize;
         let old = self.first_child[n as usize];
         let rank = (m & ((1u8 << pos) - 1)).count_ones();
-        let freed = self.free_subtree_children(old + rank) + 1;
+        let freed = NodeStore::free_subtree_children(self, old + rank) + 1;
         if old_len == 1 {
             self.masks[n as usize] = 0;
             self.first_child[n as usize] = NO_CHILD;
@@ -553,28 +791,7 @@ impl NodeArena {
     /// Removes all children of `n` (and their subtrees); returns the number
     /// of nodes freed.
     pub fn remove_all_children(&mut self, n: NodeId) -> usize {
-        let freed = self.free_subtree_children(n);
-        self.masks[n as usize] = 0;
-        self.first_child[n as usize] = NO_CHILD;
-        freed
-    }
-
-    /// Frees every descendant run below `n` (not `n` itself).
-    fn free_subtree_children(&mut self, n: NodeId) -> usize {
-        let m = self.mask(n);
-        if m == 0 {
-            return 0;
-        }
-        let len = m.count_ones() as usize;
-        let first = self.first_child[n as usize];
-        let mut freed = len;
-        if !in_leaf_pool(first) {
-            for i in 0..len as u32 {
-                freed += self.free_subtree_children(first + i);
-            }
-        }
-        self.free_run(first, len);
-        freed
+        NodeStore::remove_all_children(self, n)
     }
 
     #[cfg(test)]
@@ -610,6 +827,8 @@ impl NodeArena {
 
     /// Releases spare capacity (after building).
     pub fn shrink_to_fit(&mut self) {
+        self.take_spare(usize::MAX, false);
+        self.take_spare(usize::MAX, true);
         self.values.shrink_to_fit();
         self.masks.shrink_to_fit();
         self.first_child.shrink_to_fit();
@@ -658,6 +877,7 @@ impl NodeArena {
         }
         self.free = FreeRuns::default();
         self.leaf_free = FreeRuns::default();
+        (self.spare, self.leaf_spare) = (0, 0);
     }
 
     pub fn usage(&self) -> ArenaUsage {
@@ -703,13 +923,13 @@ impl NodeArena {
     /// The inner pool's child masks, by id.
     #[inline(always)]
     pub(crate) fn masks(&self) -> &[u8] {
-        &self.masks
+        &self.masks[..self.inner_len()]
     }
 
     /// The inner pool's first-child ids, by id.
     #[inline(always)]
     pub(crate) fn first_child_ids(&self) -> &[NodeId] {
-        &self.first_child
+        &self.first_child[..self.inner_len()]
     }
 
     /// The value of leaf-pool node `n`.
@@ -727,20 +947,344 @@ impl NodeArena {
     /// The arrays of both pools, for read-only passes over the whole tree.
     #[inline]
     pub(crate) fn parts(&self) -> Parts<'_> {
+        let (n, nl) = (self.inner_len(), self.leaf_len());
+        let extras = if self.default_extra.is_some() { (n, nl) } else { (0, 0) };
         Parts {
-            values: &self.values,
-            masks: &self.masks,
-            first_child: &self.first_child,
-            extras: &self.extras,
-            leaf_values: &self.leaf_values,
-            leaf_extras: &self.leaf_extras,
+            values: &self.values[..n],
+            masks: &self.masks[..n],
+            first_child: &self.first_child[..n],
+            extras: &self.extras[..extras.0],
+            leaf_values: &self.leaf_values[..nl],
+            leaf_extras: &self.leaf_extras[..extras.1],
         }
     }
 
     /// Replaces every slot's value `v` by `f(v)` (free slots included).
     pub fn map_values(&mut self, f: impl Fn(f32) -> f32) {
-        for v in self.values.iter_mut().chain(&mut self.leaf_values) {
+        let (n, nl) = (self.inner_len(), self.leaf_len());
+        for v in self.values[..n].iter_mut().chain(&mut self.leaf_values[..nl]) {
             *v = f(*v);
+        }
+    }
+}
+
+/// Slots a worker of a parallel update claims from a pool's room at a
+/// time.
+const CHUNK: usize = 256;
+
+/// Room to reserve in a pool so that the workers of a parallel update,
+/// which allocate at most `allocations` slots between them (runs of at
+/// most 8), never run out: a worker claims a new chunk only when fewer than
+/// 8 slots are left in its last, so all its chunks but the last are filled
+/// to `CHUNK - 7` slots at least.
+pub(crate) fn room_for(allocations: usize, workers: usize) -> usize {
+    (allocations * CHUNK).div_ceil(CHUNK - 7) + workers * CHUNK
+}
+
+impl NodeArena {
+    /// Runs `f` with the arena shared by `workers` threads ([`SharedArena`])
+    /// and the free lists dealt out to them; each pool gets at least
+    /// `inner` and `leaf` spare slots (see [`room_for`]) to claim new runs
+    /// from. `f` hands back the workers' free lists. The slots claimed join
+    /// the pools; the rest stay spare. Spare slots are initialised when
+    /// made (no slot is ever uninitialised), so they are made once and
+    /// kept rather than made again for each update.
+    pub(crate) fn with_shared<R>(
+        &mut self,
+        inner: usize,
+        leaf: usize,
+        workers: usize,
+        f: impl FnOnce(&SharedArena<'_>, Vec<ArenaFree>) -> (R, Vec<ArenaFree>),
+    ) -> R {
+        let free = std::mem::take(&mut self.free).deal(workers);
+        let leaf_free = std::mem::take(&mut self.leaf_free).deal(workers);
+        let lists = free.into_iter().zip(leaf_free).map(|(free, leaf_free)| ArenaFree { free, leaf_free }).collect();
+        let (n, nl) = (self.inner_len(), self.leaf_len());
+        assert!(n + inner < LEAF_POOL as usize, "node arena exceeds 2^31 inner slots");
+        assert!(nl + leaf < LEAF_POOL as usize, "node arena exceeds 2^31 leaf slots");
+        self.make_spare(inner, false);
+        self.make_spare(leaf, true);
+        let (result, lists, ends) = {
+            let shared = SharedArena {
+                inner: SharedPool {
+                    arrays: Arrays::of(&mut self.values, &mut self.masks, &mut self.first_child, &mut self.extras),
+                    next: AtomicUsize::new(n),
+                },
+                leaf: SharedPool {
+                    arrays: Arrays::of(&mut self.leaf_values, &mut [], &mut [], &mut self.leaf_extras),
+                    next: AtomicUsize::new(nl),
+                },
+                default_extra: self.default_extra,
+            };
+            let (result, lists) = f(&shared, lists);
+            (result, lists, (shared.inner.claimed(), shared.leaf.claimed()))
+        };
+        // what was not claimed stays as spare slots for later runs
+        self.spare = self.values.len() - ends.0;
+        self.leaf_spare = self.leaf_values.len() - ends.1;
+        for list in lists {
+            self.free.append(list.free);
+            self.leaf_free.append(list.leaf_free);
+        }
+        result
+    }
+
+    /// Makes at least `k` spare slots in a pool, growing its arrays by an
+    /// eighth at least, as the serial path does. Spare slots are written
+    /// once, when made, and reused until taken.
+    fn make_spare(&mut self, k: usize, leaf: bool) {
+        let spare = if leaf { self.leaf_spare } else { self.spare };
+        if spare >= k {
+            return;
+        }
+        let extra = self.default_extra;
+        let (values, extras) =
+            if leaf { (&mut self.leaf_values, &mut self.leaf_extras) } else { (&mut self.values, &mut self.extras) };
+        let (len, add) = (values.len(), k - spare);
+        let more = if len + add > values.capacity() { add.max(len / 8) } else { 0 };
+        values.reserve_exact(more);
+        values.resize(len + add, 0.0);
+        if let Some(e) = extra {
+            extras.reserve_exact(more);
+            extras.resize(len + add, e);
+        }
+        if leaf {
+            self.leaf_spare = k;
+        } else {
+            self.masks.reserve_exact(more);
+            self.masks.resize(len + add, 0);
+            self.first_child.reserve_exact(more);
+            self.first_child.resize(len + add, NO_CHILD);
+            self.spare = k;
+        }
+    }
+}
+
+/// A worker's free lists, for both pools.
+#[derive(Default)]
+pub(crate) struct ArenaFree {
+    free: FreeRuns,
+    leaf_free: FreeRuns,
+}
+
+/// A pool's arrays as atomics (masks and first children empty in the leaf
+/// pool, extras empty when off).
+struct Arrays<'a> {
+    values: &'a [AtomicU32],
+    masks: &'a [AtomicU8],
+    first_child: &'a [AtomicU32],
+    extras: &'a [AtomicU32],
+}
+
+impl<'a> Arrays<'a> {
+    fn of(values: &'a mut [f32], masks: &'a mut [u8], first_child: &'a mut [u32], extras: &'a mut [u32]) -> Self {
+        Arrays {
+            values: atomic_f32s(values),
+            masks: atomic_u8s(masks),
+            first_child: atomic_u32s(first_child),
+            extras: atomic_u32s(extras),
+        }
+    }
+}
+
+// the atomics stand in for the arrays' elements: same size and alignment
+const _: () = assert!(std::mem::size_of::<AtomicU32>() == 4 && std::mem::align_of::<AtomicU32>() == 4);
+const _: () = assert!(std::mem::align_of::<f32>() == 4 && std::mem::align_of::<u32>() == 4);
+const _: () = assert!(std::mem::size_of::<AtomicU8>() == 1 && std::mem::align_of::<AtomicU8>() == 1);
+
+fn atomic_u32s(s: &mut [u32]) -> &[AtomicU32] {
+    // SAFETY: AtomicU32 has the size, alignment (checked above) and bit
+    // validity of u32; the exclusive borrow means nothing else reads or
+    // writes the slice while the atomics are in use.
+    unsafe { &*(s as *mut [u32] as *const [AtomicU32]) }
+}
+
+fn atomic_f32s(s: &mut [f32]) -> &[AtomicU32] {
+    // SAFETY: as in `atomic_u32s`, f32 having the size and alignment of
+    // u32, and every bit pattern being valid for both.
+    unsafe { &*(s as *mut [f32] as *const [AtomicU32]) }
+}
+
+fn atomic_u8s(s: &mut [u8]) -> &[AtomicU8] {
+    // SAFETY: as in `atomic_u32s`, for u8 and AtomicU8.
+    unsafe { &*(s as *mut [u8] as *const [AtomicU8]) }
+}
+
+/// The arena, shared by the workers of a parallel batch update
+/// ([`NodeArena::with_shared`]). Each worker changes only the nodes of its
+/// own subtrees, so no slot is used by two; the arrays are relaxed atomics
+/// all the same (plain loads and stores on x86-64), so that a slot used
+/// twice would be a wrong answer, never a data race.
+pub(crate) struct SharedArena<'a> {
+    inner: SharedPool<'a>,
+    leaf: SharedPool<'a>,
+    default_extra: Option<u32>,
+}
+
+/// One pool: its slots, then spare slots that workers claim by chunks.
+struct SharedPool<'a> {
+    arrays: Arrays<'a>,
+    /// The first unclaimed slot.
+    next: AtomicUsize,
+}
+
+impl SharedPool<'_> {
+    /// Where the claimed slots end.
+    fn claimed(&self) -> usize {
+        self.next.load(Relaxed).min(self.arrays.values.len())
+    }
+
+    /// Claims a chunk of spare slots; returns its first slot.
+    fn claim(&self) -> usize {
+        let start = self.next.fetch_add(CHUNK, Relaxed);
+        assert!(start + CHUNK <= self.arrays.values.len(), "a parallel update outgrew the room made for it");
+        start
+    }
+}
+
+impl SharedArena<'_> {
+    /// A worker that allocates from `free` first, then from chunks of the
+    /// room.
+    pub(crate) fn worker(&self, free: ArenaFree) -> ArenaWorker<'_, '_> {
+        ArenaWorker { shared: self, lists: free, chunk: (0, 0), leaf_chunk: (0, 0) }
+    }
+
+    /// The arrays holding node `n`, and its index there.
+    #[inline(always)]
+    fn pool(&self, n: NodeId) -> (&Arrays<'_>, usize) {
+        if in_leaf_pool(n) {
+            (&self.leaf.arrays, leaf_index(n))
+        } else {
+            (&self.inner.arrays, n as usize)
+        }
+    }
+}
+
+/// One worker's view of a [`SharedArena`]: its own free lists, and the
+/// chunk of room it allocates new runs from.
+pub(crate) struct ArenaWorker<'s, 'a> {
+    shared: &'s SharedArena<'a>,
+    lists: ArenaFree,
+    /// The unallocated rest of the worker's chunk of each pool, as
+    /// (first, end) slot indices.
+    chunk: (usize, usize),
+    leaf_chunk: (usize, usize),
+}
+
+impl ArenaWorker<'_, '_> {
+    /// Ends the worker; the rest of its chunks joins its free lists.
+    pub(crate) fn finish(mut self) -> ArenaFree {
+        let (a, b) = self.chunk;
+        self.lists.free.push_span(a as NodeId, b - a);
+        let (a, b) = self.leaf_chunk;
+        self.lists.leaf_free.push_span(LEAF_POOL | a as NodeId, b - a);
+        self.lists
+    }
+
+    /// `len` slots from the worker's chunk of a pool, claiming a new chunk
+    /// when fewer are left (the rest becomes a free run).
+    #[inline]
+    fn take(&mut self, len: usize, leaf: bool) -> NodeId {
+        let (chunk, pool, free, tag) = if leaf {
+            (&mut self.leaf_chunk, &self.shared.leaf, &mut self.lists.leaf_free, LEAF_POOL)
+        } else {
+            (&mut self.chunk, &self.shared.inner, &mut self.lists.free, 0)
+        };
+        if chunk.1 - chunk.0 < len {
+            free.push(tag | chunk.0 as NodeId, chunk.1 - chunk.0);
+            let start = pool.claim();
+            *chunk = (start, start + CHUNK);
+        }
+        let id = chunk.0;
+        chunk.0 += len;
+        tag | id as NodeId
+    }
+}
+
+impl NodeStore for ArenaWorker<'_, '_> {
+    #[inline(always)]
+    fn value(&self, n: NodeId) -> f32 {
+        let (a, i) = self.shared.pool(n);
+        f32::from_bits(a.values[i].load(Relaxed))
+    }
+    #[inline(always)]
+    fn set_value(&mut self, n: NodeId, v: f32) {
+        let (a, i) = self.shared.pool(n);
+        a.values[i].store(v.to_bits(), Relaxed);
+    }
+    #[inline(always)]
+    fn extra(&self, n: NodeId) -> u32 {
+        let (a, i) = self.shared.pool(n);
+        a.extras.get(i).map_or(0, |e| e.load(Relaxed))
+    }
+    #[inline(always)]
+    fn set_extra(&mut self, n: NodeId, v: u32) {
+        let (a, i) = self.shared.pool(n);
+        if let Some(e) = a.extras.get(i) {
+            e.store(v, Relaxed);
+        }
+    }
+    #[inline(always)]
+    fn mask(&self, n: NodeId) -> u8 {
+        if in_leaf_pool(n) {
+            return 0;
+        }
+        self.shared.inner.arrays.masks[n as usize].load(Relaxed)
+    }
+    #[inline(always)]
+    fn first_child(&self, n: NodeId) -> NodeId {
+        if in_leaf_pool(n) {
+            return NO_CHILD;
+        }
+        self.shared.inner.arrays.first_child[n as usize].load(Relaxed)
+    }
+    #[inline(always)]
+    fn set_children(&mut self, n: NodeId, mask: u8, first: NodeId) {
+        let a = &self.shared.inner.arrays;
+        a.masks[n as usize].store(mask, Relaxed);
+        a.first_child[n as usize].store(first, Relaxed);
+    }
+    #[inline(always)]
+    fn default_extra(&self) -> Option<u32> {
+        self.shared.default_extra
+    }
+    #[inline]
+    fn alloc_run(&mut self, len: usize, leaf: bool) -> NodeId {
+        let list = if leaf { &mut self.lists.leaf_free } else { &mut self.lists.free };
+        match list.pop(len) {
+            Some(start) => start,
+            None => self.take(len, leaf),
+        }
+    }
+    #[inline]
+    fn free_run(&mut self, start: NodeId, len: usize) {
+        if in_leaf_pool(start) {
+            self.lists.leaf_free.push(start, len);
+        } else {
+            self.lists.free.push(start, len);
+        }
+    }
+    #[inline(always)]
+    fn copy_slot(&mut self, from: NodeId, to: NodeId) {
+        let v = self.value(from);
+        self.set_value(to, v);
+        if self.shared.default_extra.is_some() {
+            let e = self.extra(from);
+            self.set_extra(to, e);
+        }
+        if !in_leaf_pool(from) {
+            let (m, f) = (self.mask(from), self.first_child(from));
+            self.set_children(to, m, f);
+        }
+    }
+    #[inline(always)]
+    fn init_slot(&mut self, id: NodeId, value: f32, extra: Option<u32>) {
+        self.set_value(id, value);
+        if let Some(e) = extra {
+            self.set_extra(id, e);
+        }
+        if !in_leaf_pool(id) {
+            self.set_children(id, 0, NO_CHILD);
         }
     }
 }

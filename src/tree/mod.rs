@@ -6,17 +6,19 @@ mod counting;
 mod cursor;
 mod iter;
 mod level_index;
+mod parallel;
 mod search_index;
 mod trunk;
 
 pub(crate) use arena::LabelFill;
-use arena::PreorderFill;
 pub(crate) use arena::{in_leaf_pool, leaf_index, prefetch_lines, Parts, WHOLE_PREFETCH_BYTES};
 pub use arena::{ArenaUsage, NodeArena, NodeId};
+use arena::{NodeStore, PreorderFill};
 pub use counting::CountingTree;
 pub(crate) use cursor::{LastAnswer, PathSearch};
 pub use iter::{KeyBox, NodeItem, NodeIter};
 use level_index::{LevelSlot, Reach};
+pub(crate) use parallel::MIN_CODES as PARALLEL_MIN_CODES;
 pub(crate) use search_index::LevelTables;
 pub use search_index::SearchIndex;
 pub(crate) use trunk::{Trunks, GRID_NODES_PER_CELL};
@@ -430,6 +432,28 @@ impl OccupancyTree {
     /// voxel appears once, so leaf values do not depend on the order, and a
     /// node's final pruning only depends on its children's final state.
     pub fn update_batch(&mut self, codes: &[u64], delta: f32, inner: InnerNodes) {
+        self.update_batch_split(codes, delta, inner, 1, &|| {});
+    }
+
+    /// [`Self::update_batch`] with the work shared by the threads of the
+    /// current rayon pool, split in `2 * workers` parts, when the batch has
+    /// 32,768 codes or more and no changes are being recorded. The tree is
+    /// the one [`Self::update_batch`] gives.
+    pub fn update_batch_shared(&mut self, codes: &[u64], delta: f32, inner: InnerNodes, workers: usize) {
+        self.update_batch_split(codes, delta, inner, workers, &|| {});
+    }
+
+    /// [`Self::update_batch_shared`]; `announce` is called once work is
+    /// waiting to be taken, so that threads blocked elsewhere can come and
+    /// help (see `rayon::yield_now`).
+    pub(crate) fn update_batch_split(
+        &mut self,
+        codes: &[u64],
+        delta: f32,
+        inner: InnerNodes,
+        workers: usize,
+        announce: &(dyn Fn() + Sync),
+    ) {
         if codes.is_empty() {
             return;
         }
@@ -449,8 +473,13 @@ impl OccupancyTree {
             lazy: inner == InnerNodes::Defer,
             size: self.size as isize,
             changes: self.changes.as_mut(),
+            split: None,
         };
-        batch.apply(ROOT, 0, codes, created);
+        if workers > 1 && codes.len() >= parallel::MIN_CODES && batch.changes.is_none() {
+            parallel::apply(&mut batch, codes, created, workers, announce);
+        } else {
+            batch.apply(ROOT, 0, codes, created);
+        }
         self.size = batch.size as usize;
         if self.compaction == Compaction::Automatic {
             let a = self.arena_mut().expect("root exists");
@@ -1086,18 +1115,22 @@ impl OccupancyTree {
     }
 }
 
-/// State of one [`OccupancyTree::update_batch`] walk.
-struct Batch<'a> {
-    arena: &'a mut NodeArena,
+/// State of one [`OccupancyTree::update_batch`] walk, over the arena or,
+/// in a parallel update, over one worker's share of it.
+struct Batch<'a, S: NodeStore> {
+    arena: &'a mut S,
     rules: Rules,
     sensor: SensorModel,
     delta: f32,
     lazy: bool,
     size: isize,
     changes: Option<&'a mut HashMap<Key, bool>>,
+    /// Where the walk stops short for a parallel update
+    /// ([`parallel::Split`]); `None` for a whole walk.
+    split: Option<&'a mut parallel::Split>,
 }
 
-impl Batch<'_> {
+impl<S: NodeStore> Batch<'_, S> {
     /// Applies `codes` (all below `n`, which sits at `depth`) to the
     /// subtree; returns whether any voxel was updated. Like `updateNode`,
     /// whose early exit on a saturated voxel leaves the path above it alone,
@@ -1106,6 +1139,11 @@ impl Batch<'_> {
     fn apply(&mut self, n: NodeId, depth: u8, codes: &[u64], created: bool) -> bool {
         if depth == TREE_DEPTH {
             return self.apply_leaf(n, codes[0], created);
+        }
+        if let Some(split) = self.split.as_deref_mut() {
+            if depth == split.depth {
+                return split.visit(n, codes, created);
+            }
         }
         // where each child's codes start: codes are sorted and share the
         // prefix above this node, so the child index is monotone in them
@@ -1188,13 +1226,13 @@ impl Batch<'_> {
         }
         if changed && !self.lazy {
             if self.rules.kind == NodeKind::Plain {
-                if prune_or_update_plain(self.arena, n) {
+                if prune_or_update_plain(&mut *self.arena, n) {
                     self.size -= 8;
                 }
-            } else if prune_node(self.arena, n, self.rules).is_some() {
+            } else if prune_node(&mut *self.arena, n, self.rules).is_some() {
                 self.size -= 8;
             } else {
-                update_from_children(self.arena, n, self.rules);
+                update_from_children(&mut *self.arena, n, self.rules);
             }
         }
         changed
@@ -1390,7 +1428,7 @@ pub(crate) fn default_extra(kind: NodeKind) -> Option<u32> {
 
 /// `getMaxChildLogOdds`.
 #[inline]
-fn max_child_value(a: &NodeArena, n: NodeId) -> f32 {
+fn max_child_value<S: NodeStore>(a: &S, n: NodeId) -> f32 {
     let first = a.first_child(n);
     let mut max = -f32::MAX;
     for i in 0..a.mask(n).count_ones() {
@@ -1406,7 +1444,7 @@ fn max_child_value(a: &NodeArena, n: NodeId) -> f32 {
 /// takes child 0's data); returns the value. Stamped trees also need equal
 /// stamps; colour trees ignore colours and give the merged node the average.
 #[inline]
-fn prune_node(a: &mut NodeArena, n: NodeId, rules: Rules) -> Option<f32> {
+fn prune_node<S: NodeStore>(a: &mut S, n: NodeId, rules: Rules) -> Option<f32> {
     if a.mask(n) != 0xff {
         return None;
     }
@@ -1432,7 +1470,7 @@ fn prune_node(a: &mut NodeArena, n: NodeId, rules: Rules) -> Option<f32> {
 /// [`prune_node`], else [`update_from_children`], for plain trees in one
 /// pass over the children; returns whether `n` was pruned.
 #[inline]
-fn prune_or_update_plain(a: &mut NodeArena, n: NodeId) -> bool {
+fn prune_or_update_plain<S: NodeStore>(a: &mut S, n: NodeId) -> bool {
     let mask = a.mask(n);
     let first = a.first_child(n);
     let v0 = a.value(first);
@@ -1458,7 +1496,7 @@ fn prune_or_update_plain(a: &mut NodeArena, n: NodeId) -> bool {
 /// `updateOccupancyChildren`: the maximum of the children's values (and,
 /// for stamped trees, the current time).
 #[inline]
-fn update_from_children(a: &mut NodeArena, n: NodeId, rules: Rules) {
+fn update_from_children<S: NodeStore>(a: &mut S, n: NodeId, rules: Rules) {
     let v = max_child_value(a, n);
     a.set_value(n, v);
     if rules.kind == NodeKind::Stamped {
@@ -1468,9 +1506,10 @@ fn update_from_children(a: &mut NodeArena, n: NodeId, rules: Rules) {
 
 /// `getAverageChildColor`: integer mean over children whose colour is set,
 /// white when none is.
-fn average_child_color(a: &NodeArena, n: NodeId) -> u32 {
+fn average_child_color<S: NodeStore>(a: &S, n: NodeId) -> u32 {
     let (mut sum, mut count) = ([0u32; 3], 0u32);
-    for (_, c) in a.children(n) {
+    let first = a.first_child(n);
+    for c in first..first + a.mask(n).count_ones() {
         let e = a.extra(c);
         if e != WHITE {
             let rgb = unpack_rgb(e);
