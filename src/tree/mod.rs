@@ -18,6 +18,7 @@ pub use counting::CountingTree;
 pub(crate) use cursor::{LastAnswer, PathSearch};
 pub use iter::{KeyBox, NodeItem, NodeIter};
 use level_index::{LevelSlot, Reach};
+#[cfg(test)]
 pub(crate) use parallel::MIN_CODES as PARALLEL_MIN_CODES;
 pub(crate) use search_index::LevelTables;
 pub use search_index::SearchIndex;
