@@ -624,11 +624,13 @@ impl OccupancyTree {
                         pipeline.lock().cast.insert(i, result);
                         pipeline.changed.notify_all();
                     }
-                    Job::Apply(update, report) => {
+                    Job::Apply(update, report, share) => {
                         let mut guard = tree.lock().unwrap_or_else(|e| e.into_inner());
                         let (tree, after_each) = &mut *guard;
                         let report =
-                            tree.apply_update_on(&update, report, opts.inner, threads, &|| pipeline.announce());
+                            tree.apply_update_on(&update, report, opts.inner, if share { threads } else { 1 }, &|| {
+                                pipeline.announce()
+                            });
                         drop(update);
                         after_each(tree, report);
                         drop(guard);
@@ -795,8 +797,10 @@ struct PipelineState<S> {
 enum Job<T> {
     /// Cast the scan at this position.
     Cast(usize, T),
-    /// Apply the update of the next scan in order.
-    Apply(ScanUpdate, ScanReport),
+    /// Apply the update of the next scan in order; `true`: share the tree
+    /// update with the other threads, the scan after being cast already
+    /// (so the tree, not the casting, holds the pipeline up).
+    Apply(ScanUpdate, ScanReport, bool),
 }
 
 impl<S, T> Pipeline<S>
@@ -824,7 +828,8 @@ where
                 match s.cast.remove(&next) {
                     Some(Ok((update, report))) => {
                         s.applying = true;
-                        return Some(Job::Apply(update, report));
+                        let share = s.cast.contains_key(&(next + 1));
+                        return Some(Job::Apply(update, report, share));
                     }
                     Some(Err(e)) => {
                         s.refused = Some((next, e));

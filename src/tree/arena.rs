@@ -74,6 +74,9 @@ pub struct NodeArena {
     /// ([`NodeArena::with_shared`]), taken by later runs.
     spare: usize,
     leaf_spare: usize,
+    /// Slots of each pool the last parallel update allocated from its
+    /// spare slots, which sizes the next one's.
+    last_shared_use: Option<(usize, usize)>,
 }
 
 /// The free slot runs of one pool, by length (index 1..=8), as ids.
@@ -977,25 +980,36 @@ const CHUNK: usize = 256;
 /// most 8), never run out: a worker claims a new chunk only when fewer than
 /// 8 slots are left in its last, so all its chunks but the last are filled
 /// to `CHUNK - 7` slots at least.
-pub(crate) fn room_for(allocations: usize, workers: usize) -> usize {
+fn room_for(allocations: usize, workers: usize) -> usize {
     (allocations * CHUNK).div_ceil(CHUNK - 7) + workers * CHUNK
 }
 
 impl NodeArena {
     /// Runs `f` with the arena shared by `workers` threads ([`SharedArena`])
-    /// and the free lists dealt out to them; each pool gets at least
-    /// `inner` and `leaf` spare slots (see [`room_for`]) to claim new runs
-    /// from. `f` hands back the workers' free lists. The slots claimed join
-    /// the pools; the rest stay spare. Spare slots are initialised when
-    /// made (no slot is ever uninitialised), so they are made once and
-    /// kept rather than made again for each update.
+    /// and the free lists dealt out to them (`f` hands them back). The
+    /// workers allocate from spare slots, made here for a budget: a worker
+    /// takes a task only once it has reserved the task's worst case from
+    /// the budget ([`ArenaWorker::reserve`]). The worst cases of all tasks
+    /// (`bound`, inner and leaf pool) are four times what an outdoor scan
+    /// allocates and a hundred times what a scan of mapped space does, so
+    /// the budget is twice what the last parallel update allocated (a
+    /// quarter of `bound` at first) plus the largest task's worst case
+    /// (`largest`), and never more than `bound`; tasks the budget cannot
+    /// cover are left to the caller. The slots claimed join the pools, the rest stay spare.
+    /// Spare slots are initialised when made (no slot is ever
+    /// uninitialised), so they are made once and kept for later runs.
     pub(crate) fn with_shared<R>(
         &mut self,
-        inner: usize,
-        leaf: usize,
+        bound: (usize, usize),
+        largest: (usize, usize),
         workers: usize,
         f: impl FnOnce(&SharedArena<'_>, Vec<ArenaFree>) -> (R, Vec<ArenaFree>),
     ) -> R {
+        // with no history, a quarter of the worst case (a scan of new
+        // space allocates that much)
+        let (i, l) = self.last_shared_use.unwrap_or((bound.0 / 4, bound.1 / 4));
+        let budget = ((2 * i + largest.0).min(bound.0), (2 * l + largest.1).min(bound.1));
+        let (inner, leaf) = (room_for(budget.0, workers), room_for(budget.1, workers));
         let free = std::mem::take(&mut self.free).deal(workers);
         let leaf_free = std::mem::take(&mut self.leaf_free).deal(workers);
         let lists = free.into_iter().zip(leaf_free).map(|(free, leaf_free)| ArenaFree { free, leaf_free }).collect();
@@ -1009,14 +1023,18 @@ impl NodeArena {
                 inner: SharedPool {
                     arrays: Arrays::of(&mut self.values, &mut self.masks, &mut self.first_child, &mut self.extras),
                     next: AtomicUsize::new(n),
+                    budget: AtomicUsize::new(budget.0),
                 },
                 leaf: SharedPool {
                     arrays: Arrays::of(&mut self.leaf_values, &mut [], &mut [], &mut self.leaf_extras),
                     next: AtomicUsize::new(nl),
+                    budget: AtomicUsize::new(budget.1),
                 },
                 default_extra: self.default_extra,
             };
             let (result, lists) = f(&shared, lists);
+            let used = |p: &SharedPool, budget: usize| budget - p.budget.load(Relaxed);
+            self.last_shared_use = Some((used(&shared.inner, budget.0), used(&shared.leaf, budget.1)));
             (result, lists, (shared.inner.claimed(), shared.leaf.claimed()))
         };
         // what was not claimed stays as spare slots for later runs
@@ -1126,6 +1144,8 @@ struct SharedPool<'a> {
     arrays: Arrays<'a>,
     /// The first unclaimed slot.
     next: AtomicUsize,
+    /// Slots not reserved by a task ([`ArenaWorker::reserve`]).
+    budget: AtomicUsize,
 }
 
 impl SharedPool<'_> {
@@ -1134,7 +1154,15 @@ impl SharedPool<'_> {
         self.next.load(Relaxed).min(self.arrays.values.len())
     }
 
-    /// Claims a chunk of spare slots; returns its first slot.
+    /// Takes `k` slots from the budget, if it has them.
+    fn reserve(&self, k: usize) -> bool {
+        self.budget.fetch_update(Relaxed, Relaxed, |b| b.checked_sub(k)).is_ok()
+    }
+
+    /// Claims a chunk of spare slots; returns its first slot. The budget
+    /// keeps the claims within the spare slots: a worker claims a chunk
+    /// only for the slots of a task's reservation, and only when fewer
+    /// than 8 are left in its last (see [`room_for`]).
     fn claim(&self) -> usize {
         let start = self.next.fetch_add(CHUNK, Relaxed);
         assert!(start + CHUNK <= self.arrays.values.len(), "a parallel update outgrew the room made for it");
@@ -1146,7 +1174,7 @@ impl SharedArena<'_> {
     /// A worker that allocates from `free` first, then from chunks of the
     /// room.
     pub(crate) fn worker(&self, free: ArenaFree) -> ArenaWorker<'_, '_> {
-        ArenaWorker { shared: self, lists: free, chunk: (0, 0), leaf_chunk: (0, 0) }
+        ArenaWorker { shared: self, lists: free, chunk: (0, 0), leaf_chunk: (0, 0), reserved: (0, 0), taken: (0, 0) }
     }
 
     /// The arrays holding node `n`, and its index there.
@@ -1169,9 +1197,38 @@ pub(crate) struct ArenaWorker<'s, 'a> {
     /// (first, end) slot indices.
     chunk: (usize, usize),
     leaf_chunk: (usize, usize),
+    /// The current task's reservation, and the slots it took from chunks.
+    reserved: (usize, usize),
+    taken: (usize, usize),
 }
 
 impl ArenaWorker<'_, '_> {
+    /// Reserves a task's worst case (inner-pool and leaf-pool slots) from
+    /// the budget of spare slots; `false` when the budget cannot cover it,
+    /// and the task must not be applied through this worker.
+    pub(crate) fn reserve(&mut self, k: (usize, usize)) -> bool {
+        let (inner, leaf) = (&self.shared.inner, &self.shared.leaf);
+        if !inner.reserve(k.0) {
+            return false;
+        }
+        if !leaf.reserve(k.1) {
+            inner.budget.fetch_add(k.0, Relaxed);
+            return false;
+        }
+        self.reserved = k;
+        self.taken = (0, 0);
+        true
+    }
+
+    /// Ends the task reserved for: gives back what it did not take.
+    pub(crate) fn release(&mut self) {
+        let (r, t) = (self.reserved, self.taken);
+        assert!(t.0 <= r.0 && t.1 <= r.1, "a task took more slots than its reservation");
+        self.shared.inner.budget.fetch_add(r.0 - t.0, Relaxed);
+        self.shared.leaf.budget.fetch_add(r.1 - t.1, Relaxed);
+        self.reserved = (0, 0);
+    }
+
     /// Ends the worker; the rest of its chunks joins its free lists.
     pub(crate) fn finish(mut self) -> ArenaFree {
         let (a, b) = self.chunk;
@@ -1197,6 +1254,11 @@ impl ArenaWorker<'_, '_> {
         }
         let id = chunk.0;
         chunk.0 += len;
+        if leaf {
+            self.taken.1 += len;
+        } else {
+            self.taken.0 += len;
+        }
         tag | id as NodeId
     }
 }

@@ -438,7 +438,7 @@ impl OccupancyTree {
 
     /// [`Self::update_batch`] with the work shared by the threads of the
     /// current rayon pool, split in `2 * workers` parts, when the batch has
-    /// 32,768 codes or more and no changes are being recorded. The tree is
+    /// 262,144 codes or more and no changes are being recorded. The tree is
     /// the one [`Self::update_batch`] gives.
     pub fn update_batch_shared(&mut self, codes: &[u64], delta: f32, inner: InnerNodes, workers: usize) {
         self.update_batch_split(codes, delta, inner, workers, &|| {});
@@ -1142,8 +1142,8 @@ impl<S: NodeStore> Batch<'_, S> {
             return self.apply_leaf(n, codes[0], created);
         }
         if let Some(split) = self.split.as_deref_mut() {
-            if depth == split.depth {
-                return split.visit(n, codes, created);
+            if split.is_task(depth, codes.len()) {
+                return split.visit(n, depth, codes, created);
             }
         }
         // where each child's codes start: codes are sorted and share the

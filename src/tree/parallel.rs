@@ -1,10 +1,10 @@
 //! A batch update shared by several threads.
 //!
-//! A batch's codes are sorted, so the subtrees at a fixed depth
-//! ([`SPLIT_DEPTH`]) take disjoint runs of them. The update goes in three
+//! A batch's codes are sorted, so disjoint subtrees take disjoint runs of
+//! them. The update goes in three
 //! steps with the result of the serial walk:
-//! 1. *plan*: one thread walks the levels above that depth, creating
-//!    missing nodes, and lists the subtrees with their codes (tasks);
+//! 1. *plan*: one thread walks the upper levels, creating missing nodes,
+//!    and lists subtrees with their codes (tasks, [`Split::is_task`]);
 //! 2. the tasks, in contiguous parts of about equal code counts, are
 //!    applied by the pool's threads at once, each in its own subtrees of
 //!    the one arena ([`NodeArena::with_shared`]), allocating from free
@@ -19,26 +19,41 @@
 //! final state, so the tree is the one the serial walk gives; only where
 //! nodes sit in the arena differs.
 
-use super::arena::{room_for, ArenaFree, SharedArena};
+use super::arena::{ArenaFree, SharedArena};
 use super::{Batch, NodeArena, NodeId, ROOT};
 use crate::key::TREE_DEPTH;
 
-/// Batches with fewer codes are applied by one thread: splitting costs a
-/// second walk of the upper levels and room made for the workers.
+/// Batches with fewer codes are applied by one thread. Splitting costs a
+/// second walk of the upper levels and, above all, memory: the spare slots
+/// are made for the worst case, up to 8 per node a batch visits, where a
+/// scan over mapped space allocates almost nothing. At 32,768 codes an
+/// indoor build's peak memory rose by a quarter (19.6 to 24.6 MB on 2
+/// threads, `docs/benchmarks.md`) for no gain in time; scans of new
+/// space (outdoor) gain, and their batches are far larger. Unit tests
+/// share smaller batches, dense enough to prune whole blocks.
+#[cfg(not(test))]
+pub(crate) const MIN_CODES: usize = 1 << 18;
+#[cfg(test)]
 pub(crate) const MIN_CODES: usize = 1 << 15;
 
-/// Depth of the subtrees handed out: deep enough that a scan's updates
-/// spread over many (a depth-9 node spans 128 voxels a side, 6.4 m at
-/// 0.05 m), shallow enough that the upper levels are a small walk.
-const SPLIT_DEPTH: u8 = 9;
+/// Depths of the subtrees handed out (tasks): a node at depth
+/// [`MIN_SPLIT_DEPTH`] or below whose codes are few enough
+/// ([`Split::max_codes`]) is a task, and so is every node at
+/// [`MAX_SPLIT_DEPTH`]. Small tasks balance the threads and keep the
+/// worst case of any one task small, which sizes the spare slots made for
+/// them (see [`NodeArena::with_shared`]); the upper levels stay a small
+/// walk (a depth-12 node spans 16 voxels a side).
+const MIN_SPLIT_DEPTH: u8 = 6;
+const MAX_SPLIT_DEPTH: u8 = 12;
 
 /// Parts per thread: more than one, so that a thread whose parts went
 /// slowly is helped by the others.
 const PARTS_PER_WORKER: usize = 2;
 
-/// The subtrees at the split depth, and what their workers answered.
+/// The subtrees handed out, and what their workers answered.
 pub(super) struct Split {
-    pub(super) depth: u8,
+    /// Codes a task may have above [`MAX_SPLIT_DEPTH`].
+    max_codes: usize,
     /// Address of the batch's first code, to turn sub-slices into ranges.
     base: usize,
     tasks: Vec<Task>,
@@ -51,20 +66,30 @@ pub(super) struct Split {
 #[derive(Clone, Copy)]
 struct Task {
     node: NodeId,
+    depth: u8,
     start: usize,
     end: usize,
     created: bool,
+    /// The most inner-pool and leaf-pool slots the task can allocate.
+    bound: (usize, usize),
 }
 
 impl Split {
-    /// Reached subtree `n` with `codes`: while planning, lists it and says
-    /// nothing changed (so the walk leaves the nodes above alone); when
-    /// finishing, gives its worker's answer.
-    pub(super) fn visit(&mut self, n: NodeId, codes: &[u64], created: bool) -> bool {
+    /// Is the node at `depth` with `codes` below it a task?
+    #[inline]
+    pub(super) fn is_task(&self, depth: u8, codes: usize) -> bool {
+        depth == MAX_SPLIT_DEPTH || (depth >= MIN_SPLIT_DEPTH && codes <= self.max_codes)
+    }
+
+    /// Reached task `n` at `depth` with `codes`: while planning, lists it
+    /// and says nothing changed (so the walk leaves the nodes above alone);
+    /// when finishing, gives its worker's answer.
+    pub(super) fn visit(&mut self, n: NodeId, depth: u8, codes: &[u64], created: bool) -> bool {
         match &self.changed {
             None => {
                 let start = (codes.as_ptr() as usize - self.base) / std::mem::size_of::<u64>();
-                self.tasks.push(Task { node: n, start, end: start + codes.len(), created });
+                let bound = allocation_bound(codes, depth);
+                self.tasks.push(Task { node: n, depth, start, end: start + codes.len(), created, bound });
                 false
             }
             Some(changed) => {
@@ -85,31 +110,36 @@ pub(super) fn apply(
     workers: usize,
     announce: &(dyn Fn() + Sync),
 ) {
-    let t0 = std::time::Instant::now();
-    let mut split =
-        Split { depth: SPLIT_DEPTH, base: codes.as_ptr() as usize, tasks: Vec::new(), changed: None, next: 0 };
+    // about eight tasks per part at least
+    let max_codes = (codes.len() / (8 * workers * PARTS_PER_WORKER)).max(1024);
+    let mut split = Split { max_codes, base: codes.as_ptr() as usize, tasks: Vec::new(), changed: None, next: 0 };
     walk_upper_levels(batch, &mut split, codes, created);
     let tasks = &std::mem::take(&mut split.tasks)[..];
     let parts = partition(tasks, workers * PARTS_PER_WORKER);
-    let (inner, leaf) = allocation_bound(tasks, codes);
+    let total = tasks.iter().fold((0, 0), |(i, l), t| (i + t.bound.0, l + t.bound.1));
+    let largest = tasks.iter().fold((0, 0), |(i, l), t| (i.max(t.bound.0), l.max(t.bound.1)));
 
     let (rules, sensor, delta, lazy) = (batch.rules, batch.sensor, batch.delta, batch.lazy);
+    // per task: changed, or `None` when the spare slots could not be
+    // promised to it (applied afterwards, by this thread)
     let run = |shared: &SharedArena<'_>, tasks: &[Task], free: ArenaFree| {
-        let t = std::time::Instant::now();
         let mut worker = shared.worker(free);
-        let mut b = Batch { arena: &mut worker, rules, sensor, delta, lazy, size: 0, changes: None, split: None };
-        let changed: Vec<bool> =
-            tasks.iter().map(|t| b.apply(t.node, SPLIT_DEPTH, &codes[t.start..t.end], t.created)).collect();
-        let size = b.size;
-        if std::env::var("PDEBUG").is_ok() {
-            eprintln!("  part {:?} on {:?}", t.elapsed(), rayon::current_thread_index());
+        let mut changed = Vec::with_capacity(tasks.len());
+        let mut size = 0;
+        for t in tasks {
+            if !worker.reserve(t.bound) {
+                changed.push(None);
+                continue;
+            }
+            let mut b = Batch { arena: &mut worker, rules, sensor, delta, lazy, size: 0, changes: None, split: None };
+            changed.push(Some(b.apply(t.node, t.depth, &codes[t.start..t.end], t.created)));
+            size += b.size;
+            worker.release();
         }
         (changed, size, worker.finish())
     };
-    let t1 = std::time::Instant::now();
-    let room = (room_for(inner, parts.len()), room_for(leaf, parts.len()));
-    let results = batch.arena.with_shared(room.0, room.1, parts.len(), |shared, lists| {
-        let mut results: Vec<(Vec<bool>, isize, ArenaFree)> =
+    let results = batch.arena.with_shared(total, largest, parts.len(), |shared, lists| {
+        let mut results: Vec<(Vec<Option<bool>>, isize, ArenaFree)> =
             lists.into_iter().map(|list| (Vec::new(), 0, list)).collect();
         rayon::scope(|scope| {
             let mut pairs = parts.iter().zip(results.iter_mut());
@@ -126,29 +156,33 @@ pub(super) fn apply(
         let lists = results.iter_mut().map(|r| std::mem::take(&mut r.2)).collect();
         (results, lists)
     });
-    let t2 = std::time::Instant::now();
     let mut changed = Vec::with_capacity(tasks.len());
     for (flags, size, _) in results {
         changed.extend(flags);
         batch.size += size;
     }
+    let changed =
+        changed.into_iter().zip(tasks).map(|(c, t)| c.unwrap_or_else(|| apply_task(batch, t, codes))).collect();
 
     split.changed = Some(changed);
     walk_upper_levels(batch, &mut split, codes, created);
-    let t3 = std::time::Instant::now();
-    if std::env::var("PDEBUG").is_ok() {
-        eprintln!(
-            "codes {} tasks {} bound {}/{} slots {} | plan {:?} par {:?} finish {:?}",
-            codes.len(),
-            tasks.len(),
-            inner,
-            leaf,
-            batch.arena.slot_count(),
-            t1 - t0,
-            t2 - t1,
-            t3 - t2
-        );
-    }
+}
+
+/// Applies one task on this thread, to the arena itself.
+fn apply_task(batch: &mut Batch<'_, NodeArena>, t: &Task, codes: &[u64]) -> bool {
+    let mut b = Batch {
+        arena: &mut *batch.arena,
+        rules: batch.rules,
+        sensor: batch.sensor,
+        delta: batch.delta,
+        lazy: batch.lazy,
+        size: 0,
+        changes: None,
+        split: None,
+    };
+    let changed = b.apply(t.node, t.depth, &codes[t.start..t.end], t.created);
+    batch.size += b.size;
+    changed
 }
 
 /// The walk above the split depth, planning or finishing per `split`.
@@ -187,27 +221,21 @@ fn partition(tasks: &[Task], parts: usize) -> Vec<std::ops::Range<usize>> {
     out
 }
 
-/// Upper bounds of the inner-pool and leaf-pool slots the tasks can
-/// allocate: a visited node allocates at most one run of at most 8 slots
-/// (new children, or an expansion), in the leaf pool at depth 15, and the
-/// nodes a task visits are the distinct prefixes of its codes at depths
-/// [`SPLIT_DEPTH`]..=15.
-fn allocation_bound(tasks: &[Task], codes: &[u64]) -> (usize, usize) {
-    let below = usize::from(TREE_DEPTH - 1 - SPLIT_DEPTH);
-    let (mut inner, mut leaf) = (0, 0);
-    for t in tasks {
-        let codes = &codes[t.start..t.end];
-        // the first code's whole path from the split depth
-        inner += below;
-        leaf += 1;
-        for pair in codes.windows(2) {
-            // the first depth whose child index differs: the two codes
-            // share the nodes down to it and none below
-            let top_bit = 63 - (pair[0] ^ pair[1]).leading_zeros() as usize;
-            let first_new = usize::from(TREE_DEPTH) - top_bit / 3;
-            inner += usize::from(TREE_DEPTH - 1).saturating_sub(first_new.max(usize::from(SPLIT_DEPTH)));
-            leaf += usize::from(first_new <= usize::from(TREE_DEPTH - 1));
-        }
+/// Upper bounds of the inner-pool and leaf-pool slots a task with `codes`
+/// can allocate: a visited node allocates at most one run of at most 8
+/// slots (new children, or an expansion), in the leaf pool at depth 15,
+/// and the nodes a task at `depth` visits are the distinct prefixes of its
+/// codes at depths `depth..=15`.
+fn allocation_bound(codes: &[u64], depth: u8) -> (usize, usize) {
+    // the first code's whole path from the task's node
+    let (mut inner, mut leaf) = (usize::from(TREE_DEPTH - 1 - depth), 1);
+    for pair in codes.windows(2) {
+        // the first depth whose node differs: the two codes share the
+        // nodes above it and none from it down
+        let top_bit = 63 - (pair[0] ^ pair[1]).leading_zeros() as usize;
+        let first_new = usize::from(TREE_DEPTH) - top_bit / 3;
+        inner += usize::from(TREE_DEPTH - 1).saturating_sub(first_new.max(usize::from(depth)));
+        leaf += usize::from(first_new <= usize::from(TREE_DEPTH - 1));
     }
     (8 * inner, 8 * leaf)
 }
@@ -277,7 +305,7 @@ mod tests {
     }
 
     fn task(start: usize, end: usize) -> Task {
-        Task { node: 0, start, end, created: false }
+        Task { node: 0, depth: 9, start, end, created: false, bound: (0, 0) }
     }
 
     #[test]
@@ -303,13 +331,13 @@ mod tests {
     fn the_bound_counts_distinct_prefixes_below_the_split() {
         // two voxels with the same depth-15 parent: one path of inner nodes
         // (depths 9..=14) and one leaf group
-        let codes = [0b000, 0b001];
-        assert_eq!(allocation_bound(&[task(0, 2)], &codes), (8 * 6, 8));
+        assert_eq!(allocation_bound(&[0b000, 0b001], 9), (8 * 6, 8));
         // differing at depth 14: a second depth-15 parent
-        let codes = [0b000, 0b001_000];
-        assert_eq!(allocation_bound(&[task(0, 2)], &codes), (8 * 6, 16));
+        assert_eq!(allocation_bound(&[0b000, 0b001_000], 9), (8 * 6, 16));
         // differing at depth 10: new nodes at depths 11..=15
-        let codes = [0, 1 << (3 * 5)];
-        assert_eq!(allocation_bound(&[task(0, 2)], &codes), (8 * (6 + 4), 16));
+        assert_eq!(allocation_bound(&[0, 1 << (3 * 5)], 9), (8 * (6 + 4), 16));
+        // a task at depth 12: inner nodes at depths 12..=14 only; the
+        // second code adds the depth-14 and depth-15 nodes
+        assert_eq!(allocation_bound(&[0, 1 << (3 * 2)], 12), (8 * (3 + 1), 16));
     }
 }
