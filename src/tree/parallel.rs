@@ -168,8 +168,17 @@ pub(super) fn apply(
     walk_upper_levels(batch, &mut split, codes, created);
 }
 
+#[cfg(test)]
+thread_local! {
+    /// Tasks [`apply_task`] applied on this thread (tests check that it
+    /// happens).
+    static LEFT_OVER: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+}
+
 /// Applies one task on this thread, to the arena itself.
 fn apply_task(batch: &mut Batch<'_, NodeArena>, t: &Task, codes: &[u64]) -> bool {
+    #[cfg(test)]
+    LEFT_OVER.set(LEFT_OVER.get() + 1);
     let mut b = Batch {
         arena: &mut *batch.arena,
         rules: batch.rules,
@@ -301,6 +310,42 @@ mod tests {
             }
             // the batches pruned: some leaves lie above the voxels
             assert!(serial.leaves(16).any(|l| l.depth < 16), "{kind:?}: nothing was pruned");
+        }
+    }
+
+    /// A shared batch over mapped space allocates little, so the next one
+    /// gets a small budget of spare slots; when that one maps new space,
+    /// the tasks the budget cannot cover are applied afterwards, and the
+    /// tree is still the serial walk's.
+    #[test]
+    fn tasks_beyond_the_budget_are_applied_after() {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let mut rng = SplitMix64(11);
+        let known = random_codes(&mut rng, 60_000, 48);
+        // new space: far from the first cube, spread over many tasks
+        let new: Vec<u64> = {
+            let c = |rng: &mut SplitMix64| (20_000 + rng.below(400)) as u16;
+            let mut v: Vec<u64> =
+                (0..60_000).map(|_| MortonCode::encode(Key::new(c(&mut rng), c(&mut rng), c(&mut rng))).0).collect();
+            v.sort_unstable();
+            v.dedup();
+            v
+        };
+        let mut serial = OccupancyTree::new(0.1).unwrap();
+        let hit = serial.sensor().hit;
+        let mut shared = serial.clone();
+        for codes in [&known, &known, &known, &new] {
+            serial.update_batch(codes, hit, InnerNodes::Update);
+            // counted on the thread that applies the left-over tasks
+            let left = pool.install(|| {
+                let before = LEFT_OVER.get();
+                shared.update_batch_shared(codes, hit, InnerNodes::Update, 2);
+                LEFT_OVER.get() - before
+            });
+            assert!(ot(&shared) == ot(&serial));
+            if std::ptr::eq(codes, &new) {
+                assert!(left > 0, "every task was covered");
+            }
         }
     }
 
