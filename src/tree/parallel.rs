@@ -179,24 +179,22 @@ thread_local! {
 fn apply_task(batch: &mut Batch<'_, NodeArena>, t: &Task, codes: &[u64]) -> bool {
     #[cfg(test)]
     LEFT_OVER.set(LEFT_OVER.get() + 1);
-    let mut b = Batch {
-        arena: &mut *batch.arena,
-        rules: batch.rules,
-        sensor: batch.sensor,
-        delta: batch.delta,
-        lazy: batch.lazy,
-        size: 0,
-        changes: None,
-        split: None,
-    };
+    let mut b = on_arena(batch, None);
     let changed = b.apply(t.node, t.depth, &codes[t.start..t.end], t.created);
     batch.size += b.size;
     changed
 }
 
-/// The walk above the split depth, planning or finishing per `split`.
+/// The walk above the tasks, planning or finishing per `split`.
 fn walk_upper_levels(batch: &mut Batch<'_, NodeArena>, split: &mut Split, codes: &[u64], created: bool) {
-    let mut top = Batch {
+    let mut top = on_arena(batch, Some(split));
+    top.apply(ROOT, 0, codes, created);
+    batch.size += top.size;
+}
+
+/// A walk with `batch`'s settings on its arena, counting nodes from 0.
+fn on_arena<'b>(batch: &'b mut Batch<'_, NodeArena>, split: Option<&'b mut Split>) -> Batch<'b, NodeArena> {
+    Batch {
         arena: &mut *batch.arena,
         rules: batch.rules,
         sensor: batch.sensor,
@@ -204,10 +202,8 @@ fn walk_upper_levels(batch: &mut Batch<'_, NodeArena>, split: &mut Split, codes:
         lazy: batch.lazy,
         size: 0,
         changes: None,
-        split: Some(split),
-    };
-    top.apply(ROOT, 0, codes, created);
-    batch.size += top.size;
+        split,
+    }
 }
 
 /// Contiguous runs of `tasks`, at most `parts`, with about equal code
