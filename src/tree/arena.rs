@@ -971,11 +971,10 @@ impl NodeArena {
     }
 }
 
-/// Slots a worker of a parallel update claims from a pool's room at a
-/// time.
+/// Spare slots a worker of a parallel update claims at a time.
 const CHUNK: usize = 256;
 
-/// Room to reserve in a pool so that the workers of a parallel update,
+/// Spare slots to make in a pool so that the workers of a parallel update,
 /// which allocate at most `allocations` slots between them (runs of at
 /// most 8), never run out: a worker claims a new chunk only when fewer than
 /// 8 slots are left in its last, so all its chunks but the last are filled
@@ -1165,14 +1164,14 @@ impl SharedPool<'_> {
     /// than 8 are left in its last (see [`room_for`]).
     fn claim(&self) -> usize {
         let start = self.next.fetch_add(CHUNK, Relaxed);
-        assert!(start + CHUNK <= self.arrays.values.len(), "a parallel update outgrew the room made for it");
+        assert!(start + CHUNK <= self.arrays.values.len(), "a parallel update outgrew the spare slots made for it");
         start
     }
 }
 
 impl SharedArena<'_> {
-    /// A worker that allocates from `free` first, then from chunks of the
-    /// room.
+    /// A worker that allocates from `free` first, then from chunks of
+    /// spare slots.
     pub(crate) fn worker(&self, free: ArenaFree) -> ArenaWorker<'_, '_> {
         ArenaWorker { shared: self, lists: free, chunk: (0, 0), leaf_chunk: (0, 0), reserved: (0, 0), taken: (0, 0) }
     }
@@ -1189,7 +1188,7 @@ impl SharedArena<'_> {
 }
 
 /// One worker's view of a [`SharedArena`]: its own free lists, and the
-/// chunk of room it allocates new runs from.
+/// chunk of spare slots it allocates new runs from.
 pub(crate) struct ArenaWorker<'s, 'a> {
     shared: &'s SharedArena<'a>,
     lists: ArenaFree,
