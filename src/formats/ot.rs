@@ -231,6 +231,14 @@ pub fn write(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
     write_data(tree, w)
 }
 
+/// The `.ot` bytes of `tree`, for tests that compare trees.
+#[cfg(test)]
+pub(crate) fn to_bytes(tree: &OccupancyTree) -> Vec<u8> {
+    let mut out = Vec::new();
+    write(tree, &mut out).expect("writing to a Vec");
+    out
+}
+
 /// Writes the node stream alone, without header (`writeData`).
 pub(crate) fn write_data(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
     let Some(root) = tree.root() else { return Ok(()) };

@@ -1051,11 +1051,7 @@ mod tests {
         g.nodes.iter().map(|n| n.graph2tree()).map(|(c, o)| (c.points, o)).collect()
     }
 
-    fn ot(t: &OccupancyTree) -> Vec<u8> {
-        let mut out = Vec::new();
-        crate::formats::ot::write(t, &mut out).unwrap();
-        out
-    }
+    use crate::formats::ot::to_bytes as ot;
 
     /// The two walks (eight or sixteen rays in AVX-512 lanes, and two
     /// rays interleaved, which processors without AVX-512 take) give the

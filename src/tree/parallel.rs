@@ -257,18 +257,20 @@ mod tests {
     /// `n` random voxels (sorted codes, no repeats) in a cube of `side`
     /// voxels a side at the map's centre, where the first levels split.
     fn random_codes(rng: &mut SplitMix64, n: usize, side: u32) -> Vec<u64> {
-        let c = |rng: &mut SplitMix64| (32768 - side / 2 + rng.below(side)) as u16;
+        random_codes_from(rng, n, 32768 - side / 2, side)
+    }
+
+    /// `n` random voxels in the cube of `side` voxels from key `low` on
+    /// every axis.
+    fn random_codes_from(rng: &mut SplitMix64, n: usize, low: u32, side: u32) -> Vec<u64> {
+        let c = |rng: &mut SplitMix64| (low + rng.below(side)) as u16;
         let mut codes: Vec<u64> = (0..n).map(|_| MortonCode::encode(Key::new(c(rng), c(rng), c(rng))).0).collect();
         codes.sort_unstable();
         codes.dedup();
         codes
     }
 
-    fn ot(t: &OccupancyTree) -> Vec<u8> {
-        let mut out = Vec::new();
-        crate::formats::ot::write(t, &mut out).unwrap();
-        out
-    }
+    use crate::formats::ot::to_bytes as ot;
 
     /// Batches shared by 2, 3 and 8 workers give the serial walk's tree:
     /// new space, revisits that saturate and prune whole blocks (dense
@@ -319,14 +321,7 @@ mod tests {
         let mut rng = SplitMix64(11);
         let known = random_codes(&mut rng, 60_000, 48);
         // new space: far from the first cube, spread over many tasks
-        let new: Vec<u64> = {
-            let c = |rng: &mut SplitMix64| (20_000 + rng.below(400)) as u16;
-            let mut v: Vec<u64> =
-                (0..60_000).map(|_| MortonCode::encode(Key::new(c(&mut rng), c(&mut rng), c(&mut rng))).0).collect();
-            v.sort_unstable();
-            v.dedup();
-            v
-        };
+        let new = random_codes_from(&mut rng, 60_000, 20_000, 400);
         let mut serial = OccupancyTree::new(0.1).unwrap();
         let hit = serial.sensor().hit;
         let mut shared = serial.clone();
