@@ -486,33 +486,68 @@ pub(crate) unsafe fn walk(
 ) {
     assert!(rays.padded, "LaneRays::pad before walk");
     let mut buffer = [0u64; BUFFER + LANES];
+    let mut next = 0usize;
+    // called through a pointer: `#[inline(never)]` alone did not keep it
+    // out of the caller
+    let fill_fn: Fill = std::hint::black_box(fill);
+    loop {
+        // SAFETY: AVX-512F as the caller guarantees; `next` starts at 0
+        // and `fill` keeps it within `rays.len`
+        let (filled, done) = unsafe { fill_fn(lanes, rays, &mut next, origin_code, drain, &mut buffer) };
+        visit(&buffer[..filled]);
+        if done {
+            return;
+        }
+    }
+}
+
+type Fill = unsafe fn(&mut Lanes, &LaneRays, &mut usize, u64, bool, &mut [u64; BUFFER + LANES]) -> (usize, bool);
+
+/// [`walk`]'s steps until `buffer` is nearly full (returns its codes'
+/// count and `false`) or the walk is done (`true`). Apart from `visit`, so
+/// that no call sits inside the loop: around a call every vector register
+/// is lost, and the lanes' registers would be kept in memory all along.
+///
+/// # Safety
+/// The processor must support AVX-512F, `rays` must be padded and `*next
+/// <= rays.len`.
+#[target_feature(enable = "avx512f")]
+#[inline(never)]
+unsafe fn fill(
+    lanes: &mut Lanes,
+    rays: &LaneRays,
+    next: &mut usize,
+    origin_code: u64,
+    drain: bool,
+    buffer: &mut [u64; BUFFER + LANES],
+) -> (usize, bool) {
     let mut filled = 0usize;
     let origin = _mm512_set1_epi64(origin_code as i64);
     let mut a = Group::load(&lanes.groups[0]);
     let mut b = Group::load(&lanes.groups[1]);
     let len = rays.len;
-    let mut next = 0usize;
-    loop {
+    let mut at = *next;
+    let done = loop {
         let ended_a = a.step();
         let ended_b = b.step();
-        filled = append(&mut buffer, filled, a.code, ended_a);
-        filled = append(&mut buffer, filled, b.code, ended_b);
+        filled = append(buffer, filled, a.code, ended_a);
+        filled = append(buffer, filled, b.code, ended_b);
         // ended lanes take the next rays, in order
-        a.refill(ended_a, rays, next, origin);
-        next = (next + ended_a.count_ones() as usize).min(len);
-        b.refill(ended_b, rays, next, origin);
-        next = (next + ended_b.count_ones() as usize).min(len);
+        a.refill(ended_a, rays, at, origin);
+        at = (at + ended_a.count_ones() as usize).min(len);
+        b.refill(ended_b, rays, at, origin);
+        at = (at + ended_b.count_ones() as usize).min(len);
+        if at == len && (!drain || (a.finished() && b.finished())) {
+            break true;
+        }
         if filled > BUFFER - LANES {
-            visit(&buffer[..filled]);
-            filled = 0;
+            break false;
         }
-        if next == len && (!drain || (a.finished() && b.finished())) {
-            break;
-        }
-    }
-    visit(&buffer[..filled]);
+    };
     a.store(&mut lanes.groups[0]);
     b.store(&mut lanes.groups[1]);
+    *next = at;
+    (filled, done)
 }
 
 /// `code` moved one voxel along the axis whose bits are `mask`: the axis's
