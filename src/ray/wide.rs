@@ -487,8 +487,8 @@ pub(crate) unsafe fn walk(
     assert!(rays.padded, "LaneRays::pad before walk");
     let mut buffer = [0u64; BUFFER + LANES];
     let mut next = 0usize;
-    // called through a pointer: `#[inline(never)]` alone did not keep it
-    // out of the caller
+    // through an opaque pointer, so that `fill` is never inlined here
+    // (`#[inline(never)]` did not keep it out)
     let fill_fn: Fill = std::hint::black_box(fill);
     loop {
         // SAFETY: AVX-512F as the caller guarantees; `next` starts at 0
@@ -501,6 +501,7 @@ pub(crate) unsafe fn walk(
     }
 }
 
+/// [`fill`]'s signature, for the pointer [`walk`] calls it through.
 type Fill = unsafe fn(&mut Lanes, &LaneRays, &mut usize, u64, bool, &mut [u64; BUFFER + LANES]) -> (usize, bool);
 
 /// [`walk`]'s steps until `buffer` is nearly full (returns its codes'
@@ -512,7 +513,6 @@ type Fill = unsafe fn(&mut Lanes, &LaneRays, &mut usize, u64, bool, &mut [u64; B
 /// The processor must support AVX-512F, `rays` must be padded and `*next
 /// <= rays.len`.
 #[target_feature(enable = "avx512f")]
-#[inline(never)]
 unsafe fn fill(
     lanes: &mut Lanes,
     rays: &LaneRays,
