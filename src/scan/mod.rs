@@ -184,7 +184,7 @@ impl Casting {
             rays.pad();
             let last = chunks.peek().is_none();
             let free = &mut self.free;
-            walk(&mut lanes, &rays, fan.origin_code(), last, |codes| codes.iter().for_each(|&c| free.insert(c)));
+            walk(&mut lanes, &rays, fan.origin_code(), last, |codes| free.insert_all(codes));
         }
         if any {
             self.free.insert(fan.origin_code());
