@@ -27,9 +27,10 @@ const LANES: usize = 8;
 /// Codes gathered before they are handed on.
 const BUFFER: usize = 512;
 
-/// Whether this processor can run the lanes.
+/// Whether this processor can run the lanes (and its callers' BMI2 shifts:
+/// every AVX-512 processor has BMI2).
 pub(crate) fn available() -> bool {
-    std::arch::is_x86_feature_detected!("avx512f")
+    std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("bmi2")
 }
 
 /// Rays set up and waiting for a lane, as a structure of arrays with room

@@ -121,7 +121,7 @@ impl Casting {
         };
         #[cfg(target_arch = "x86_64")]
         if crate::ray::wide::available() {
-            // SAFETY: the processor has AVX-512F
+            // SAFETY: the processor has AVX-512F and BMI2
             unsafe { self.cast_all_wide(keys, fan, points, opts) };
             return;
         }
@@ -165,12 +165,13 @@ impl Casting {
     /// [`Self::cast_all`] in the lanes of AVX-512 registers (`ray::wide`):
     /// the rays are set up a chunk at a time, eight at once, each chunk
     /// walked sixteen rays at once while the lanes still hold the previous
-    /// chunk's last rays.
+    /// chunk's last rays. BMI2 gives the set insertion its one-instruction
+    /// variable shift (2-3% of the casting).
     ///
     /// # Safety
-    /// The processor must support AVX-512F.
+    /// The processor must support AVX-512F and BMI2.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
+    #[target_feature(enable = "avx512f,bmi2")]
     unsafe fn cast_all_wide(&mut self, keys: &KeySpace, fan: &RayFan, points: &[Point3], opts: &ScanOptions) {
         use crate::ray::wide::{set_up, walk, LaneRays, Lanes};
         let mut rays = LaneRays::default();
