@@ -88,9 +88,10 @@ impl BlockSet {
                 first
             };
             // SAFETY: `first` is where a block's WORDS words start in
-            // `words` (from the table or `add_block`, which keep them in
-            // step), the offset is below WORDS, and `base` is `words`'
-            // pointer since its last change
+            // `words` (from the table, whose initial entries match no block,
+            // or from `add_block`, which keeps the two in step), the offset
+            // is below WORDS, and `base` is `words`' pointer since its last
+            // change
             unsafe { *base.add(first + ((code >> 6) as usize & (WORDS - 1))) |= 1 << (code & 63) };
         }
     }
@@ -155,5 +156,16 @@ mod tests {
         let kept: Vec<u64> = model.difference(&dropped).copied().collect();
         assert_eq!(set.sorted_codes(Some(&except)), kept);
         assert_eq!(BlockSet::default().sorted_codes(None), Vec::<u64>::new());
+    }
+
+    /// Codes added a buffer at a time (new blocks, and so reallocations of
+    /// the words, in the middle of a buffer) give the same set as one by one.
+    #[test]
+    fn insert_all_is_insert_of_each() {
+        let codes: Vec<u64> = (0..50_000u64).map(|i| (i * 2_654_435_761) % (1 << 30)).collect();
+        let (mut one, mut all) = (BlockSet::default(), BlockSet::default());
+        codes.iter().for_each(|&c| one.insert(c));
+        codes.chunks(512).for_each(|chunk| all.insert_all(chunk));
+        assert_eq!(all.sorted_codes(None), one.sorted_codes(None));
     }
 }
