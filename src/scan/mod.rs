@@ -34,12 +34,13 @@ use crate::ray::{point_along, FanRay, RayFan, RayKeys};
 use crate::tree::{InnerNodes, OccupancyTree};
 use block_set::BlockSet;
 use hashbrown::HashSet;
+use pipeline::{Job, Pipeline, StdMonitor};
 use rayon::prelude::*;
-use std::collections::BTreeMap;
 use std::hash::{BuildHasherDefault, Hasher};
-use std::sync::{Condvar, Mutex};
+use std::sync::Mutex;
 
 mod block_set;
+mod pipeline;
 
 /// A hasher for keys: the Morton code mixed by one multiplication.
 #[derive(Default, Clone, Copy)]
@@ -598,34 +599,20 @@ impl OccupancyTree {
     {
         let keys = self.key_space().clone();
         let cast_opts = ScanOptions { threads: Some(1), ..*opts };
-        let pipeline = Pipeline {
-            state: Mutex::new(PipelineState {
-                scans: scans.fuse(),
-                taken: 0,
-                applied: 0,
-                applying: false,
-                exhausted: false,
-                stopped: false,
-                refused: None,
-                cast: BTreeMap::new(),
-                offers: 0,
-            }),
-            changed: Condvar::new(),
-            lookahead: threads.max(1) + 1,
-        };
+        let pipeline = Pipeline::<StdMonitor<_>>::new(scans, threads + 1);
         // used by one thread at a time: the one applying
         let tree = Mutex::new((self, after_each));
+        // nothing to do: run the pool's pending work (the applying thread's
+        // shared tree update) while there is some
+        let help = || rayon::yield_now() == Some(rayon::Yield::Executed);
         let work = || {
-            // a panicking thread stops the others
-            let _stop = StopOnDrop { pipeline: &pipeline };
-            while let Some(job) = pipeline.next_job() {
+            let _stop = pipeline.stop_on_panic();
+            while let Some(job) = pipeline.next_job(help) {
                 match job {
                     Job::Cast(i, (points, origin)) => {
-                        let result = compute_update(&keys, points.as_ref(), origin, &cast_opts);
-                        pipeline.lock().cast.insert(i, result);
-                        pipeline.changed.notify_all();
+                        pipeline.cast_done(i, compute_update(&keys, points.as_ref(), origin, &cast_opts));
                     }
-                    Job::Apply(update, report, share) => {
+                    Job::Apply((update, report), share) => {
                         let mut guard = tree.lock().unwrap_or_else(|e| e.into_inner());
                         let (tree, after_each) = &mut *guard;
                         let report =
@@ -635,11 +622,7 @@ impl OccupancyTree {
                         drop(update);
                         after_each(tree, report);
                         drop(guard);
-                        let mut s = pipeline.lock();
-                        s.applied += 1;
-                        s.applying = false;
-                        drop(s);
-                        pipeline.changed.notify_all();
+                        pipeline.apply_done();
                     }
                 }
             }
@@ -648,8 +631,7 @@ impl OccupancyTree {
         // spawned loop could be stolen late by a thread waiting inside a
         // shared tree update, which would then wait on itself
         rayon::broadcast(|_| work());
-        let refused = pipeline.lock().refused.take();
-        refused.map_or(Ok(()), Err)
+        pipeline.take_refused().map_or(Ok(()), Err)
     }
 
     /// Integrates a coloured scan into a colour tree: the scan as
@@ -760,134 +742,6 @@ impl OccupancyTree {
         }
         self.update_point(end, true, inner)?;
         Ok(())
-    }
-}
-
-type CastResult = Result<(ScanUpdate, ScanReport), ScanError>;
-
-/// What the threads of [`OccupancyTree::insert_point_clouds`] share.
-struct Pipeline<S> {
-    state: Mutex<PipelineState<S>>,
-    /// Signalled when a cast is stored, a scan applied, or the pipeline
-    /// stopped.
-    changed: Condvar,
-    lookahead: usize,
-}
-
-struct PipelineState<S> {
-    /// Advanced under the lock: the caller's iterator (which may transform
-    /// each scan, as `octolinear build` does) runs on one thread at a time.
-    scans: std::iter::Fuse<S>,
-    /// Scans taken for casting (they are taken in order).
-    taken: usize,
-    applied: usize,
-    /// Whether a thread is applying scan `applied`.
-    applying: bool,
-    exhausted: bool,
-    stopped: bool,
-    /// The first scan refused, once it is the next to apply.
-    refused: Option<(usize, ScanError)>,
-    /// Cast scans waiting to be applied, by position.
-    cast: BTreeMap<usize, CastResult>,
-    /// Counts the times the applying thread offered part of its work to
-    /// the pool (a shared tree update).
-    offers: usize,
-}
-
-/// A thread's next piece of work.
-enum Job<T> {
-    /// Cast the scan at this position.
-    Cast(usize, T),
-    /// Apply the update of the next scan in order; `true`: share the tree
-    /// update with the other threads, the scan after being cast already
-    /// (so the tree, not the casting, holds the pipeline up).
-    Apply(ScanUpdate, ScanReport, bool),
-}
-
-impl<S, T> Pipeline<S>
-where
-    S: Iterator<Item = (usize, T)>,
-{
-    fn lock(&self) -> std::sync::MutexGuard<'_, PipelineState<S>> {
-        // a panicking thread stops the pipeline (`StopOnDrop`); the state
-        // stays consistent, so a poisoned lock is still usable
-        self.state.lock().unwrap_or_else(|e| e.into_inner())
-    }
-
-    /// The next job, waiting while there is none yet: applying the next
-    /// update when it is ready and nobody applies, else casting the next
-    /// scan when the look-ahead allows; `None` once every scan is in, or
-    /// the pipeline stopped (a refused scan or a panic).
-    fn next_job(&self) -> Option<Job<T>> {
-        let mut s = self.lock();
-        loop {
-            if s.stopped {
-                return None;
-            }
-            let next = s.applied;
-            if !s.applying {
-                match s.cast.remove(&next) {
-                    Some(Ok((update, report))) => {
-                        s.applying = true;
-                        let share = s.cast.contains_key(&(next + 1));
-                        return Some(Job::Apply(update, report, share));
-                    }
-                    Some(Err(e)) => {
-                        s.refused = Some((next, e));
-                        s.stopped = true;
-                        drop(s);
-                        self.changed.notify_all();
-                        return None;
-                    }
-                    None => {}
-                }
-            }
-            if !s.exhausted && s.taken - s.applied < self.lookahead {
-                match s.scans.next() {
-                    Some((i, scan)) => {
-                        s.taken += 1;
-                        return Some(Job::Cast(i, scan));
-                    }
-                    None => s.exhausted = true,
-                }
-            }
-            if s.exhausted && s.applied == s.taken {
-                return None;
-            }
-            // nothing here: help with the pool's work (the applying
-            // thread's shared tree update) while there is some
-            let offers = s.offers;
-            if s.applying {
-                drop(s);
-                while rayon::yield_now() == Some(rayon::Yield::Executed) {}
-                s = self.lock();
-                if s.offers != offers {
-                    continue;
-                }
-            }
-            s = self.changed.wait(s).unwrap_or_else(|e| e.into_inner());
-        }
-    }
-
-    /// Tells waiting threads that the applying thread has work for the
-    /// pool to take.
-    fn announce(&self) {
-        self.lock().offers += 1;
-        self.changed.notify_all();
-    }
-}
-
-/// Stops a [`Pipeline`] when dropped by a panic.
-struct StopOnDrop<'a, S> {
-    pipeline: &'a Pipeline<S>,
-}
-
-impl<S> Drop for StopOnDrop<'_, S> {
-    fn drop(&mut self) {
-        if std::thread::panicking() {
-            self.pipeline.state.lock().unwrap_or_else(|e| e.into_inner()).stopped = true;
-            self.pipeline.changed.notify_all();
-        }
     }
 }
 
@@ -1113,6 +967,49 @@ mod tests {
             trees.push(ot(&t));
         }
         assert!(trees[0] == trees[1] && trees[1] == trees[2]);
+    }
+
+    /// Many threads over many short scans, with a few large ones whose
+    /// tree updates are shared while the other threads wait for work: the
+    /// hand-off never loses a wakeup (a lost one hangs the run) and the
+    /// tree is the one-thread tree. Each run is watched by a timer.
+    #[test]
+    fn many_threads_on_many_short_scans_always_finish() {
+        let cfg = crate::simulate::LidarConfig::outdoor();
+        let g = crate::simulate::simulate(crate::simulate::SceneKind::Outdoor, 2, 7, &cfg).unwrap();
+        let mut scans: Vec<(Vec<Point3>, Point3)> =
+            g.nodes.iter().map(|n| n.graph2tree()).map(|(c, o)| (c.points, o)).collect();
+        for (points, origin) in indoor_scans(2, 11) {
+            scans.extend(points.chunks(25).map(|c| (c.to_vec(), origin)));
+        }
+        let middle = scans.len() / 2;
+        scans.swap(1, middle);
+        let build = |threads| {
+            let mut t = OccupancyTree::new(0.1).unwrap();
+            let opts = ScanOptions { threads, ..Default::default() };
+            t.insert_point_clouds(scans.iter().map(|(p, o)| (p.as_slice(), *o)), &opts, |_, _| {}).unwrap();
+            ot(&t)
+        };
+        let expected = build(Some(1));
+        let scans = &scans;
+        std::thread::scope(|scope| {
+            for (run, threads) in [256, 64, 33, 256, 7, 128].repeat(2).into_iter().enumerate() {
+                let (done, finished) = std::sync::mpsc::channel();
+                let watched = scope.spawn(move || {
+                    let mut t = OccupancyTree::new(0.1).unwrap();
+                    let opts = ScanOptions { threads: Some(threads), ..Default::default() };
+                    t.insert_point_clouds(scans.iter().map(|(p, o)| (p.as_slice(), *o)), &opts, |_, _| {}).unwrap();
+                    let _ = done.send(());
+                    ot(&t)
+                });
+                if finished.recv_timeout(std::time::Duration::from_secs(120)).is_err() {
+                    // a hung pipeline never returns: end the test process
+                    eprintln!("run {run} on {threads} threads hung");
+                    std::process::abort();
+                }
+                assert!(watched.join().unwrap() == expected, "run {run}, {threads} threads");
+            }
+        });
     }
 
     #[test]
