@@ -98,8 +98,43 @@ pub fn main() -> i32 {
     match result {
         Ok(()) => 0,
         Err(e) => {
-            eprintln!("octolinear: error: {e:#}");
+            eprintln!("octolinear: error: {}", error_line(&e));
             1
         }
+    }
+}
+
+/// An error and its causes on one line, `: `-separated, without the causes
+/// that a message already ends with (the library's errors print their
+/// source, an I/O error, as part of their own message).
+fn error_line(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if line.ends_with(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line
+}
+
+#[cfg(test)]
+mod tests {
+    use super::error_line;
+
+    #[test]
+    fn an_error_line_names_each_cause_once() {
+        let io = std::io::Error::from(std::io::ErrorKind::NotFound);
+        #[derive(Debug, thiserror::Error)]
+        #[error("I/O error at byte 0: {0}")]
+        struct Wrapped(#[source] std::io::Error);
+        let e = anyhow::Error::new(Wrapped(io)).context("cannot read x.graph");
+        assert_eq!(error_line(&e), "cannot read x.graph: I/O error at byte 0: entity not found");
+        let e = anyhow::anyhow!("inner").context("outer");
+        assert_eq!(error_line(&e), "outer: inner");
     }
 }
