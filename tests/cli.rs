@@ -1357,3 +1357,206 @@ fn counting_trees_convert_between_ot_and_olm_and_answer_counts() {
     assert!(from_ot.contains(",counted,2") && from_ot.contains(",counted,1") && from_ot.contains(",unknown,"));
     assert_eq!(ok(&["query", f.p("c.olm"), "--points", points]), from_ot);
 }
+
+// ----- reading commands: verify's report, convert's line, query's formats, numbers for people ------
+
+#[test]
+fn verify_reports_what_it_checked() {
+    let f = Fixture::new();
+    ok(&["convert", f.p("a.ot"), f.p("a.olm")]);
+    let tree = read_tree(f.p("a.ot"));
+    let size = std::fs::metadata(f.path("a.olm")).unwrap().len();
+    let text = ok(&["verify", f.p("a.olm")]);
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 4, "{text}");
+    assert_eq!(lines[0], format!("{}: ok", f.p("a.olm")));
+    assert_eq!(lines[1], format!("map:         OcTree, full variant, resolution 0.1 m, {size} bytes"));
+    assert!(lines[2].starts_with("checksums:   header and 3 sections (masks, rank, values): "), "{text}");
+    let structure = format!(
+        "structure:   zero padding, rank directory, one tree of {} nodes ({} inner, {} leaves), depth 16",
+        tree.size(),
+        tree.size() - tree.num_leaves(),
+        tree.num_leaves()
+    );
+    assert_eq!(lines[3], structure);
+    let j = json(&ok(&["verify", f.p("a.olm"), "--json"]));
+    assert_eq!(
+        (j["ok"].as_bool(), j["kind"].as_str(), j["variant"].as_str()),
+        (Some(true), Some("OcTree"), Some("full"))
+    );
+    assert_eq!(j["nodes"].as_u64(), Some(tree.size() as u64));
+    assert_eq!(j["leaves"].as_u64(), Some(tree.num_leaves() as u64));
+    assert_eq!(j["file_bytes"].as_u64(), Some(size));
+    let checked = j["checked_bytes"].as_u64().unwrap();
+    assert!(checked <= size && checked > size * 9 / 10, "{checked} of {size}");
+    assert!(lines[2].ends_with(&format!(": {checked} bytes")), "{text}");
+    assert_eq!(j["sections"], serde_json::json!(["masks", "rank", "values"]));
+    ok(&["convert", f.p("a.bt"), f.p("ml.olm"), "--ml"]);
+    let j = json(&ok(&["verify", f.p("ml.olm"), "--json"]));
+    assert_eq!(j["variant"].as_str(), Some("maximum-likelihood"));
+    assert_eq!(j["nodes"].as_u64(), Some(read_tree(f.p("a.bt")).size() as u64));
+    fail(&["verify", f.p("a.bt")], "verify checks .olm maps");
+}
+
+#[test]
+fn convert_says_what_it_wrote() {
+    let f = Fixture::new();
+    // one line on stderr, nothing on stdout
+    let line = |args: &[&str]| {
+        let out = run(args);
+        let err = String::from_utf8(out.stderr).unwrap();
+        assert!(out.status.success() && out.stdout.is_empty() && err.lines().count() == 1, "{args:?}: {err}");
+        err.trim_end().to_string()
+    };
+    let size = |name: &str| std::fs::metadata(f.path(name)).unwrap().len();
+    let nodes = read_tree(f.p("a.ot")).size();
+    let ml_nodes = read_tree(f.p("a.bt")).size();
+    assert!(ml_nodes < nodes);
+    assert_eq!(
+        line(&["convert", f.p("a.ot"), f.p("a.olm")]),
+        format!("wrote {} (OcTree, {nodes} nodes, {} bytes)", f.p("a.olm"), size("a.olm"))
+    );
+    assert_eq!(
+        line(&["convert", f.p("a.olm"), f.p("b.ot")]),
+        format!("wrote {} (OcTree, {nodes} nodes, {} bytes)", f.p("b.ot"), size("b.ot"))
+    );
+    assert_eq!(
+        line(&["convert", f.p("a.ot"), f.p("ml.olm"), "--ml"]),
+        format!("wrote {} (OcTree, maximum likelihood, {ml_nodes} nodes, {} bytes)", f.p("ml.olm"), size("ml.olm"))
+    );
+    assert_eq!(
+        line(&["convert", f.p("a.ot"), f.p("b.bt")]),
+        format!("wrote {} (OcTree, maximum likelihood, {} bytes)", f.p("b.bt"), size("b.bt"))
+    );
+}
+
+#[test]
+fn query_decimal_format_prints_logodds_and_probability() {
+    let f = Fixture::new();
+    ok(&["convert", f.p("a.ot"), f.p("a.olm")]);
+    let tree = read_tree(f.p("a.ot"));
+    let mut pts: String =
+        tree.leaves(0).step_by(53).map(|l| l.center_point()).map(|c| format!("{} {} {}\n", c.x, c.y, c.z)).collect();
+    pts += "1e9 0 0\n";
+    let points = f.write("q.xyz", pts);
+    for map in [f.p("a.ot"), f.p("a.olm")] {
+        let bits = ok(&["query", map, "--points", points]);
+        assert_eq!(ok(&["query", map, "--points", points, "--format", "bits"]), bits);
+        let decimal = ok(&["query", map, "--points", points, "--format", "decimal"]);
+        assert_eq!(decimal.lines().count(), bits.lines().count());
+        assert!(decimal.contains(",occupied,") && decimal.contains(",free,") && decimal.contains(",unknown,"));
+        for (b, d) in bits.lines().zip(decimal.lines()) {
+            let (b, d): (Vec<&str>, Vec<&str>) = (b.split(',').collect(), d.split(',').collect());
+            assert_eq!((b.len(), d.len(), &b[..4]), (5, 6, &d[..4]), "{b:?} {d:?}");
+            if b[3] == "unknown" {
+                assert_eq!(&d[4..], ["", ""]);
+                continue;
+            }
+            let logodds: f32 = d[4].parse().unwrap();
+            assert_eq!(format!("{:08x}", logodds.to_bits()), b[4], "{d:?}");
+            let probability = octolinear::sensor::probability(f64::from(logodds)) as f32;
+            assert_eq!(d[5], probability.to_string(), "{d:?}");
+        }
+    }
+    fail_usage(&["query", f.p("a.ot"), "--points", points, "--format", "hex"], "hex");
+}
+
+#[test]
+fn reading_commands_help_names_every_map_format() {
+    for cmd in ["info", "query", "convert", "compare"] {
+        let help = ok(&[cmd, "--help"]);
+        assert!(help.contains(".bt, .ot or .olm"), "{cmd}: {help}");
+    }
+    let help = ok(&["query", "--help"]);
+    assert!(help.contains("--format") && help.contains("decimal") && help.contains("--no-verify"), "{help}");
+    assert!(ok(&["verify", "--help"]).contains("--json"));
+}
+
+#[test]
+fn numbers_for_people_are_printed_at_map_precision() {
+    let f = Fixture::new();
+    let text = ok(&["info", f.p("a.ot")]);
+    let j = json(&ok(&["info", f.p("a.ot"), "--json"]));
+    let field = |name: &str| {
+        let line = text.lines().find(|l| l.starts_with(name)).unwrap_or_else(|| panic!("{name}: {text}"));
+        line[name.len()..].trim().to_string()
+    };
+    assert_eq!(field("resolution:"), "0.1 m");
+    // every number printed is the f32 of the full value, in its shortest form
+    let full: Vec<f64> = ["bounds_min", "bounds_max"]
+        .iter()
+        .flat_map(|k| j[k].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()))
+        .collect();
+    let shown: String = full
+        .chunks(3)
+        .map(|p| format!("({}, {}, {})", p[0] as f32, p[1] as f32, p[2] as f32))
+        .collect::<Vec<_>>()
+        .join(" .. ");
+    assert_eq!(field("bounds:"), format!("{shown} m"));
+    assert!(full.iter().any(|v| v.to_string().len() > (*v as f32).to_string().len() + 5), "no noise to hide: {full:?}");
+    let volume = |k: &str| (j[k].as_f64().unwrap() as f32).to_string();
+    assert_eq!(
+        field("volume:"),
+        format!("{} m^3 occupied, {} m^3 free", volume("occupied_volume_m3"), volume("free_volume_m3"))
+    ); // a resolution computed in f64 (0.1 x 3 = 0.30000000000000004)
+    let out = run(&["edit", f.p("a.ot"), f.p("e.ot"), "--scale", "3"]);
+    let line = String::from_utf8(out.stderr).unwrap();
+    assert!(out.status.success() && line.trim_end().ends_with(" nodes, resolution 0.3)"), "{line}");
+}
+
+/// A map file truncated in place while `query` has it mapped: one error
+/// line and exit code 1 instead of a death by SIGBUS. The points come
+/// through a pipe, read after the map is opened, so the truncation falls
+/// between the two. Replacing the file by a rename instead is harmless.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_map_changed_under_query_is_an_error_or_harmless() {
+    use std::io::Write;
+    use std::process::Stdio;
+    let f = Fixture::new();
+    let tree = read_tree(f.p("a.ot"));
+    let points: String =
+        tree.leaves(0).step_by(31).map(|l| l.center_point()).map(|c| format!("{} {} {}\n", c.x, c.y, c.z)).collect();
+    let expected = ok(&["query", f.p("a.ot"), "--points", f.write("q.xyz", &points)]);
+    let map = f.p("t.olm");
+    // runs query with the map mapped and waiting for points, changes the map, then sends them
+    let query_while = |change: &dyn Fn()| {
+        ok(&["convert", f.p("a.ot"), map]);
+        let real = std::fs::canonicalize(map).unwrap();
+        let mut child = bin()
+            .args(["query", map, "--points", "/dev/stdin"])
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let maps = format!("/proc/{}/maps", child.id());
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+        while !std::fs::read_to_string(&maps).unwrap_or_default().contains(real.to_str().unwrap()) {
+            assert!(std::time::Instant::now() < deadline, "query never mapped {map}");
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        change();
+        let mut stdin = child.stdin.take().unwrap();
+        // the process may already be gone (truncated during its check of the map)
+        let _ = stdin.write_all(points.as_bytes());
+        drop(stdin);
+        child.wait_with_output().unwrap()
+    };
+    let truncated = query_while(&|| std::fs::OpenOptions::new().write(true).open(map).unwrap().set_len(0).unwrap());
+    let err = String::from_utf8_lossy(&truncated.stderr);
+    assert_eq!(truncated.status.code(), Some(1), "{err}");
+    assert_eq!(
+        err,
+        format!(
+            "octolinear: error: {map}: the map file was truncated while memory-mapped \
+             (replace map files by renaming a new file over them, never in place)\n"
+        )
+    );
+    let renamed = query_while(&|| {
+        std::fs::write(f.path("new.olm"), b"not a map").unwrap();
+        std::fs::rename(f.path("new.olm"), map).unwrap();
+    });
+    assert!(renamed.status.success(), "{}", String::from_utf8_lossy(&renamed.stderr));
+    assert_eq!(String::from_utf8(renamed.stdout).unwrap(), expected);
+}

@@ -128,7 +128,7 @@ pub fn run(a: Args) -> Result<()> {
             "read {} voxels, skipped {} (out of bounding box); resolution {}; wrote {}",
             counts.voxels,
             counts.out_of_box,
-            tree.resolution(),
+            super::common::human_number(tree.resolution()),
             output.display()
         );
     }

@@ -1,8 +1,10 @@
-//! Helpers shared by the subcommands: map loading by extension, progress bars.
+//! Helpers shared by the subcommands: map loading by extension, progress
+//! bars, numbers for people, and the report of a mapped file truncated
+//! under the reader.
 
 use anyhow::{bail, Context, Result};
-use octolinear::formats::{bt, ot, write_atomically};
-use octolinear::mapped::TreeKind;
+use octolinear::formats::{bt, ot, write_atomically, xyz};
+use octolinear::mapped::{MappedMap, TreeKind, VerifyReport};
 use octolinear::{CountingTree, OccupancyTree};
 use std::fs::File;
 use std::io::BufReader;
@@ -51,22 +53,20 @@ pub fn load_map(path: &Path) -> Result<LoadedMap> {
 }
 
 /// Reads any map by extension (`.ot` and `.olm` may hold a counting tree).
+/// An `.olm` map is verified on the way (checksums and structure).
 pub fn load_any(path: &Path) -> Result<AnyMap> {
     let format = MapFormat::of(path)?;
     if format == MapFormat::Olm {
-        let mapped =
-            octolinear::mapped::open(path).with_context(|| format!("{}: not a valid .olm map", path.display()))?;
+        let mapped = open_olm(path)?;
         let view = mapped.view();
+        let invalid = || format!("{}: not a valid .olm map", path.display());
         let kind = match view.kind() {
-            TreeKind::CountingOcTree => {
-                let t = view.to_counting_tree().with_context(|| format!("{}: not a valid .olm map", path.display()))?;
-                return Ok(AnyMap::Counting(t));
-            }
+            TreeKind::CountingOcTree => return Ok(AnyMap::Counting(view.to_counting_tree().with_context(invalid)?)),
             TreeKind::OcTree => "OcTree (.olm, memory-mapped)",
             TreeKind::ColorOcTree => "ColorOcTree (.olm, memory-mapped)",
             TreeKind::OcTreeStamped => "OcTreeStamped (.olm, memory-mapped)",
         };
-        let tree = view.to_tree().with_context(|| format!("{}: not a valid .olm map", path.display()))?;
+        let tree = view.to_tree().with_context(invalid)?;
         return Ok(AnyMap::Occupancy(LoadedMap { tree, kind }));
     }
     let file = File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
@@ -86,6 +86,20 @@ pub fn load_any(path: &Path) -> Result<AnyMap> {
             }
         }
     })
+}
+
+/// Memory-maps an `.olm` map and checks its header (O(1); the nodes are
+/// checked by [`verify_olm`] or by the conversion to a tree). Names the file
+/// in the message of [`report_truncated_maps`]'s handler first.
+pub fn open_olm(path: &Path) -> Result<MappedMap<memmap2::Mmap>> {
+    truncated_map::name(path);
+    octolinear::mapped::open(path).with_context(|| format!("{}: not a valid .olm map", path.display()))
+}
+
+/// Checks every byte of a mapped `.olm` map (checksums and structure,
+/// O(file size)), so that no answer comes from damaged bytes.
+pub fn verify_olm(path: &Path, map: &MappedMap<memmap2::Mmap>) -> Result<VerifyReport> {
+    map.verify().with_context(|| format!("{}: not a valid .olm map", path.display()))
 }
 
 /// Writes a map by extension, atomically.
@@ -166,6 +180,16 @@ pub fn extension(path: &Path, choices: &[&str]) -> Result<String> {
     }
 }
 
+/// A number for people: the shortest decimal that reads back as the same
+/// `f32` (with an exponent only for extreme magnitudes). Map coordinates
+/// are `f32` (OctoMap's `point3d`), so digits past that precision in a
+/// bound, size, resolution or volume computed in `f64` are noise
+/// (`-6.6000000000000005` prints as `-6.6`). Every human-readable output
+/// of map numbers goes through here; `--json` keeps full `f64` precision.
+pub fn human_number(v: f64) -> String {
+    xyz::format_f32(v as f32)
+}
+
 /// C++ `std::ostream << double` with the default precision 6 (`%g`).
 pub fn format_g6(v: f64) -> String {
     if v == 0.0 {
@@ -197,4 +221,68 @@ pub fn format_g6(v: f64) -> String {
         let decimals = (5 - exp).max(0) as usize;
         trim(format!("{v:.decimals$}"))
     }
+}
+
+/// Turns `SIGBUS` into the tool's error line and exit code 1. A file
+/// truncated in place while memory-mapped (by another process; the writers
+/// here rename a new file over the old one, which is safe) raises `SIGBUS`
+/// at the next read past its new end, which would otherwise kill the
+/// process without a word. Mapped `.olm` files are the only mappings here,
+/// so the handler blames the one [`open_olm`] opened last. Installed once,
+/// at start.
+pub fn report_truncated_maps() {
+    truncated_map::install();
+}
+
+#[cfg(unix)]
+mod truncated_map {
+    use std::path::Path;
+    use std::sync::atomic::{AtomicPtr, Ordering};
+
+    /// The line for the map opened last, built before it is mapped (the
+    /// handler may not allocate); null before any map is opened.
+    static LINE: AtomicPtr<&'static [u8]> = AtomicPtr::new(std::ptr::null_mut());
+
+    const UNNAMED: &[u8] = b"octolinear: error: a map file was truncated while memory-mapped \
+        (replace map files by renaming a new file over them, never in place)\n";
+
+    pub fn name(path: &Path) {
+        let line = format!(
+            "octolinear: error: {}: the map file was truncated while memory-mapped \
+             (replace map files by renaming a new file over them, never in place)\n",
+            path.display()
+        );
+        // leaked: the handler may read it at any time (one short line per map opened)
+        let line: &'static [u8] = Box::leak(line.into_bytes().into_boxed_slice());
+        LINE.store(Box::leak(Box::new(line)), Ordering::Release);
+    }
+
+    extern "C" fn on_sigbus(_signal: libc::c_int) {
+        let line = LINE.load(Ordering::Acquire);
+        // SAFETY: non-null values come from `Box::leak` in `name` and are never freed
+        let line: &[u8] = if line.is_null() { UNNAMED } else { unsafe { *line } };
+        // SAFETY: write(2) and _exit(2) are async-signal-safe; the buffer is valid
+        unsafe {
+            libc::write(libc::STDERR_FILENO, line.as_ptr().cast(), line.len());
+            libc::_exit(1);
+        }
+    }
+
+    pub fn install() {
+        // SAFETY: a zeroed sigaction is a valid empty one; the handler only
+        // calls async-signal-safe functions and reads data that is never freed
+        unsafe {
+            let mut action: libc::sigaction = std::mem::zeroed();
+            action.sa_sigaction = on_sigbus as extern "C" fn(libc::c_int) as libc::sighandler_t;
+            action.sa_flags = libc::SA_ONSTACK;
+            libc::sigemptyset(&mut action.sa_mask);
+            libc::sigaction(libc::SIGBUS, &action, std::ptr::null_mut());
+        }
+    }
+}
+
+#[cfg(not(unix))]
+mod truncated_map {
+    pub fn name(_path: &std::path::Path) {}
+    pub fn install() {}
 }

@@ -20,9 +20,9 @@ use std::path::PathBuf;
 /// Example: octolinear compare built.ot reference.ot --json
 #[derive(clap::Args)]
 pub struct Args {
-    /// First map (.bt or .ot): the reference P of KLD(P || Q).
+    /// First map (.bt, .ot or .olm): the reference P of KLD(P || Q).
     a: PathBuf,
-    /// Second map (.bt or .ot).
+    /// Second map (.bt, .ot or .olm).
     b: PathBuf,
     /// One JSON object instead of text.
     #[arg(long)]

@@ -227,7 +227,8 @@ pub fn run(a: Args) -> Result<()> {
         tree.prune();
     }
     save_map(&tree, &a.output)?;
-    eprintln!("wrote {} ({} nodes, resolution {})", a.output.display(), tree.size(), tree.resolution());
+    let resolution = super::common::human_number(tree.resolution());
+    eprintln!("wrote {} ({} nodes, resolution {resolution})", a.output.display(), tree.size());
     Ok(())
 }
 

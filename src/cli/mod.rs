@@ -69,6 +69,7 @@ fn default_sigpipe() {}
 /// Runs the tool; returns the process exit code.
 pub fn main() -> i32 {
     default_sigpipe();
+    common::report_truncated_maps();
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {

@@ -97,6 +97,17 @@ impl TreeKind {
             crate::tree::NodeKind::Stamped => TreeKind::OcTreeStamped,
         }
     }
+
+    /// The OctoMap class name, for messages (`.ot` headers name a counting
+    /// tree `OcTreeBase`; this says `CountingOcTree`).
+    pub fn name(self) -> &'static str {
+        match self {
+            TreeKind::OcTree => "OcTree",
+            TreeKind::ColorOcTree => "ColorOcTree",
+            TreeKind::OcTreeStamped => "OcTreeStamped",
+            TreeKind::CountingOcTree => "CountingOcTree",
+        }
+    }
 }
 
 /// What each node holds.

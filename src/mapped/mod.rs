@@ -31,13 +31,43 @@
 //! # Ok(()) }
 //! ```
 //!
-//! Robustness: opening checks only the header, in O(1). Whatever the
-//! remaining bytes hold, queries never panic and never loop without bound
-//! (a search visits at most 16 levels, an iteration at most as many nodes
-//! as the header announces); on a corrupted file they may answer wrongly.
-//! [`MapView::verify`] checks everything and guarantees correct answers.
-//! No `unsafe` code is involved except the memory mapping in
-//! [`MappedMap::open`].
+//! # What an unverified map answers
+//!
+//! Opening ([`open`], [`MappedMap::new`]) is O(1): it checks the header
+//! (its CRC-32 and every field), that the file is as long as the header
+//! says, and that each section lies inside the file with the length the
+//! node counts require. It reads no node and computes no section checksum.
+//!
+//! Queries on such a map are memory-safe whatever the sections hold: every
+//! read is a bounds-checked copy of bytes into an integer (no pointer casts;
+//! the mapping in [`MappedMap::open`] is the only `unsafe`), a search
+//! descends at most 16 levels and an iteration visits at most the announced
+//! node count, so no query panics, reads outside the bytes or loops without
+//! bound. What nothing checks is that the bytes are the ones written: in a
+//! damaged file a flipped bit in a log-odds value turns a free voxel
+//! occupied or the reverse, one in a child mask makes known space unknown or
+//! adds nodes that were never there, colours, stamps and counts may be
+//! wrong, iterations may miss or repeat voxels, and [`MapView::search`] and
+//! [`MapView::search_many`] may disagree. These answers are silently wrong.
+//!
+//! [`MapView::verify`] (O(file size): every checksum, the padding, the
+//! index and the tree structure) rules that out: a map that passes
+//! describes exactly one tree and every query answers as that tree. Verify
+//! once after opening unless the file is trusted (written by this process,
+//! or verified before and not changed since); [`MapView::to_tree`] and
+//! [`read_file`] always verify.
+//!
+//! # Files changed while mapped
+//!
+//! A mapping shows the file as it is now, not as it was when opened. The
+//! writers here ([`write_file`]) write a temporary file and rename it over
+//! the old one: a mapping of the old file keeps that file (its inode) alive
+//! and unchanged, so replacing a map under a reader is safe. Changing it in
+//! place is not. When another process truncates a mapped file, a read of a
+//! page past its new end raises `SIGBUS`, which kills the process unless it
+//! handles the signal (the `octolinear` tool reports it as an error and
+//! exits with status 1); a file rewritten in place changes the bytes under
+//! the reader, which then answers as from a damaged file (above).
 
 pub mod format;
 mod nav;
@@ -87,14 +117,20 @@ pub enum OlmError {
     BadField { field: &'static str, value: String },
     #[error("file is {actual} bytes but its header says {header} (truncated or extended)")]
     FileLength { header: u64, actual: u64 },
-    #[error("section kind {kind}: {reason}")]
+    #[error("{} section (kind {kind}): {reason}", section_name(*kind))]
     Section { kind: u16, reason: String },
-    #[error("section kind {kind}: checksum mismatch (stored {stored:#010x}, computed {computed:#010x})")]
+    #[error("{} section (kind {kind}): checksum mismatch (stored {stored:#010x}, computed {computed:#010x})", section_name(*kind))]
     SectionChecksum { kind: u16, stored: u32, computed: u32 },
     #[error("inconsistent tree structure: {0}")]
     Structure(String),
     #[error("this is a {found:?} map: {hint}")]
     Kind { found: TreeKind, hint: &'static str },
+}
+
+/// A section kind's name for messages, or `unknown` for a kind this reader
+/// does not know.
+fn section_name(kind: u16) -> &'static str {
+    SectionKind::from_id(kind).map_or("unknown", SectionKind::name)
 }
 
 /// An `.olm` map over bytes it owns or borrows: `Vec<u8>`, `&[u8]`,
@@ -113,7 +149,9 @@ impl<D: AsRef<[u8]>> MappedMap<D> {
         Ok(MappedMap { data, meta })
     }
 
-    /// A cheap, copyable handle for queries.
+    /// A cheap, copyable handle for queries. Its answers are those of the
+    /// bytes as they are: right only if [`Self::verify`] passed or the file
+    /// is trusted (module docs).
     #[inline]
     pub fn view(&self) -> MapView<'_> {
         MapView::from_parts(self.data.as_ref(), &self.meta)
@@ -160,16 +198,19 @@ impl<D: AsRef<[u8]>> MappedMap<D> {
 
 impl MappedMap<memmap2::Mmap> {
     /// Memory-maps the file at `path` and checks its header (O(1): nothing
-    /// beyond the header is read until queried).
+    /// beyond the header is read until queried). The nodes are not checked:
+    /// see the module docs for what an unverified map can answer, and
+    /// [`Self::verify`].
     ///
     /// This is the only `unsafe` in the module. Assumption: the file is
     /// not truncated or modified in place while mapped. Writers in this
     /// crate never modify a file in place (they write a temporary file and
     /// rename it over the old one, so a mapping keeps the old contents).
     /// If another process breaks the assumption, truncation makes reads
-    /// fault (SIGBUS) and modification makes the bytes change under the
-    /// reader; all reads are bounds-checked copies of bytes into integers,
-    /// so changed contents can only produce wrong answers.
+    /// past the new end fault (`SIGBUS`) and modification makes the bytes
+    /// change under the reader; all reads are bounds-checked copies of
+    /// bytes into integers, so changed contents can only produce wrong
+    /// answers.
     pub fn open(path: &Path) -> Result<Self, OlmError> {
         let file = std::fs::File::open(path)?;
         // SAFETY: memmap2 requires that the mapped file is not modified or
@@ -180,7 +221,10 @@ impl MappedMap<memmap2::Mmap> {
     }
 }
 
-/// Opens an `.olm` file by memory mapping ([`MappedMap::open`]).
+/// Opens an `.olm` file by memory mapping ([`MappedMap::open`]): O(1),
+/// header checks only, so that huge maps open at once; call
+/// [`MappedMap::verify`] before trusting the answers of a file that may be
+/// damaged (module docs).
 pub fn open(path: &Path) -> Result<MappedMap<memmap2::Mmap>, OlmError> {
     MappedMap::open(path)
 }
