@@ -297,7 +297,7 @@ fn to_points_writes_every_occupied_voxel_centre() {
     let a = read_tree(f.p("a.bt"));
     let sensor = *a.sensor();
     let occupied = voxel_count(&a, 16, |v| sensor.is_occupied(v));
-    ok(&["to-points", f.p("a.bt"), f.p("p.xyz")]);
+    ok(&["to-points", f.p("a.bt"), "-o", f.p("p.xyz")]);
     let pts = octolinear::formats::xyz::read_file(f.path("p.xyz")).unwrap();
     assert_eq!(pts.len() as u64, occupied);
     for p in &pts.points {
@@ -308,27 +308,27 @@ fn to_points_writes_every_occupied_voxel_centre() {
         assert_eq!(c, *p);
     }
     let free = voxel_count(&a, 16, |v| !sensor.is_occupied(v));
-    ok(&["to-points", f.p("a.bt"), f.p("f.ply"), "--free", "--ascii"]);
+    ok(&["to-points", f.p("a.bt"), "-o", f.p("f.ply"), "--free", "--ascii"]);
     let ply = std::fs::read_to_string(f.path("f.ply")).unwrap();
     assert!(ply.contains(&format!("element vertex {free}\n")));
     assert_eq!(ply.lines().count() as u64, 8 + free);
     // coarser level: one point per occupied depth-14 node
     let coarse = voxel_count(&a, 14, |v| sensor.is_occupied(v));
     assert!(coarse < occupied);
-    ok(&["to-points", f.p("a.bt"), f.p("c.pcd"), "--depth", "14"]);
+    ok(&["to-points", f.p("a.bt"), "-o", f.p("c.pcd"), "--depth", "14"]);
     let pcd = std::fs::read_to_string(f.path("c.pcd")).unwrap();
     assert!(pcd.starts_with("# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\n"));
     assert!(pcd.contains(&format!("\nPOINTS {coarse}\nDATA ascii\n")));
     assert_eq!(pcd.lines().count() as u64, 11 + coarse);
-    ok(&["to-points", f.p("a.bt"), f.p("b.ply")]);
+    ok(&["to-points", f.p("a.bt"), "-o", f.p("b.ply")]);
     let b = std::fs::read(f.path("b.ply")).unwrap();
     let header = b"end_header\n";
     let at = b.windows(header.len()).position(|w| w == header).unwrap() + header.len();
     assert_eq!((b.len() - at) as u64, 12 * occupied);
 
-    fail(&["to-points", f.p("a.bt"), f.p("p.obj")], "unknown format");
-    fail(&["to-points", f.p("a.bt"), f.p("p.xyz"), "--depth", "17"], "--depth must be");
-    fail(&["to-points", f.p("missing.bt"), f.p("p.xyz")], "cannot open");
+    fail(&["to-points", f.p("a.bt"), "-o", f.p("p.obj")], "unknown format");
+    fail(&["to-points", f.p("a.bt"), "-o", f.p("p.xyz"), "--depth", "17"], "--depth must be");
+    fail(&["to-points", f.p("missing.bt"), "-o", f.p("p.xyz")], "cannot open");
 }
 
 // ----- eval ----------------------------------------------------------------------
@@ -1559,4 +1559,84 @@ fn a_map_changed_under_query_is_an_error_or_harmless() {
     });
     assert!(renamed.status.success(), "{}", String::from_utf8_lossy(&renamed.stderr));
     assert_eq!(String::from_utf8(renamed.stdout).unwrap(), expected);
+}
+
+// ----- threads, output arguments, messages ------------------------------------
+
+/// Many more threads than scans, as a default run on a large machine has:
+/// every run ends (a lost wakeup in the scan pipeline once hung some of
+/// them) and gives the one-thread bytes. Each run has a deadline.
+#[test]
+fn builds_on_many_threads_always_finish() {
+    let f = Fixture::new();
+    let sample = concat!(env!("CARGO_MANIFEST_DIR"), "/samples/indoor.graph");
+    ok(&["build", sample, "-o", f.p("one.bt"), "--threads", "1"]);
+    let expected = std::fs::read(f.path("one.bt")).unwrap();
+    for run in 0..8 {
+        let threads = ["256", "64", "1000", "32"][run % 4];
+        let out = f.p("many.bt");
+        let mut child = bin()
+            .args(["build", sample, "-o", out, "--threads", threads])
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+        let status = loop {
+            if let Some(status) = child.try_wait().unwrap() {
+                break status;
+            }
+            if std::time::Instant::now() > deadline {
+                let _ = child.kill();
+                panic!("run {run} on {threads} threads hung");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        };
+        assert!(status.success(), "run {run} on {threads} threads: {status}");
+        assert!(std::fs::read(out).unwrap() == expected, "run {run} on {threads} threads");
+    }
+}
+
+#[test]
+fn commands_that_write_take_dash_o_or_a_last_positional() {
+    let f = Fixture::new();
+    let a = f.p("a.bt");
+    ok(&["to-points", a, "-o", f.p("o.xyz")]);
+    ok(&["to-points", a, f.p("p.xyz")]);
+    assert_eq!(std::fs::read(f.path("o.xyz")).unwrap(), std::fs::read(f.path("p.xyz")).unwrap());
+    ok(&["convert", a, "-o", f.p("c.ot")]);
+    ok(&["edit", a, "--output", f.p("e.bt"), "--prune"]);
+    ok(&["crop", a, "-o", f.p("r.bt"), "--min", "0", "0", "0", "--max", "1", "1", "1"]);
+    fail_usage(&["to-points", a, f.p("x.xyz"), "-o", f.p("y.xyz")], "cannot be used with");
+    fail_usage(&["convert", a], "--output");
+}
+
+/// `raycast` names its outcomes in `--help` as it prints them.
+#[test]
+fn raycast_help_names_the_outcomes_it_prints() {
+    let help = ok(&["raycast", "--help"]);
+    for outcome in ["occupied", "max_range", "unknown", "left_map"] {
+        assert!(help.contains(outcome), "{outcome} missing from raycast --help");
+    }
+    let f = Fixture::new();
+    let out = ok(&["raycast", f.p("a.bt"), "--origin", "0", "0", "0", "--direction", "0", "0", "-1"]);
+    let printed = out.split_whitespace().next().unwrap();
+    assert!(["occupied", "max_range", "unknown", "left_map"].contains(&printed), "{out}");
+}
+
+/// An error line says each cause once (no "(os error 2): No such file or
+/// directory (os error 2)").
+#[test]
+fn error_lines_do_not_repeat_their_cause() {
+    let f = Fixture::new();
+    for args in [
+        vec!["build", f.p("missing.graph"), "-o", f.p("x.bt")],
+        vec!["info", f.p("missing.olm")],
+        vec!["verify", f.p("missing.olm")],
+        vec!["query", f.p("a.bt"), "--points", f.p("missing.xyz")],
+    ] {
+        let out = run(&args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?}");
+        assert_eq!(err.matches("os error 2").count(), 1, "{args:?}: {err}");
+    }
 }

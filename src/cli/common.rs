@@ -8,7 +8,27 @@ use octolinear::mapped::{MappedMap, TreeKind, VerifyReport};
 use octolinear::{CountingTree, OccupancyTree};
 use std::fs::File;
 use std::io::BufReader;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+/// A command's output file: `-o PATH`, or the last positional argument
+/// where OctoMap's tool takes it so (`convert`, `edit`, `crop`,
+/// `to-points`).
+#[derive(clap::Args)]
+pub struct OutputArg {
+    /// Output file (or give it as the last positional argument).
+    #[arg(short, long = "output", value_name = "OUT", required_unless_present = "output_positional")]
+    output: Option<PathBuf>,
+    /// The output file, when not given with -o.
+    #[arg(value_name = "OUT", conflicts_with = "output")]
+    output_positional: Option<PathBuf>,
+}
+
+impl OutputArg {
+    /// The output path, however it was given.
+    pub fn path(&self) -> &Path {
+        self.output.as_deref().or(self.output_positional.as_deref()).expect("clap requires one of the two")
+    }
+}
 
 /// Map formats recognised by file extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -93,7 +113,10 @@ pub fn load_any(path: &Path) -> Result<AnyMap> {
 /// in the message of [`report_truncated_maps`]'s handler first.
 pub fn open_olm(path: &Path) -> Result<MappedMap<memmap2::Mmap>> {
     truncated_map::name(path);
-    octolinear::mapped::open(path).with_context(|| format!("{}: not a valid .olm map", path.display()))
+    match octolinear::mapped::open(path) {
+        Err(octolinear::mapped::OlmError::Io(e)) => Err(e).with_context(|| format!("cannot open {}", path.display())),
+        opened => opened.with_context(|| format!("{}: not a valid .olm map", path.display())),
+    }
 }
 
 /// Checks every byte of a mapped `.olm` map (checksums and structure,

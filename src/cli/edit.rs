@@ -2,7 +2,7 @@
 //! change) plus cropping to a box, expansion, pruning and conversion to
 //! maximum likelihood.
 
-use super::common::{load_map, point_arg, save_map};
+use super::common::{load_map, point_arg, save_map, OutputArg};
 use anyhow::{bail, Context, Result};
 use octolinear::key::KeySpace;
 use octolinear::sensor::SensorModel;
@@ -17,14 +17,14 @@ use std::path::PathBuf;
 /// extension (.bt is always written maximum-likelihood and pruned, as
 /// OctoMap's writeBinary does).
 ///
-/// Example: octolinear edit map.bt small.bt --min -2 -2 0 --max 2 2 1.5 --scale 2
+/// Example: octolinear edit map.bt -o small.bt --min -2 -2 0 --max 2 2 1.5 --scale 2
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub struct Args {
-    /// Input map (.bt or .ot).
+    /// Input map (.bt, .ot or .olm).
     input: PathBuf,
-    /// Output map (.bt or .ot).
-    output: PathBuf,
+    #[command(flatten)]
+    output: OutputArg,
     #[command(flatten)]
     crop: CropBox,
     /// New voxel size in metres (the tree structure is kept, the map scaled).
@@ -63,12 +63,14 @@ pub struct CropBox {
 /// Pruned nodes straddling the border are split; inner nodes are
 /// recomputed as the maximum of their kept children.
 ///
-/// Example: octolinear crop map.ot room.ot --min -2 -2 0 --max 2 2 1.5
+/// Example: octolinear crop map.ot -o room.ot --min -2 -2 0 --max 2 2 1.5
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub struct CropArgs {
+    /// Input map (.bt, .ot or .olm).
     input: PathBuf,
-    output: PathBuf,
+    #[command(flatten)]
+    output: OutputArg,
     /// Lower corner of the box to keep.
     #[arg(long, num_args = 3, value_names = ["X", "Y", "Z"], allow_negative_numbers = true, required = true)]
     min: Vec<f64>,
@@ -197,7 +199,7 @@ fn positive(v: f64, flag: &str) -> Result<f64> {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    super::common::MapFormat::of(&a.output)?;
+    super::common::MapFormat::of(a.output.path())?;
     let new_res = match (a.res, a.scale) {
         (Some(r), _) => Some(positive(r, "--res")?),
         (None, Some(s)) => Some(positive(s, "--scale")?),
@@ -226,9 +228,9 @@ pub fn run(a: Args) -> Result<()> {
     if a.prune {
         tree.prune();
     }
-    save_map(&tree, &a.output)?;
+    save_map(&tree, a.output.path())?;
     let resolution = super::common::human_number(tree.resolution());
-    eprintln!("wrote {} ({} nodes, resolution {resolution})", a.output.display(), tree.size());
+    eprintln!("wrote {} ({} nodes, resolution {resolution})", a.output.path().display(), tree.size());
     Ok(())
 }
 

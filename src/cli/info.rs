@@ -2,7 +2,7 @@
 //! query and check maps.
 
 use super::common::{
-    human_number, load_any, load_map, open_olm, save_counting, save_map, verify_olm, AnyMap, MapFormat,
+    human_number, load_any, load_map, open_olm, save_counting, save_map, verify_olm, AnyMap, MapFormat, OutputArg,
 };
 use anyhow::{bail, Context, Result};
 use octolinear::formats::xyz;
@@ -112,8 +112,8 @@ pub fn run(a: Args) -> Result<()> {
 pub struct ConvertArgs {
     /// The map to read (.bt, .ot or .olm).
     input: PathBuf,
-    /// Where to write it (.bt, .ot or .olm).
-    output: PathBuf,
+    #[command(flatten)]
+    output: OutputArg,
     /// Write the maximum-likelihood variant of .olm (occupancy maps only).
     #[arg(long)]
     ml: bool,
@@ -125,14 +125,14 @@ pub struct ConvertArgs {
 }
 
 pub fn convert(a: ConvertArgs) -> Result<()> {
-    let format = MapFormat::of(&a.output)?;
+    let format = MapFormat::of(a.output.path())?;
     if (a.ml || a.search_blocks) && format != MapFormat::Olm {
         let flag = if a.ml { "--ml" } else { "--search-blocks" };
-        bail!("{flag} applies to .olm output, not {}", a.output.display());
+        bail!("{flag} applies to .olm output, not {}", a.output.path().display());
     }
     let write_olm = |tree: &OccupancyTree, opts| {
-        octolinear::mapped::write_file_with(tree, &a.output, opts)
-            .with_context(|| format!("cannot write {}", a.output.display()))
+        octolinear::mapped::write_file_with(tree, a.output.path(), opts)
+            .with_context(|| format!("cannot write {}", a.output.path().display()))
     };
     let (kind, nodes) = match load_any(&a.input)? {
         AnyMap::Occupancy(m) => {
@@ -142,13 +142,13 @@ pub fn convert(a: ConvertArgs) -> Result<()> {
                 let search_blocks = octolinear::mapped::SearchBlocksSection::Always;
                 write_olm(&m.tree, octolinear::mapped::WriteOptions { search_blocks, ..Default::default() })?;
             } else {
-                save_map(&m.tree, &a.output)?;
+                save_map(&m.tree, a.output.path())?;
             }
             (TreeKind::of(m.tree.kind()), m.tree.size())
         }
         AnyMap::Counting(_) if a.ml => bail!("{}: a counting tree has no maximum-likelihood form", a.input.display()),
         AnyMap::Counting(t) => {
-            save_counting(&t, &a.output)?;
+            save_counting(&t, a.output.path())?;
             (TreeKind::CountingOcTree, t.size())
         }
     };
@@ -162,15 +162,16 @@ pub fn convert(a: ConvertArgs) -> Result<()> {
     // .olm header says its count, a .bt file would have to be read back
     let nodes = match format {
         MapFormat::Olm => {
-            let written =
-                octolinear::mapped::open(&a.output).with_context(|| format!("cannot read {}", a.output.display()))?;
+            let written = octolinear::mapped::open(a.output.path())
+                .with_context(|| format!("cannot read {}", a.output.path().display()))?;
             format!(", {} nodes", written.header().node_count)
         }
         MapFormat::Ot => format!(", {nodes} nodes"),
         MapFormat::Bt => String::new(),
     };
-    let bytes = std::fs::metadata(&a.output).with_context(|| format!("cannot read {}", a.output.display()))?.len();
-    eprintln!("wrote {} ({what}{nodes}, {bytes} bytes)", a.output.display());
+    let bytes =
+        std::fs::metadata(a.output.path()).with_context(|| format!("cannot read {}", a.output.path().display()))?.len();
+    eprintln!("wrote {} ({what}{nodes}, {bytes} bytes)", a.output.path().display());
     Ok(())
 }
 

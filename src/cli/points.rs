@@ -1,7 +1,7 @@
 //! `octolinear to-points`: OctoMap's `octree2pointcloud` — voxel centres
 //! as a point cloud (.xyz, .ply or .pcd).
 
-use super::common::{depth_arg, extension, format_g6, load_map, write_output};
+use super::common::{depth_arg, extension, format_g6, load_map, write_output, OutputArg};
 use anyhow::{bail, Result};
 use octolinear::{Key, OccupancyTree, Point3};
 use std::io::Write;
@@ -14,14 +14,15 @@ use std::path::PathBuf;
 /// `.pcd` output is octree2pointcloud's ASCII file, `.xyz` one `x y z` per
 /// line (exact floats), `.ply` binary little endian unless `--ascii`.
 ///
-/// Example: octolinear to-points map.bt occupied.ply --depth 14
+/// Example: octolinear to-points map.bt -o occupied.ply --depth 14
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub struct Args {
-    /// Input map (.bt or .ot).
+    /// Input map (.bt, .ot or .olm).
     map: PathBuf,
     /// Output cloud (.xyz, .ply or .pcd).
-    output: PathBuf,
+    #[command(flatten)]
+    output: OutputArg,
     /// Free voxels instead of occupied ones.
     #[arg(long)]
     free: bool,
@@ -59,7 +60,7 @@ pub fn for_each_voxel(
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let format = extension(&a.output, &["xyz", "ply", "pcd"])?;
+    let format = extension(a.output.path(), &["xyz", "ply", "pcd"])?;
     let depth = depth_arg(a.depth)?;
     let tree = load_map(&a.map)?.tree;
     let sensor = *tree.sensor();
@@ -69,7 +70,7 @@ pub fn run(a: Args) -> Result<()> {
     if points.len() > u32::MAX as usize {
         bail!("{} points are too many for one file", points.len());
     }
-    write_output(&a.output, |w| match format.as_str() {
+    write_output(a.output.path(), |w| match format.as_str() {
         "xyz" => octolinear::formats::xyz::write(&points.clone().into(), w),
         "pcd" => write_pcd(&points, w),
         _ => octolinear::formats::ply::write(&points, a.ascii, w),
@@ -78,7 +79,7 @@ pub fn run(a: Args) -> Result<()> {
         "wrote {} {} voxel centres to {}",
         points.len(),
         if free { "free" } else { "occupied" },
-        a.output.display()
+        a.output.path().display()
     );
     Ok(())
 }

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 /// Cast one ray through a map (OctoMap's castRay).
 ///
-/// Prints how the ray ended (occupied, max-range, unknown or left-map) and the centre of the last
+/// Prints how the ray ended (occupied, max_range, unknown or left_map) and the centre of the last
 /// voxel visited.
 ///
 /// Example: octolinear raycast map.bt --origin 0 0 1 --direction 1 0 0 --max-range 10 --json
