@@ -150,9 +150,7 @@ fn list(path: &Path) -> Option<Listed> {
 /// writes then fail, and writes started later fail at once. Meant for a
 /// signal handler just before the process ends: it is async-signal-safe
 /// (no allocation, no lock; it waits only for other threads to finish
-/// creating a temporary file). It must not interrupt itself on one
-/// thread: block the other signals that call it while it runs, as
-/// [`remove_temp_files_on_signals`] does.
+/// creating a temporary file) and may run in several handlers at once.
 pub fn remove_temp_files() {
     ENDING.store(true, Ordering::SeqCst);
     while CREATING.load(Ordering::SeqCst) != 0 {
