@@ -1638,5 +1638,114 @@ fn error_lines_do_not_repeat_their_cause() {
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{args:?}");
         assert_eq!(err.matches("os error 2").count(), 1, "{args:?}: {err}");
+
+// ---- interrupted writes: no temporary file survives a signal ----
+
+#[cfg(unix)]
+mod interrupted_writes {
+    use super::*;
+    use std::os::unix::process::{CommandExt, ExitStatusExt};
+    use std::process::{ExitStatus, Stdio};
+    use std::time::{Duration, Instant};
+
+    /// Jobs of growing size (16, 64 and 256 MB of `.graph`), tried until the
+    /// write lasts long enough to be signalled while its temporary file exists.
+    const SCANS: [&str; 3] = ["100", "400", "1600"];
+
+    fn temp_files(dir: &Path) -> Vec<String> {
+        std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with(".out.graph.") && n.ends_with(".tmp"))
+            .collect()
+    }
+
+    /// Starts `simulate` writing `dir/out.graph` (with `ignored` ignored, the
+    /// other signals at their default action whatever this test inherited),
+    /// sends `signal` once its temporary file appears and returns the exit
+    /// status; `None` if the write was over before the signal could be sent.
+    fn signal_during_write(dir: &Path, scans: &str, signal: i32, ignored: Option<i32>) -> Option<ExitStatus> {
+        let mut cmd = bin();
+        cmd.args(["simulate", "--scans", scans, "-o", s(&dir.join("out.graph"))]);
+        cmd.stdout(Stdio::null()).stderr(Stdio::null());
+        // SAFETY: signal() is async-signal-safe, as pre_exec requires.
+        unsafe {
+            cmd.pre_exec(move || {
+                for sig in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+                    libc::signal(sig, if Some(sig) == ignored { libc::SIG_IGN } else { libc::SIG_DFL });
+                }
+                Ok(())
+            });
+        }
+        let mut child = cmd.spawn().expect("binary runs");
+        let deadline = Instant::now() + Duration::from_secs(300);
+        loop {
+            if !temp_files(dir).is_empty() {
+                // SAFETY: kill() of the child's pid, which stays reserved
+                // until it is waited for below.
+                assert_eq!(unsafe { libc::kill(child.id() as i32, signal) }, 0);
+                let status = child.wait().unwrap();
+                return (ignored.is_some() || !status.success()).then_some(status);
+            }
+            if let Some(status) = child.try_wait().unwrap() {
+                assert!(status.success(), "simulate --scans {scans}: {status}");
+                return None;
+            }
+            if Instant::now() > deadline {
+                let _ = child.kill();
+                panic!("simulate --scans {scans} neither wrote nor ended in 300 s");
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+
+    /// The first of [`SCANS`]'s jobs that `signal` reaches while it writes.
+    fn signalled_write(dir: &Path, signal: i32, ignored: Option<i32>) -> ExitStatus {
+        for scans in SCANS {
+            if let Some(status) = signal_during_write(dir, scans, signal, ignored) {
+                return status;
+            }
+        }
+        panic!("no write of up to {} scans lasted until signal {signal}", SCANS[SCANS.len() - 1]);
+    }
+
+    #[test]
+    fn polite_signals_remove_the_temporary_file_and_end_the_process_by_the_signal() {
+        for signal in [libc::SIGTERM, libc::SIGINT, libc::SIGHUP] {
+            let dir = tempfile::tempdir().unwrap();
+            let status = signalled_write(dir.path(), signal, None);
+            assert_eq!(status.signal(), Some(signal), "{status}");
+            assert_eq!(temp_files(dir.path()), Vec::<String>::new(), "signal {signal}");
+        }
+    }
+
+    #[test]
+    fn an_ignored_signal_stays_ignored() {
+        let dir = tempfile::tempdir().unwrap();
+        let status = signalled_write(dir.path(), libc::SIGHUP, Some(libc::SIGHUP));
+        assert!(status.success(), "{status}");
+        assert!(graph::read_file(dir.path().join("out.graph")).is_ok());
+        assert_eq!(temp_files(dir.path()), Vec::<String>::new());
+    }
+
+    #[test]
+    fn the_next_write_removes_the_temporary_file_a_sigkill_left() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out.graph");
+        let left = SCANS.iter().find_map(|scans| {
+            let status = signal_during_write(dir.path(), scans, libc::SIGKILL, None)?;
+            assert_eq!(status.signal(), Some(libc::SIGKILL), "{status}");
+            // killed after the rename: nothing left to observe, try a longer write
+            let left = temp_files(dir.path());
+            (!left.is_empty()).then_some(left)
+        });
+        let left = left.expect("a SIGKILL during a write leaves its temporary file");
+        assert_eq!(left.len(), 1, "{left:?}");
+        // another process's temporary file of the same output, still running: kept
+        let live = format!(".out.graph.{}.0.tmp", std::process::id());
+        std::fs::write(dir.path().join(&live), "live").unwrap();
+        ok(&["simulate", "--scans", "2", "-o", s(&out)]);
+        assert_eq!(temp_files(dir.path()), [live]);
+        assert_eq!(graph::read_file(&out).unwrap().nodes.len(), 2);
     }
 }

@@ -48,27 +48,27 @@ enum Command {
 
 /// Restores the default SIGPIPE action so that `octolinear ... | head`
 /// ends quietly like other command-line tools instead of panicking in
-/// `println!` (Rust ignores SIGPIPE by default).
-#[cfg(target_os = "linux")]
-fn default_sigpipe() {
-    extern "C" {
-        fn signal(signum: i32, handler: usize) -> usize;
-    }
-    const SIGPIPE: i32 = 13;
-    const SIG_DFL: usize = 0;
-    // SAFETY: signal() from the C library with a valid signal number and
-    // the default disposition; called before any other thread exists.
+/// `println!` (Rust ignores SIGPIPE by default), and has Ctrl-C, SIGTERM,
+/// SIGHUP and SIGQUIT remove the temporary files of writes in progress
+/// before the signal ends the process.
+#[cfg(unix)]
+fn set_signal_actions() {
+    // SAFETY: signal() with a valid signal number and the default
+    // disposition; called before any other thread exists.
     unsafe {
-        signal(SIGPIPE, SIG_DFL);
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
+    // fails only for invalid signal numbers; a failure would only lose the
+    // cleanup, which the next write to the same file makes up for
+    let _ = octolinear::formats::atomic::remove_temp_files_on_signals();
 }
 
-#[cfg(not(target_os = "linux"))]
-fn default_sigpipe() {}
+#[cfg(not(unix))]
+fn set_signal_actions() {}
 
 /// Runs the tool; returns the process exit code.
 pub fn main() -> i32 {
-    default_sigpipe();
+    set_signal_actions();
     common::report_truncated_maps();
     let cli = match Cli::try_parse() {
         Ok(c) => c,

@@ -1,8 +1,9 @@
 //! On-disk formats. Each reader takes `impl BufRead` (or `impl Read`), or
 //! a byte slice for the files of other tools read whole (PLY, PCD, binvox),
 //! each writer `impl Write`; writes to a path go through [`write_atomically`]
-//! so a crash never leaves a half-written file.
+//! so an interrupted write never leaves a half-written file (see [`atomic`]).
 
+pub mod atomic;
 pub mod binvox;
 pub mod bt;
 pub mod graph;
@@ -15,12 +16,11 @@ pub mod ros;
 mod scalar;
 pub mod xyz;
 
+pub use atomic::write_atomically;
 pub use header::{format_double, Header};
 pub use scalar::ColoredCloud;
 
-use std::fs::File;
-use std::io::{self, BufWriter, Write};
-use std::path::{Path, PathBuf};
+use std::io;
 
 /// Why an `.ot` or `.bt` file (or a ROS `Octomap` message) could not be
 /// read. Every variant that concerns a place in the input names its byte
@@ -51,44 +51,4 @@ pub enum TreeFileError {
 
 fn at_byte(offset: &Option<u64>) -> String {
     offset.map(|o| format!(" at byte {o}")).unwrap_or_default()
-}
-
-/// Writes through `write` into a fresh temporary file next to `path`,
-/// syncs it, then renames it into place; on any error the temporary file is
-/// removed and `path` is left as it was.
-pub fn write_atomically(path: &Path, write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>) -> io::Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let name = path
-        .file_name()
-        .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, format!("{} names no file", path.display())))?;
-    let (tmp, file) = create_temp(dir, &name.to_string_lossy())?;
-    let result = (|| {
-        let mut w = BufWriter::with_capacity(1 << 16, &file);
-        write(&mut w)?;
-        w.flush()?;
-        drop(w);
-        file.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
-}
-
-/// Creates a fresh `.<name>.<pid>.<n>.tmp` next to the target.
-fn create_temp(dir: &Path, name: &str) -> io::Result<(PathBuf, File)> {
-    let pid = std::process::id();
-    for n in 0..1000u32 {
-        let tmp = dir.join(format!(".{name}.{pid}.{n}.tmp"));
-        match std::fs::OpenOptions::new().write(true).create_new(true).open(&tmp) {
-            Ok(f) => return Ok((tmp, f)),
-            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
-            Err(e) => return Err(e),
-        }
-    }
-    Err(io::Error::new(io::ErrorKind::AlreadyExists, format!("no free temporary name in {}", dir.display())))
 }
