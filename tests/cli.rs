@@ -1638,6 +1638,8 @@ fn error_lines_do_not_repeat_their_cause() {
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{args:?}");
         assert_eq!(err.matches("os error 2").count(), 1, "{args:?}: {err}");
+    }
+}
 
 // ---- interrupted writes: no temporary file survives a signal ----
 
