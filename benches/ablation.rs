@@ -721,7 +721,7 @@ fn write_report(o: &Opts, ds: &[Dataset], elapsed: f64, load: [String; 2]) {
     );
     w(
         &mut md,
-        "* The paper's model (Sect. 4, Eq. 8 as the issue states it): `n_inner · (s_node + 8·s_ptr) + n_leaf · s_node`, \
+        "* The paper's model (Sect. 4, Eq. 8): `n_inner · (s_node + 8·s_ptr) + n_leaf · s_node`, \
          i.e. 40 B per inner node and 8 B per leaf with 32-bit pointers, 80 B / 16 B with 64-bit pointers.",
     );
     w(&mut md, "");

@@ -218,7 +218,7 @@ impl KeySpace {
             // z in lane 0 alone (lane 1 converts 0.0, which is in range): a
             // broadcast was compiled into a 16-byte load of a 12-byte
             // point copied to the stack, which the processor cannot
-            // forward from the copy's two stores (13 ns a point instead of 2)
+            // forward from the copy's two stores (a stall on every point)
             let z = _mm_mul_pd(factor, _mm_cvtps_pd(_mm_set_ss(p.z)));
             let zero = _mm_setzero_pd();
             let octant = _mm_movemask_pd(_mm_cmpge_pd(xy, zero)) | (_mm_movemask_pd(_mm_cmpge_sd(z, zero)) & 1) << 2;

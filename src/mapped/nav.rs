@@ -196,7 +196,7 @@ impl Nav for RankNav<'_> {
     /// node's own mask and those counted by its rank, so a level reads
     /// that word and one directory entry, and one popcount of the word
     /// gives the child: the chain of dependent steps per level is a load,
-    /// a mask, a popcount and an add (small-map point queries 36 → 32 ns).
+    /// a mask, a popcount and an add.
     #[inline(always)]
     fn descend(&self, node: Node, from: u8, depth: u8, code: u64) -> Option<(Node, u8, u8)> {
         if self.log2 != 3 {

@@ -20,12 +20,11 @@ const FIELDS: usize = 16;
 
 /// Nodes at depths 13–15 from which `SearchBlocksSection::Auto` writes the
 /// section. Lower than the in-memory index's threshold: the rank layout's
-/// levels take more cache than the index's words. Measured: outdoor 0.2 m
-/// (0.45M such nodes; `examples/ab_probe 0.2 time`, mapped by key) 53–57 →
-/// 35 ns with the section; indoor 0.05 m (0.19M) the same in that probe,
-/// but in the side-by-side benchmark, where OctoMap's tree evicts the
-/// view's between rows, 69–74 → 34 ms on a machine with 1 MB of L2 per
-/// core. Indoor 0.1 m (31k) stays without.
+/// levels take more cache than the index's words, and a view shares the
+/// caches with other work, which evicts its last levels between queries
+/// (measured in `docs/benchmarks.md`, "Memory-mapped maps"). Of the bench
+/// maps, indoor 0.05 m (0.19M such nodes) and the outdoor ones get the
+/// section; indoor 0.1 m (31k) stays without.
 pub(crate) const AUTO_MIN_NODES: usize = 1 << 17;
 
 /// The section's parts, over the file's bytes.

@@ -28,10 +28,11 @@ pub struct WriteOptions {
 }
 
 /// When [`write()`] adds the optional search-blocks section, which makes
-/// full-depth searches of large maps about 1.6x faster for about a fifth
-/// more file (`formats/olm.md`). Only a plain map in the full variant with
-/// the rank index, whose voxels take at most 256 values, can have one. Off
-/// by default: a full `.olm` stays within 1.15x the size of its `.ot`.
+/// full-depth searches of large maps faster for about a fifth more file
+/// (`formats/olm.md`; measured in `docs/benchmarks.md`, "Memory-mapped
+/// maps"). Only a plain map in the full variant with the rank index, whose
+/// voxels take at most 256 values, can have one. Off by default: a full
+/// `.olm` stays within 1.15x the size of its `.ot`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum SearchBlocksSection {
     #[default]

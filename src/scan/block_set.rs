@@ -34,7 +34,7 @@ pub(crate) struct BlockSet {
 
 /// A block's slot in the table of recent ones: its code's low bits, so the
 /// blocks of an 8x8x4 box of blocks take distinct slots (a multiplicative
-/// hash here cost 5% of a small map's insertion).
+/// hash measured slower: `docs/benchmarks.md`, "Tried and rejected").
 #[inline(always)]
 fn recent_slot(block: u64) -> usize {
     (block & ((1 << RECENT_BITS) - 1)) as usize

@@ -14,12 +14,9 @@
 //! 8x8x8 blocks (`block_set`), which absorb the repeats as they happen
 //! (rays of one scan share the voxels near the sensor, about ten visits a
 //! voxel indoors) and give the codes in Morton order, which the batched
-//! application needs, by sorting the blocks alone. Before, a direct-mapped
-//! filter of recent codes dropped most repeats and the remaining lists
-//! were radix-sorted and merged; the block sets took insertion on the
-//! bench scenes from 25.7-28.0 to 20.5-21.3 ms (indoor 0.2 m) and 244 to
-//! 173 ms (indoor 0.05 m), see `docs/benchmarks.md`. `cargo bench --bench
-//! insert -- dedup` compares them with sorting and hashing the raw lists.
+//! application needs, by sorting the blocks alone. Sorting or hashing the
+//! raw lists costs more (`docs/benchmarks.md`, "Tried and rejected");
+//! `cargo bench --bench insert -- dedup` compares the three.
 //! Hash sets remain where bitmaps do not pay: merging end points for
 //! `discretize`.
 //!
@@ -167,7 +164,7 @@ impl Casting {
     /// the rays are set up a chunk at a time, eight at once, each chunk
     /// walked sixteen rays at once while the lanes still hold the previous
     /// chunk's last rays. BMI2 gives the set insertion its one-instruction
-    /// variable shift (2-3% of the casting in `walk_probe`, within its noise).
+    /// variable shift (`shlx`); every AVX-512 processor has it.
     ///
     /// # Safety
     /// The processor must support AVX-512F and BMI2.
@@ -579,13 +576,14 @@ impl OccupancyTree {
     /// thread applies the next scan's update to the tree when it has been
     /// cast and nobody is applying, else takes the next scan and casts it
     /// whole. Updates are applied in scan order, each by whichever thread
-    /// finds it ready, so no thread waits while there is work: a pipeline
-    /// where one thread did all the applying left the others idle behind
-    /// its casting, and left its own casting behind the tree on large maps
-    /// (`docs/benchmarks.md`, session 15). Each scan is cast whole by one
-    /// thread, so there is no merge of per-thread lists. At most one scan
-    /// more than there are threads is cast ahead of the tree (twice the
-    /// threads raised the peak memory of a 2-thread build from 22 to 24 MB).
+    /// finds it ready, so no thread waits while there is work: with one
+    /// thread doing all the applying, the others wait behind its casting,
+    /// and its own casting holds the tree up on large maps
+    /// (`docs/benchmarks.md`, "Tried and rejected"). Each scan is cast whole
+    /// by one thread, so there is no merge of per-thread lists. At most one
+    /// scan more than there are threads is cast ahead of the tree: each scan
+    /// cast ahead holds its sets (twice the threads raised the peak memory
+    /// of a 2-thread build from 22 to 24 MB).
     fn insert_pipelined<S, P>(
         &mut self,
         scans: S,

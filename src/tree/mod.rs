@@ -738,7 +738,7 @@ impl OccupancyTree {
 
     /// Builds now what searches otherwise build at the first one after a
     /// bulk change: the grids below the trunks and, on trees of 2^19 nodes
-    /// or more, the level index (up to ~140 ms for 16M nodes). For callers
+    /// or more, the level index (about two leaf walks). For callers
     /// whose first query must not wait; answers do not change. Does nothing
     /// while the tree is changing (after a change other than a bulk one).
     pub fn prepare_search(&self) {
@@ -768,8 +768,9 @@ impl OccupancyTree {
     fn search_id(&self, key: Key, depth: u8) -> Option<(NodeId, u8, bool)> {
         let a = self.arena.as_ref()?;
         let (key, depth) = search_target(key, depth);
-        // the table encoding (the `morton` criterion rows: about twice the
-        // speed of shifts and masks) took 6% off a small-map query
+        // the table encoding: the code is on the query's chain of dependent
+        // steps, and the table is faster than shifts and masks
+        // (`docs/benchmarks.md`, "Criterion micro-benchmarks")
         let code = MortonCode::encode_table(key).0;
         let p = a.parts();
         let (node, from) = self.start(&p, key, depth);

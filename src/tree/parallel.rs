@@ -27,10 +27,10 @@ use crate::key::TREE_DEPTH;
 /// second walk of the upper levels and, above all, memory: the spare slots
 /// are made for the worst case, up to 8 per node a batch visits, where a
 /// scan over mapped space allocates almost nothing. At 32,768 codes an
-/// indoor build's peak memory rose by a quarter (19.6 to 24.6 MB on 2
-/// threads, `docs/benchmarks.md`) for no gain in time; scans of new
-/// space (outdoor) gain, and their batches are far larger. Unit tests
-/// share smaller batches, dense enough to prune whole blocks.
+/// indoor build's peak memory on 2 threads rose by a quarter
+/// (`docs/benchmarks.md`, "Tried and rejected") for no gain in time;
+/// scans of new space (outdoor) gain, and their batches are far larger.
+/// Unit tests share smaller batches, dense enough to prune whole blocks.
 #[cfg(not(test))]
 pub(crate) const MIN_CODES: usize = 1 << 18;
 #[cfg(test)]
