@@ -118,8 +118,8 @@ pub struct ConvertArgs {
     #[arg(long)]
     ml: bool,
     /// Add the search-blocks section to a full .olm of an occupancy map
-    /// (about a fifth more file; full-depth searches of maps with millions
-    /// of nodes about 1.6x faster).
+    /// (about a fifth more file, for faster full-depth searches of maps
+    /// with millions of nodes; docs/benchmarks.md, "Memory-mapped maps").
     #[arg(long, conflicts_with = "ml")]
     search_blocks: bool,
 }
