@@ -1,43 +1,139 @@
-//! Point cloud files for `build --points`: PLY (ASCII, binary little or big
+//! Inputs of `build` and `eval`: `.graph` files read scan by scan, and
+//! point cloud files for `build --points`: PLY (ASCII, binary little or big
 //! endian), PCD (ascii, binary, binary_compressed), LAS/LAZ and plain xyz,
 //! each with a sensor pose. Colours (for `build --color`) come from PLY and
-//! PCD files (the readers in `octolinear::formats` say how).
+//! PCD files (the readers in `octolinear::formats` say how). `-` stands for
+//! standard input; pipes, FIFOs and `/dev/stdin` are read as streams.
 
 use anyhow::{bail, Context, Result};
+use octolinear::formats::graph::{self, ScanReader};
 use octolinear::formats::{pcd, ply, xyz, ColoredCloud as Scan};
 use octolinear::{Point3, PointCloud, Pose6D};
+use std::io::{BufReader, Read, Seek};
 use std::path::Path;
 
 /// An RGB colour per point.
 pub type Colors = Vec<[u8; 3]>;
 
-/// Reads the points of a file, by extension; with `colors`, also the
-/// points' colours where the format has them (PLY, PCD).
+/// How an input is named in messages: `-` is standard input.
+pub fn name(path: &Path) -> String {
+    if is_stdin(path) {
+        "standard input".to_string()
+    } else {
+        path.display().to_string()
+    }
+}
+
+fn is_stdin(path: &Path) -> bool {
+    path.as_os_str() == "-"
+}
+
+/// A `.graph` read scan by scan from a file, pipe or FIFO, or from standard
+/// input for `-`. Only a regular file's counts are checked against its
+/// length before reading; the others are checked as their data arrives.
+pub fn open_graph(path: &Path) -> Result<ScanReader<Box<dyn Read + Send>>> {
+    let (reader, len): (Box<dyn Read + Send>, _) = if is_stdin(path) {
+        (Box::new(BufReader::with_capacity(1 << 16, std::io::stdin())), None)
+    } else {
+        let file = std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
+        let len = graph::stream_len(&file).with_context(|| format!("cannot read {}", path.display()))?;
+        (Box::new(BufReader::with_capacity(1 << 16, file)), len)
+    };
+    ScanReader::with_len(reader, len).with_context(|| format!("cannot read {}", name(path)))
+}
+
+/// Point formats, by extension or by content.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum PointFormat {
+    Ply,
+    Pcd,
+    Las,
+    Xyz,
+}
+
+/// The format of a file's first bytes: the PLY magic, the LAS signature,
+/// a PCD header keyword after `#` comment lines; anything else is xyz text.
+fn sniff(bytes: &[u8]) -> PointFormat {
+    if bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r\n") {
+        return PointFormat::Ply;
+    }
+    if bytes.starts_with(b"LASF") {
+        return PointFormat::Las;
+    }
+    let first = bytes.split(|&b| b == b'\n').map(|l| l.trim_ascii()).find(|l| !l.is_empty() && l[0] != b'#');
+    let keyword = first.and_then(|l| l.split(|b| b.is_ascii_whitespace()).next()).unwrap_or_default();
+    const PCD_KEYS: [&[u8]; 10] =
+        [b"VERSION", b"FIELDS", b"SIZE", b"TYPE", b"COUNT", b"WIDTH", b"HEIGHT", b"VIEWPOINT", b"POINTS", b"DATA"];
+    if PCD_KEYS.contains(&keyword) {
+        PointFormat::Pcd
+    } else {
+        PointFormat::Xyz
+    }
+}
+
+/// Reads the points of a `--points` argument; with `colors`, also the
+/// points' colours where the format has them (PLY, PCD). The format comes
+/// from the extension; a name without one (`-`, `/dev/stdin`, a `<(...)`
+/// pipe) is recognised by its first bytes (see [`sniff`]).
 pub fn read_scan(path: &Path, colors: bool) -> Result<Scan> {
-    let ext = super::common::extension(path, &["ply", "pcd", "las", "laz", "xyz", "txt"])?;
-    let ctx = || format!("{}: not a valid .{ext} file", path.display());
+    let has_extension = path.extension().is_some() && !is_stdin(path);
+    let format = if has_extension {
+        Some(match super::common::extension(path, &["ply", "pcd", "las", "laz", "xyz", "txt"])?.as_str() {
+            "ply" => PointFormat::Ply,
+            "pcd" => PointFormat::Pcd,
+            "las" | "laz" => PointFormat::Las,
+            _ => PointFormat::Xyz,
+        })
+    } else {
+        None
+    };
+    let name = name(path);
     let plain = |cloud| Scan { cloud, colors: None };
-    match ext.as_str() {
-        "las" | "laz" => return without_panics(|| read_las(path)).map(plain).with_context(ctx),
-        "xyz" | "txt" => {
-            let f = std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
-            return xyz::read(std::io::BufReader::new(f)).map(plain).with_context(ctx);
+    // regular LAS/LAZ files are read in batches, text files line by line;
+    // everything else is read whole, which pipes allow
+    let regular = std::fs::metadata(path).is_ok_and(|m| m.is_file());
+    match format {
+        Some(PointFormat::Las) if regular => {
+            let ctx = || format!("{name}: not a valid LAS/LAZ file");
+            return without_panics(|| read_las(std::fs::File::open(path)?)).map(plain).with_context(ctx);
+        }
+        Some(PointFormat::Xyz) => {
+            let f = std::fs::File::open(path).with_context(|| format!("cannot open {name}"))?;
+            let ctx = || format!("{name}: not a valid xyz file");
+            return xyz::read(BufReader::with_capacity(1 << 16, f)).map(plain).with_context(ctx);
         }
         _ => {}
     }
-    let bytes = std::fs::read(path).with_context(|| format!("cannot open {}", path.display()))?;
-    match ext.as_str() {
-        "ply" => ply::read(&bytes, colors).map_err(anyhow::Error::from),
-        _ => pcd::read(&bytes, colors).map_err(anyhow::Error::from),
+    let bytes = if is_stdin(path) {
+        let mut bytes = Vec::new();
+        std::io::stdin().read_to_end(&mut bytes).context("cannot read standard input")?;
+        bytes
+    } else {
+        std::fs::read(path).with_context(|| format!("cannot open {name}"))?
+    };
+    let format = format.unwrap_or_else(|| sniff(&bytes));
+    let described = match format {
+        PointFormat::Ply => "PLY",
+        PointFormat::Pcd => "PCD",
+        PointFormat::Las => "LAS/LAZ",
+        PointFormat::Xyz => "xyz",
+    };
+    let ctx = || format!("{name}: not a valid {described} file");
+    match format {
+        PointFormat::Ply => ply::read(&bytes, colors).map_err(anyhow::Error::from),
+        PointFormat::Pcd => pcd::read(&bytes, colors).map_err(anyhow::Error::from),
+        PointFormat::Las => without_panics(|| read_las(std::io::Cursor::new(bytes))).map(plain),
+        PointFormat::Xyz => xyz::read(&bytes[..]).map(plain).map_err(anyhow::Error::from),
     }
     .with_context(ctx)
 }
 
 // ----- LAS / LAZ -----------------------------------------------------------
 
-fn read_las(path: &Path) -> Result<PointCloud> {
-    check_laz_chunk_table(path)?;
-    let mut reader = las::Reader::from_path(path)?;
+fn read_las(mut source: impl Read + Seek + Send + Sync + 'static) -> Result<PointCloud> {
+    check_laz_chunk_table(&mut source)?;
+    source.rewind()?;
+    let mut reader = las::Reader::new(BufReader::with_capacity(1 << 16, source))?;
     // in batches: `read_all` reserves what the header's point count says,
     // which a damaged header makes terabytes (an allocation failure aborts)
     let mut batch = las::PointDataBuilder::new().for_header(reader.header()).build();
@@ -73,10 +169,9 @@ fn without_panics<T>(read: impl FnOnce() -> Result<T>) -> Result<T> {
 /// 8 bytes of the point data, or the file's last 8 bytes when those do not
 /// point past them. Other files, and files too short to say, are left to
 /// the las crate's own checks.
-fn check_laz_chunk_table(path: &Path) -> Result<()> {
-    use std::io::{Read, Seek, SeekFrom};
-    let mut f = std::fs::File::open(path)?;
-    let len = f.metadata()?.len();
+fn check_laz_chunk_table(f: &mut (impl Read + Seek)) -> Result<()> {
+    use std::io::SeekFrom;
+    let len = f.seek(SeekFrom::End(0))?;
     let mut at = |offset: u64, buf: &mut [u8]| -> Option<()> {
         f.seek(SeekFrom::Start(offset)).ok()?;
         f.read_exact(buf).ok()
