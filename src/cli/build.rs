@@ -192,7 +192,7 @@ const MAX_THREADS: usize = 1024;
 /// Checks a `--res` value (see [`MIN_RES`], [`MAX_RES`]).
 pub(super) fn resolution_arg(res: f64) -> Result<f64> {
     if !(res.is_finite() && res > 0.0) {
-        bail!("--res must be a positive finite number of metres, got {res:?}");
+        bail!("--res must be a positive finite resolution in metres, got {res:?}");
     }
     if res < MIN_RES {
         bail!("--res {res:?} is below the smallest usable resolution {MIN_RES:?} m (2^-125: half a voxel must be a normal float)");

@@ -76,31 +76,41 @@ fn sniff(bytes: &[u8]) -> PointFormat {
 /// from the extension; a name without one (`-`, `/dev/stdin`, a `<(...)`
 /// pipe) is recognised by its first bytes (see [`sniff`]).
 pub fn read_scan(path: &Path, colors: bool) -> Result<Scan> {
-    let has_extension = path.extension().is_some() && !is_stdin(path);
-    let format = if has_extension {
-        Some(match super::common::extension(path, &["ply", "pcd", "las", "laz", "xyz", "txt"])?.as_str() {
-            "ply" => PointFormat::Ply,
-            "pcd" => PointFormat::Pcd,
-            "las" | "laz" => PointFormat::Las,
-            _ => PointFormat::Xyz,
-        })
+    let ext = if path.extension().is_some() && !is_stdin(path) {
+        Some(super::common::extension(path, &["ply", "pcd", "las", "laz", "xyz", "txt"])?)
     } else {
         None
     };
+    let format = ext.as_deref().map(|e| match e {
+        "ply" => PointFormat::Ply,
+        "pcd" => PointFormat::Pcd,
+        "las" | "laz" => PointFormat::Las,
+        _ => PointFormat::Xyz,
+    });
     let name = name(path);
+    let ctx = |format: PointFormat| {
+        let described = match (&ext, format) {
+            (Some(e), _) => format!(".{e}"),
+            (None, PointFormat::Ply) => "PLY".into(),
+            (None, PointFormat::Pcd) => "PCD".into(),
+            (None, PointFormat::Las) => "LAS/LAZ".into(),
+            (None, PointFormat::Xyz) => "xyz".into(),
+        };
+        format!("{name}: not a valid {described} file")
+    };
     let plain = |cloud| Scan { cloud, colors: None };
     // regular LAS/LAZ files are read in batches, text files line by line;
     // everything else is read whole, which pipes allow
     let regular = std::fs::metadata(path).is_ok_and(|m| m.is_file());
     match format {
         Some(PointFormat::Las) if regular => {
-            let ctx = || format!("{name}: not a valid LAS/LAZ file");
-            return without_panics(|| read_las(std::fs::File::open(path)?)).map(plain).with_context(ctx);
+            let las = without_panics(|| read_las(std::fs::File::open(path)?));
+            return las.map(plain).with_context(|| ctx(PointFormat::Las));
         }
         Some(PointFormat::Xyz) => {
             let f = std::fs::File::open(path).with_context(|| format!("cannot open {name}"))?;
-            let ctx = || format!("{name}: not a valid xyz file");
-            return xyz::read(BufReader::with_capacity(1 << 16, f)).map(plain).with_context(ctx);
+            let cloud = xyz::read(BufReader::with_capacity(1 << 16, f));
+            return cloud.map(plain).with_context(|| ctx(PointFormat::Xyz));
         }
         _ => {}
     }
@@ -112,20 +122,13 @@ pub fn read_scan(path: &Path, colors: bool) -> Result<Scan> {
         std::fs::read(path).with_context(|| format!("cannot open {name}"))?
     };
     let format = format.unwrap_or_else(|| sniff(&bytes));
-    let described = match format {
-        PointFormat::Ply => "PLY",
-        PointFormat::Pcd => "PCD",
-        PointFormat::Las => "LAS/LAZ",
-        PointFormat::Xyz => "xyz",
-    };
-    let ctx = || format!("{name}: not a valid {described} file");
     match format {
         PointFormat::Ply => ply::read(&bytes, colors).map_err(anyhow::Error::from),
         PointFormat::Pcd => pcd::read(&bytes, colors).map_err(anyhow::Error::from),
         PointFormat::Las => without_panics(|| read_las(std::io::Cursor::new(bytes))).map(plain),
         PointFormat::Xyz => xyz::read(&bytes[..]).map(plain).map_err(anyhow::Error::from),
     }
-    .with_context(ctx)
+    .with_context(|| ctx(format))
 }
 
 // ----- LAS / LAZ -----------------------------------------------------------
