@@ -132,8 +132,8 @@ pub fn progress(len: u64, what: &str) -> indicatif::ProgressBar {
 }
 
 /// A spinner naming the phase under way (change it with `set_message`)
-/// and its time so far, on a terminal; hidden otherwise, so that piped
-/// runs stay quiet.
+/// and the time since it appeared, on a terminal; hidden otherwise, so
+/// that piped runs stay quiet.
 pub fn spinner(what: &str) -> indicatif::ProgressBar {
     use std::io::IsTerminal;
     if !std::io::stderr().is_terminal() {
