@@ -133,13 +133,13 @@ pub fn progress(len: u64, what: &str) -> indicatif::ProgressBar {
 
 /// A spinner naming the phase under way (change it with `set_message`)
 /// and the time since it appeared, on a terminal; hidden otherwise, so
-/// that piped runs stay quiet.
+/// that piped runs stay quiet. Dropped (on an error too), it clears its line.
 pub fn spinner(what: &str) -> indicatif::ProgressBar {
     use std::io::IsTerminal;
     if !std::io::stderr().is_terminal() {
         return indicatif::ProgressBar::hidden();
     }
-    let bar = indicatif::ProgressBar::new_spinner();
+    let bar = indicatif::ProgressBar::new_spinner().with_finish(indicatif::ProgressFinish::AndClear);
     bar.set_style(indicatif::ProgressStyle::with_template("{spinner} {msg} ({elapsed})").expect("valid template"));
     bar.set_message(what.to_string());
     bar.enable_steady_tick(std::time::Duration::from_millis(100));

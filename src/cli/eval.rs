@@ -170,6 +170,12 @@ fn print(label: &str, a: &Accuracy) {
 pub fn run(a: Args) -> Result<()> {
     let max_range = max_range_arg(a.max_range)?;
     scans_arg(a.scans)?;
+    if a.inputs.len() == 2 && (a.holdout.is_some() || a.folds.is_some()) {
+        bail!("--holdout and --folds build their own map: give only the .graph file");
+    }
+    if a.inputs.len() == 1 {
+        resolution_arg(a.res)?;
+    }
     let graph_path = a.inputs.last().expect("one input at least");
     let phase = spinner(&format!("reading {}", input::name(graph_path)));
     let g = input::open_graph(graph_path)?
@@ -177,9 +183,6 @@ pub fn run(a: Args) -> Result<()> {
         .with_context(|| format!("cannot read {}", input::name(graph_path)))?;
     let n = a.scans.unwrap_or(g.nodes.len()).min(g.nodes.len());
     if a.inputs.len() == 2 {
-        if a.holdout.is_some() || a.folds.is_some() {
-            bail!("--holdout and --folds build their own map: give only the .graph file");
-        }
         phase.set_message(format!("loading {}", a.inputs[0].display()));
         let tree = load_map(&a.inputs[0])?.tree;
         phase.set_message(format!("evaluating {n} scans"));
@@ -192,7 +195,6 @@ pub fn run(a: Args) -> Result<()> {
         }
         return Ok(());
     }
-    resolution_arg(a.res)?;
     let (k, folds, flag) = match (a.holdout, a.folds) {
         (_, Some(k)) => (k, k, "--folds"),
         (Some(k), None) => (k, 1, "--holdout"),

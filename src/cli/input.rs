@@ -229,3 +229,28 @@ pub fn read_trajectory(path: &Path) -> Result<Vec<Pose6D>> {
     }
     Ok(poses)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn formats_are_recognised_by_their_first_bytes() {
+        let sniffed = |text: &[u8]| match sniff(text) {
+            PointFormat::Ply => "ply",
+            PointFormat::Pcd => "pcd",
+            PointFormat::Las => "las",
+            PointFormat::Xyz => "xyz",
+        };
+        assert_eq!(sniffed(b"ply\nformat ascii 1.0\n"), "ply");
+        assert_eq!(sniffed(b"ply\r\nformat ascii 1.0\r\n"), "ply");
+        assert_eq!(sniffed(b"LASF\x00\x00"), "las");
+        assert_eq!(sniffed(b"# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z\n"), "pcd");
+        assert_eq!(sniffed(b"FIELDS x y z\n"), "pcd");
+        assert_eq!(sniffed(b"# x y z\n\n1 2 3\n"), "xyz");
+        assert_eq!(sniffed(b"1,2,3\n"), "xyz");
+        assert_eq!(sniffed(b""), "xyz");
+        // a text file that merely mentions a keyword later is still xyz
+        assert_eq!(sniffed(b"1 2 3\nVERSION\n"), "xyz");
+    }
+}
