@@ -180,11 +180,11 @@ fn print_statistics(title: &str, s: &serde_json::Value) {
 /// significant bits to spare and keys round-trip through centres at any
 /// scale, so float precision never limits the map above this (each voxel
 /// holds at least 256 floats even at the map's edge); below it, it does.
-pub(super) const MIN_RES: f64 = 2.0 * f32::MIN_POSITIVE as f64;
+const MIN_RES: f64 = 2.0 * f32::MIN_POSITIVE as f64;
 
 /// Largest `--res`: the map's edge, 32768 voxels from its centre, must be
 /// a finite float.
-pub(super) const MAX_RES: f64 = f32::MAX as f64 / 32768.0;
+const MAX_RES: f64 = f32::MAX as f64 / 32768.0;
 
 /// Most `--threads`: more only share the cores, each with its stack.
 const MAX_THREADS: usize = 1024;
@@ -224,7 +224,7 @@ pub(super) fn scans_arg(scans: Option<usize>) -> Result<Option<usize>> {
 }
 
 /// A warning on stderr, in the form of the errors.
-pub(super) fn warn(message: &str) {
+fn warn(message: &str) {
     eprintln!("octolinear: warning: {message}");
 }
 
