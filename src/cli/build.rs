@@ -318,6 +318,7 @@ struct Tally {
     points: usize,
     /// Finite points without a key in the map.
     out_of_map: usize,
+    /// Points with a NaN or infinite coordinate (never inserted).
     non_finite: usize,
 }
 
@@ -325,7 +326,13 @@ impl Tally {
     fn count(&mut self, scan: &Scan, keys: &KeySpace) {
         self.ids.push(scan.id);
         self.points += scan.points.len();
-        self.out_of_map += scan.points.iter().filter(|p| p.is_finite() && keys.key(**p).is_err()).count();
+        for &p in &scan.points.points {
+            if !p.is_finite() {
+                self.non_finite += 1;
+            } else if keys.key(p).is_err() {
+                self.out_of_map += 1;
+            }
+        }
     }
 
     /// Warnings for what the map lacks: no scans, no points, points that
@@ -419,9 +426,8 @@ pub fn run(a: Args) -> Result<()> {
     };
     let bar = progress(n as u64, "inserting scans");
     let (keys, mut tally, mut failure, start) = (KeySpace::new(a.res), Tally::default(), None, Instant::now());
-    let (mut non_finite, mut reading) = (0, Duration::ZERO);
-    let after_each = |tree: &mut OccupancyTree, report: ScanReport| {
-        non_finite += report.non_finite;
+    let mut reading = Duration::ZERO;
+    let after_each = |tree: &mut OccupancyTree, _: ScanReport| {
         if a.compress_ml {
             tree.to_max_likelihood();
             tree.prune();
@@ -467,7 +473,6 @@ pub fn run(a: Args) -> Result<()> {
         // every scan was taken: the rest of the file must be well-formed too
         reader.edges().with_context(|| format!("cannot read {input}"))?;
     }
-    tally.non_finite = non_finite;
     if a.color {
         // inner nodes: maximum occupancy and average colour of their children
         let phase = spinner("updating inner nodes");
