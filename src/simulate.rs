@@ -932,16 +932,45 @@ impl LidarConfig {
     }
 }
 
+/// Rays one scan may cast: their directions are held in memory (24 bytes
+/// each), and the largest real lidars cast a few hundred thousand.
+pub const MAX_RAYS_PER_SCAN: u64 = 1 << 24;
+
+/// Rays of all scans together: every point is held in memory (12 bytes
+/// each, so at most 3 GiB) until the graph is returned.
+pub const MAX_RAYS: u64 = 1 << 28;
+
 #[derive(Debug, thiserror::Error)]
 pub enum SimError {
     #[error("invalid lidar config: {field} = {value}")]
     InvalidConfig { field: &'static str, value: String },
-    #[error("{scans} scans do not fit the graph format's u32 ids")]
-    TooManyScans { scans: usize },
+    #[error("{beams} beams × {steps} steps = {rays} rays per scan exceeds the limit of {MAX_RAYS_PER_SCAN} (2^24)")]
+    TooManyRaysPerScan { beams: u32, steps: u32, rays: u64 },
+    #[error(
+        "{scans} scans × {per_scan} rays = {total} rays exceeds the limit of {MAX_RAYS} \
+         (2^28: every point is held in memory, 12 bytes each)"
+    )]
+    TooManyRays { scans: usize, per_scan: u64, total: u128 },
+}
+
+/// Checks what `scans` scans of `cfg` would hold against [`MAX_RAYS_PER_SCAN`]
+/// and [`MAX_RAYS`] before anything is allocated for them.
+pub fn check_size(scans: usize, cfg: &LidarConfig) -> Result<(), SimError> {
+    let per_scan = u64::from(cfg.beams) * u64::from(cfg.horizontal_steps);
+    if per_scan > MAX_RAYS_PER_SCAN {
+        return Err(SimError::TooManyRaysPerScan { beams: cfg.beams, steps: cfg.horizontal_steps, rays: per_scan });
+    }
+    let total = scans as u128 * u128::from(per_scan);
+    if total > u128::from(MAX_RAYS) {
+        return Err(SimError::TooManyRays { scans, per_scan, total });
+    }
+    Ok(())
 }
 
 /// Generates `kind` from `seed` and scans it `scans` times along its path.
 pub fn simulate(kind: SceneKind, scans: usize, seed: u64, cfg: &LidarConfig) -> Result<ScanGraph, SimError> {
+    cfg.validate()?;
+    check_size(scans, cfg)?;
     let scene = Scene::generate(kind, seed);
     let poses = scene.trajectory(scans);
     simulate_scene(&scene, &poses, seed, cfg)
@@ -952,9 +981,7 @@ pub fn simulate(kind: SceneKind, scans: usize, seed: u64, cfg: &LidarConfig) -> 
 /// point. Parallel over scans and columns, identical for any thread count.
 pub fn simulate_scene(scene: &Scene, poses: &[Pose6D], seed: u64, cfg: &LidarConfig) -> Result<ScanGraph, SimError> {
     cfg.validate()?;
-    if u32::try_from(poses.len()).is_err() {
-        return Err(SimError::TooManyScans { scans: poses.len() });
-    }
+    check_size(poses.len(), cfg)?;
     let dirs = cfg.directions();
     let beams = cfg.beams as usize;
     let clouds: Vec<PointCloud> = poses
@@ -1029,6 +1056,25 @@ mod tests {
             assert!((s - x.sin()).abs() < 1e-15, "{x}");
             assert!((c - x.cos()).abs() < 1e-15, "{x}");
         }
+    }
+
+    #[test]
+    fn sizes_are_checked_before_anything_is_allocated() {
+        let cfg = |beams, horizontal_steps| LidarConfig { beams, horizontal_steps, ..LidarConfig::indoor() };
+        let err = simulate(SceneKind::Indoor, 1, 1, &cfg(100_000_000, 360)).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "100000000 beams × 360 steps = 36000000000 rays per scan exceeds the limit of 16777216 (2^24)"
+        );
+        let err = simulate(SceneKind::Indoor, 1, 1, &cfg(16, u32::MAX)).unwrap_err();
+        assert!(matches!(err, SimError::TooManyRaysPerScan { rays: 68719476720, .. }), "{err}");
+        let err = simulate(SceneKind::Indoor, usize::MAX, 1, &cfg(16, 360)).unwrap_err();
+        assert!(err.to_string().starts_with(&format!("{} scans × 5760 rays = ", usize::MAX)), "{err}");
+        assert!(err.to_string().contains("exceeds the limit of 268435456"), "{err}");
+        // the limits themselves are allowed
+        assert!(check_size(1, &cfg(1 << 12, 1 << 12)).is_ok());
+        assert!(check_size(16, &cfg(1 << 12, 1 << 12)).is_ok());
+        assert!(check_size(17, &cfg(1 << 12, 1 << 12)).is_err());
     }
 
     #[test]

@@ -1751,3 +1751,245 @@ mod interrupted_writes {
         assert_eq!(graph::read_file(&out).unwrap().nodes.len(), 2);
     }
 }
+
+// ----- bounded sizes, streamed input, warnings ---------------------------------
+
+/// Runs with `input` on standard input, written through a pipe by another
+/// thread (a write the binary leaves unread is not an error).
+fn run_with_stdin(args: &[&str], input: Vec<u8>) -> Output {
+    use std::io::Write;
+    use std::process::Stdio;
+    let mut child =
+        bin().args(args).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let writer = std::thread::spawn(move || {
+        let _ = stdin.write_all(&input);
+    });
+    let out = child.wait_with_output().unwrap();
+    writer.join().unwrap();
+    out
+}
+
+/// Requires a failure reported as one error line containing `needle`.
+fn assert_one_error(args: &[&str], out: &Output, needle: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+    assert!(err.starts_with("octolinear: error: ") && err.contains(needle), "{args:?}: {err:?} lacks {needle:?}");
+}
+
+/// Runs and requires success; returns stderr.
+fn ok_stderr(args: &[&str]) -> String {
+    let out = run(args);
+    let err = String::from_utf8(out.stderr).expect("utf-8 stderr");
+    assert!(out.status.success(), "{args:?} failed: {err}");
+    err
+}
+
+#[test]
+fn sizes_a_user_asks_for_are_bounded_by_what_they_imply() {
+    let f = Fixture::new();
+    let out = f.p("big.graph");
+    fail(
+        &["simulate", "--scans", "1", "--beams", "100000000", "-o", out],
+        "100000000 beams × 360 steps = 36000000000 rays per scan exceeds the limit of 16777216",
+    );
+    fail(&["simulate", "--steps", "4000000000", "-o", out], "exceeds the limit of 16777216");
+    fail(
+        &["simulate", "--scans", "100000000", "-o", out],
+        "100000000 scans × 5760 rays = 576000000000 rays exceeds the limit of 268435456",
+    );
+    assert!(!f.path("big.graph").exists());
+    fail(&["eval", f.p("s.graph"), "--folds", "100000"], "--folds 100000 needs at least 100000 scans, only 6");
+    fail(&["eval", f.p("s.graph"), "--holdout", "7"], "--holdout 7 needs at least 7 scans, only 6");
+    fail(&["eval", f.p("s.graph"), "--scans", "3"], "the default --holdout 5 needs at least 5 scans, only 3");
+    let j = json(&ok(&["eval", f.p("s.graph"), "--folds", "6", "--json"]));
+    assert_eq!(j["total"]["scans"], 6);
+    fail(
+        &["render", f.p("a.bt"), "-o", f.p("v.png"), "--width", "16384", "--height", "16384"],
+        "--width 16384 × --height 16384 = 268435456 pixels exceeds the limit of 67108864",
+    );
+    fail(
+        &["render", f.p("a.bt"), "-o", f.p("v.png"), "--view", "perspective", "--width", "16384"],
+        "--width 16384 × the default --height 12288 = 201326592 pixels exceeds the limit",
+    );
+    fail(&["build", f.p("s.graph"), "-o", f.p("t.bt"), "--threads", "100000"], "--threads must be between 1 and 1024");
+    // a stream claiming four billion points in its first scan: read as the
+    // data comes, it ends with an error, not an allocation abort
+    let mut claim = 1u32.to_le_bytes().to_vec();
+    claim.extend(u32::MAX.to_le_bytes());
+    claim.extend(vec![0u8; 100]);
+    let args = ["build", "-", "-o", f.p("t.bt")];
+    assert_one_error(&args, &run_with_stdin(&args, claim), "input ends at byte offset 108 inside point 3 of node 0");
+    assert!(!f.path("t.bt").exists());
+}
+
+#[test]
+fn build_streams_graphs_from_pipes_fifos_and_standard_input() {
+    let f = Fixture::new();
+    let bytes = std::fs::read(f.path("s.graph")).unwrap();
+    let expected = std::fs::read(f.path("a.bt")).unwrap();
+    for input in ["-", "/dev/stdin"] {
+        let args = ["build", input, "-o", f.p("p.bt"), "--res", "0.1"];
+        let out = run_with_stdin(&args, bytes.clone());
+        assert!(out.status.success(), "{input}: {}", String::from_utf8_lossy(&out.stderr));
+        assert_eq!(std::fs::read(f.path("p.bt")).unwrap(), expected, "{input}");
+        std::fs::remove_file(f.path("p.bt")).unwrap();
+    }
+    // the full tree and the first scans only
+    let args = ["build", "-", "-o", f.p("p.ot"), "--scans", "2"];
+    assert!(run_with_stdin(&args, bytes.clone()).status.success());
+    ok(&["build", f.p("s.graph"), "-o", f.p("two.ot"), "--scans", "2"]);
+    assert_eq!(std::fs::read(f.path("p.ot")).unwrap(), std::fs::read(f.path("two.ot")).unwrap());
+    // a FIFO, and bash's process substitution (a pipe under /dev/fd)
+    let fifo = f.path("scans.fifo");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let writer = {
+        let (fifo, bytes) = (fifo.clone(), bytes.clone());
+        std::thread::spawn(move || std::fs::write(fifo, bytes))
+    };
+    ok(&["build", f.p("scans.fifo"), "-o", f.p("fifo.bt")]);
+    writer.join().unwrap().unwrap();
+    assert_eq!(std::fs::read(f.path("fifo.bt")).unwrap(), expected);
+    let script = format!(
+        "{} build <(cat {}) -o {} >/dev/null",
+        env!("CARGO_BIN_EXE_octolinear"),
+        f.p("s.graph"),
+        f.p("subst.bt")
+    );
+    let out = Command::new("bash").arg("-c").arg(&script).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(std::fs::read(f.path("subst.bt")).unwrap(), expected);
+    // eval reads standard input too
+    let args = ["eval", f.p("a.bt"), "-", "--json"];
+    let out = run_with_stdin(&args, bytes.clone());
+    assert!(out.status.success());
+    assert_eq!(
+        json(&String::from_utf8(out.stdout).unwrap()),
+        json(&ok(&["eval", f.p("a.bt"), f.p("s.graph"), "--json"]))
+    );
+    // a stream cut inside a point, or inside the edge list: the error names
+    // the scan and the byte offset, and no map is written
+    let g = graph::read_file(f.path("s.graph")).unwrap();
+    let node0 = 4 + 4 + 28 * g.nodes[0].scan.len() + 64 + 4;
+    let cut = node0 + 4 + 28 * 3 + 10;
+    let args = ["build", "-", "-o", f.p("cut.bt")];
+    let out = run_with_stdin(&args, bytes[..cut].to_vec());
+    assert_one_error(&args, &out, &format!("input ends at byte offset {cut} inside point 3 of node 1"));
+    let out = run_with_stdin(&args, bytes[..bytes.len() - 10].to_vec());
+    assert_one_error(&args, &out, "inside constraint of edge 4");
+    assert!(!f.path("cut.bt").exists());
+    // point files from standard input, recognised by their first bytes
+    ok(&["to-points", f.p("a.bt"), f.p("occ.ply")]);
+    ok(&["build", "--points", f.p("occ.ply"), "-o", f.p("ply.bt")]);
+    let args = ["build", "--points", "-", "-o", f.p("ply_stdin.bt")];
+    assert!(run_with_stdin(&args, std::fs::read(f.path("occ.ply")).unwrap()).status.success());
+    assert_eq!(std::fs::read(f.path("ply_stdin.bt")).unwrap(), std::fs::read(f.path("ply.bt")).unwrap());
+    fail(&["build", "--points", "-", "-", "-o", f.p("x.bt")], "standard input (-) more than once");
+}
+
+#[test]
+fn meaningless_values_are_refused() {
+    let f = Fixture::new();
+    let (g, out) = (f.p("s.graph"), f.p("x.bt"));
+    fail(&["build", g, "-o", out, "--res", "1e-40"], "--res 1e-40 is below the smallest usable resolution 2.35");
+    fail(&["build", g, "-o", out, "--res", "1e40"], "above the largest usable resolution");
+    fail(&["build", g, "-o", out, "--res", "NaN"], "--res must be a positive finite");
+    for range in ["-5", "-1", "0", "inf"] {
+        fail(&["build", g, "-o", out, "--max-range", range], "--max-range must be a positive finite number");
+        fail(&["eval", g, "--max-range", range], "--max-range must be a positive finite number");
+    }
+    fail(&["build", g, "-o", out, "--scans", "0"], "--scans must be at least 1");
+    fail(&["eval", g, "--scans", "0"], "--scans must be at least 1");
+    fail(&["simulate", "--scans", "0", "-o", f.p("z.graph")], "--scans must be at least 1");
+    fail(&["render", f.p("a.bt"), "-o", f.p("v.png"), "--depth", "0"], "--depth must be between 1 and 16, got 0");
+    fail(&["mesh", f.p("a.bt"), "-o", f.p("m.ply"), "--depth", "0"], "--depth must be between 1 and 16, got 0");
+    fail(&["to-points", f.p("a.bt"), f.p("p.xyz"), "--depth", "0"], "--depth must be between 1 and 16, got 0");
+    assert!(!f.path("x.bt").exists());
+    // the documented ways: no --max-range for no limit, depth 1
+    ok(&["mesh", f.p("a.bt"), "-o", f.p("m.ply"), "--depth", "1"]);
+    let help = ok(&["build", "--help"]);
+    assert!(help.contains("leave it out for no limit"), "{help}");
+}
+
+#[test]
+fn build_says_what_it_dropped_and_stays_quiet_otherwise() {
+    let f = Fixture::new();
+    let total = json(&ok(&["build", f.p("s.graph"), "-o", f.p("q.bt"), "--json"]))["points"].as_u64().unwrap();
+    // a piped run of a normal build: no progress, no warning
+    assert_eq!(ok_stderr(&["build", f.p("s.graph"), "-o", f.p("q.bt")]), "");
+    // every point outside a map of ±0.032768 m; the map (empty) is what
+    // graph2tree writes, byte for byte
+    let args = ["build", f.p("s.graph"), "-o", f.p("tiny.bt"), "--res", "1e-6"];
+    let err = ok_stderr(&args);
+    assert_eq!(
+        err,
+        format!(
+            "octolinear: warning: {total} of {total} points lie outside the map, which spans ±0.032768 m at \
+             --res 1e-6; they were not marked and cast no ray (beyond a --max-range cut), as in OctoMap\n"
+        )
+    );
+    let j = json(&ok(&[&args[..], &["--json"]].concat()));
+    assert_eq!(j["out_of_map_points"], total);
+    if let Some(t) = tool("graph2tree") {
+        Command::new(t).args(["-i", f.p("s.graph"), "-o", f.p("tiny_g.bt"), "-res", "1e-6"]).output().unwrap();
+        assert_eq!(std::fs::read(f.path("tiny.bt")).unwrap(), std::fs::read(f.path("tiny_g.bt")).unwrap());
+    }
+    // one point 400 m away at 0.01 m, under each --out-of-map rule
+    let xyz = f.write("far.xyz", "400 0 0\n1 0 0\n");
+    let err = ok_stderr(&["build", "--points", xyz, "-o", f.p("far.bt"), "--res", "0.01"]);
+    assert!(err.contains("warning: 1 of 2 points lie outside the map, which spans ±327.68 m at --res 0.01"), "{err}");
+    let err = ok_stderr(&["build", "--points", xyz, "-o", f.p("far.bt"), "--res", "0.01", "--discretize"]);
+    assert!(err.contains("1 of 2 points") && err.contains("wrapped around"), "{err}");
+    let err = ok_stderr(&["build", "--points", xyz, "-o", f.p("far.bt"), "--res", "0.01", "--out-of-map", "skip"]);
+    assert!(err.contains("1 of 2 points") && err.contains("were skipped (--out-of-map skip)"), "{err}");
+    // NaN coordinates (a .graph can hold them)
+    let mut nan = octolinear::ScanGraph::new();
+    let cloud = [Point3::new(1.0, 0.0, 0.0), Point3::new(f32::NAN, 0.0, 0.0), Point3::new(0.0, 1.0, 0.0)];
+    nan.add_node(cloud.into_iter().collect(), octolinear::Pose6D::IDENTITY);
+    graph::write_file(&nan, f.path("nan.graph")).unwrap();
+    let err = ok_stderr(&["build", f.p("nan.graph"), "-o", f.p("nan.bt")]);
+    assert!(err.contains("warning: 1 of 3 points have NaN or infinite coordinates and were skipped"), "{err}");
+    // empty inputs build empty maps, with a word
+    graph::write_file(&octolinear::ScanGraph::new(), f.path("none.graph")).unwrap();
+    let err = ok_stderr(&["build", f.p("none.graph"), "-o", f.p("none.bt")]);
+    assert!(err.contains("none.graph holds no scans: the map is empty"), "{err}");
+    assert!(f.path("none.bt").exists());
+    let mut bare = octolinear::ScanGraph::new();
+    for _ in 0..2 {
+        bare.add_node(Default::default(), octolinear::Pose6D::IDENTITY);
+    }
+    graph::write_file(&bare, f.path("bare.graph")).unwrap();
+    let err = ok_stderr(&["build", f.p("bare.graph"), "-o", f.p("bare.bt")]);
+    assert!(err.contains("the 2 scans of") && err.contains("hold no points: the map is empty"), "{err}");
+    let err = ok_stderr(&["build", f.p("s.graph"), "-o", f.p("q.bt"), "--scans", "10"]);
+    assert!(err.contains("--scans 10 asks for more than the 6 scans of"), "{err}");
+}
+
+#[test]
+fn xyz_points_with_comments_commas_and_semicolons() {
+    let f = Fixture::new();
+    let plain = f.write("plain.xyz", "2.05 0.05 0.05\n2.05 0.15 0.05\n-1 0.5 0.25\n");
+    let other = f.write(
+        "other.xyz",
+        "# exported by a scanner\n\n2.05,0.05,0.05\n2.05, 0.15, 0.05 # second\n-1;0.5;0.25\r\n# end\n",
+    );
+    ok(&["build", "--points", plain, "-o", f.p("plain.bt")]);
+    ok(&["build", "--points", other, "-o", f.p("other.bt")]);
+    assert_eq!(std::fs::read(f.path("plain.bt")).unwrap(), std::fs::read(f.path("other.bt")).unwrap());
+    let bad = f.write("bad.xyz", "# x,y,z\n1,2,3\n1,,3\n");
+    fail(&["build", "--points", bad, "-o", f.p("bad.bt")], "line 3: \"\" is not a decimal number");
+    let short = f.write("short.txt", "1;2;3\n4;5\n");
+    fail(&["build", "--points", short, "-o", f.p("bad.bt")], "line 2: expected 3 numbers, found 2 values");
+}
+
+#[test]
+fn build_help_lists_every_format_it_takes() {
+    let help = ok(&["build", "--help"]);
+    for format in [".bt", ".ot", ".olm", ".ply", ".pcd", ".las", ".laz", ".xyz", "standard input"] {
+        assert!(help.contains(format), "build --help lacks {format}");
+    }
+    let f = Fixture::new();
+    ok(&["build", f.p("s.graph"), "-o", f.p("m.olm")]);
+    assert!(ok(&["verify", f.p("m.olm")]).contains(": ok"));
+}

@@ -248,7 +248,8 @@ impl Format {
                 GraphError::Io { offset, .. }
                 | GraphError::Truncated { offset, .. }
                 | GraphError::BadMarker { offset, .. }
-                | GraphError::CountTooLarge { offset, .. } => *offset,
+                | GraphError::CountTooLarge { offset, .. }
+                | GraphError::OutOfMemory { offset, .. } => *offset,
             };
             (e.to_string(), Place::Byte(offset))
         }

@@ -358,7 +358,7 @@ fn xyz_reader_rules() {
         (b"nan 1 2\n", 1),
         (b"1 inf 2\n", 1),
         (b"1 2 1e39\n", 1),
-        (b"\n\n# comment\n", 3),
+        (b"\n\n# comment\n1 2\n", 4),
         (b"1.5.3 1 2\n", 1),
         (b"0x10 1 2\n", 1),
     ] {

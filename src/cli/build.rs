@@ -1,23 +1,28 @@
 //! `octolinear build`: OctoMap's `graph2tree` — integrate the scans of a
 //! `.graph` file into a map.
 
-use super::common::{progress, save_map, MapFormat};
+use super::common::{progress, save_map, spinner, MapFormat};
 use super::input;
 use anyhow::{bail, Context, Result};
-use octolinear::formats::graph;
 use octolinear::formats::{bt, ot, write_atomically};
+use octolinear::geometry::graph2tree_transform;
 use octolinear::scan::OutOfMap;
 use octolinear::sensor::{SensorModel, SensorProbabilities};
-use octolinear::{BoundsRule, InnerNodes, NodeKind, OccupancyTree, Point3, Pose6D, ScanGraph, ScanOptions, ScanReport};
+use octolinear::{
+    BoundsRule, InnerNodes, KeySpace, NodeKind, OccupancyTree, Point3, PointCloud, Pose6D, ScanOptions, ScanReport,
+};
 use std::path::PathBuf;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Build a map from a `.graph` file (like OctoMap's graph2tree) or point cloud files.
 ///
-/// Input is a `.graph` file, or point cloud files (--points: .ply, .pcd, .las, .laz, .xyz), one
-/// scan per file, each taken from a sensor pose (--pose for all files, or
-/// one line `x y z roll pitch yaw` per file in --trajectory; identity by
-/// default). Points are in the sensor frame; rays start at the pose.
+/// Input is a `.graph` file (`-` for standard input; pipes and FIFOs are
+/// read as they stream, one scan at a time), or point cloud files
+/// (--points: .ply, .pcd, .las, .laz, .xyz; a name without extension, such
+/// as `-` or a pipe, is recognised by its first bytes), one scan per file,
+/// each taken from a sensor pose (--pose for all files, or one line
+/// `x y z roll pitch yaw` per file in --trajectory; identity by default).
+/// Points are in the sensor frame; rays start at the pose.
 ///
 /// `.ot` output is the full probabilistic tree, `.bt` the compact
 /// maximum-likelihood tree; both are byte-identical to what OctoMap writes.
@@ -31,7 +36,13 @@ use std::time::Instant;
 /// Without --color, colours in the files are ignored. Colour maps are
 /// written as .ot (id ColorOcTree) or .olm; .bt cannot hold colours.
 ///
+/// Points that cannot go into the map (NaN or infinite coordinates,
+/// outside the map's ±32768 voxels) and an input without points are
+/// reported as warnings on stderr, with counts.
+///
 /// Example: octolinear build scans.graph -o map.bt --res 0.05 --max-range 20
+///
+/// Example: cat scans.graph | octolinear build - -o map.bt
 ///
 /// Example: octolinear build --points a.ply b.pcd --trajectory traj.txt -o map.bt
 ///
@@ -39,10 +50,11 @@ use std::time::Instant;
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub struct Args {
-    /// Input `.graph` file (OctoMap ScanGraph).
+    /// Input `.graph` file (OctoMap ScanGraph); `-` reads standard input.
     #[arg(required_unless_present = "points", conflicts_with = "points")]
     input: Option<PathBuf>,
-    /// Point cloud files, one scan each (.ply, .pcd, .las, .laz, .xyz).
+    /// Point cloud files, one scan each (.ply, .pcd, .las, .laz, .xyz or
+    /// .txt; without extension, by content; `-` reads standard input).
     #[arg(long, num_args = 1.., value_name = "FILE")]
     points: Vec<PathBuf>,
     /// Sensor pose of every --points file.
@@ -52,13 +64,16 @@ pub struct Args {
     /// Text file with one pose `x y z roll pitch yaw` per --points file.
     #[arg(long, requires = "points")]
     trajectory: Option<PathBuf>,
-    /// Output map, `.bt` or `.ot`.
+    /// Output map: `.bt` (maximum likelihood, as graph2tree writes it),
+    /// `.ot` (full tree) or `.olm` (full tree, memory-mapped format).
     #[arg(short, long)]
     output: PathBuf,
-    /// Voxel edge length in metres.
+    /// Voxel edge length in metres; the map spans ±32768 voxels around the
+    /// origin on each axis.
     #[arg(long, default_value_t = 0.1)]
     res: f64,
-    /// Cut rays at this range (metres); their end points are not marked occupied.
+    /// Cut rays at this range (metres, positive; leave it out for no limit,
+    /// graph2tree's `-m -1`); their end points are not marked occupied.
     #[arg(long)]
     max_range: Option<f64>,
     /// Merge end points per voxel before casting rays.
@@ -67,7 +82,7 @@ pub struct Args {
     /// Update ray by ray (OctoMap's insertPointCloudRays) instead of per-scan key sets.
     #[arg(long)]
     simple: bool,
-    /// Only insert the first N scans.
+    /// Only insert the first N scans (at least 1).
     #[arg(long, value_name = "N")]
     scans: Option<usize>,
     /// Miss and hit probabilities.
@@ -79,7 +94,7 @@ pub struct Args {
     /// Convert to maximum likelihood and prune after each scan.
     #[arg(long)]
     compress_ml: bool,
-    /// Threads for ray casting (default: all cores).
+    /// Threads for ray casting (1 to 1024; default: all cores).
     #[arg(long)]
     threads: Option<usize>,
     /// End points outside the map: `octomap` (what OctoMap does: no key, no
@@ -159,9 +174,75 @@ fn print_statistics(title: &str, s: &serde_json::Value) {
     println!("Size: {} x {} x {} m^3\n", m[0], m[1], m[2]);
 }
 
-/// The `--points` files as a scan graph, each with its pose, and with
-/// --color each scan's colours.
-fn point_files(a: &Args) -> Result<(ScanGraph, Vec<input::Colors>)> {
+/// Smallest `--res`: half a voxel must be a normal float. Voxel centres
+/// are floats (OctoMap's point3d) half a voxel from the faces; with a
+/// normal float for that half, every centre of the ±32768 voxels has 17
+/// significant bits to spare and keys round-trip through centres at any
+/// scale, so float precision never limits the map above this (each voxel
+/// holds at least 256 floats even at the map's edge); below it, it does.
+const MIN_RES: f64 = 2.0 * f32::MIN_POSITIVE as f64;
+
+/// Largest `--res`: the map's edge, 32768 voxels from its centre, must be
+/// a finite float.
+const MAX_RES: f64 = f32::MAX as f64 / 32768.0;
+
+/// Most `--threads`: more only share the cores, each with its stack.
+const MAX_THREADS: usize = 1024;
+
+/// Checks a `--res` value (see [`MIN_RES`], [`MAX_RES`]).
+pub(super) fn resolution_arg(res: f64) -> Result<f64> {
+    if !(res.is_finite() && res > 0.0) {
+        bail!("--res must be a positive finite resolution in metres, got {res:?}");
+    }
+    if res < MIN_RES {
+        bail!("--res {res:?} is below the smallest usable resolution {MIN_RES:?} m (2^-125: half a voxel must be a normal float)");
+    }
+    if res > MAX_RES {
+        bail!("--res {res:?} is above the largest usable resolution {MAX_RES:?} m (the map's edge, 32768 voxels out, must be a finite float)");
+    }
+    Ok(res)
+}
+
+/// Checks a `--max-range` value: positive and finite, as for `raycast`;
+/// no limit is said by leaving the flag out (graph2tree's `-m -1` and
+/// OctoMap's negative `maxrange`).
+pub(super) fn max_range_arg(range: Option<f64>) -> Result<Option<f64>> {
+    match range {
+        Some(r) if !(r.is_finite() && r > 0.0) => {
+            bail!("--max-range must be a positive finite number of metres, got {r} (leave it out for no limit)")
+        }
+        r => Ok(r),
+    }
+}
+
+/// Checks a `--scans` value: at least one scan.
+pub(super) fn scans_arg(scans: Option<usize>) -> Result<Option<usize>> {
+    if scans == Some(0) {
+        bail!("--scans must be at least 1 (leave it out for every scan)");
+    }
+    Ok(scans)
+}
+
+/// A warning on stderr, in the form of the errors.
+fn warn(message: &str) {
+    eprintln!("octolinear: warning: {message}");
+}
+
+/// One scan ready to insert: world-frame points, sensor origin, and with
+/// --color the points' colours.
+struct Scan {
+    id: u32,
+    points: PointCloud,
+    origin: Point3,
+    colors: Option<input::Colors>,
+}
+
+/// Scans, read one at a time as insertion asks for them.
+type Scans<'a> = Box<dyn Iterator<Item = Result<Scan>> + Send + 'a>;
+
+/// The `--points` files as scans, each with its pose, each read when its
+/// turn comes.
+fn point_files(a: &Args) -> Result<Scans<'_>> {
     let poses = match (&a.pose, &a.trajectory) {
         (Some(p), _) => vec![input::pose(p)?; a.points.len()],
         (None, Some(t)) => {
@@ -173,22 +254,25 @@ fn point_files(a: &Args) -> Result<(ScanGraph, Vec<input::Colors>)> {
         }
         (None, None) => vec![Pose6D::IDENTITY; a.points.len()],
     };
-    let mut g = ScanGraph::new();
-    let mut colors = Vec::new();
-    for (path, pose) in a.points.iter().zip(poses) {
+    if a.points.iter().filter(|p| p.as_os_str() == "-").count() > 1 {
+        bail!("--points names standard input (-) more than once");
+    }
+    let scans = a.points.iter().zip(poses).enumerate().map(|(i, (path, pose))| {
         let scan = input::read_scan(path, a.color)?;
-        if a.color {
-            let c = scan.colors.with_context(|| {
+        let colors = if a.color {
+            Some(scan.colors.with_context(|| {
                 format!(
                     "{}: --color needs colours (PLY red/green/blue, PCD rgb or rgba), this file has none",
-                    path.display()
+                    input::name(path)
                 )
-            })?;
-            colors.push(c);
-        }
-        g.add_node(scan.cloud, pose);
-    }
-    Ok((g, colors))
+            })?)
+        } else {
+            None
+        };
+        let (points, origin) = graph2tree_transform(&pose, &scan.cloud);
+        Ok(Scan { id: i as u32, points, origin, colors })
+    });
+    Ok(Box::new(scans))
 }
 
 /// `integrateNodeColor(x, y, z, r, g, b)` for every point, in order: points
@@ -201,6 +285,101 @@ fn integrate_colors(tree: &mut OccupancyTree, points: &[Point3], colors: &[[u8; 
     }
 }
 
+/// Inserts scan by scan, each applied before the next is read: OctoMap's
+/// insertPointCloudRays with `simple`, else insertPointCloud; colours are
+/// blended in after each scan's occupancy.
+fn insert_one_by_one(
+    tree: &mut OccupancyTree,
+    scans: impl Iterator<Item = Scan>,
+    simple: bool,
+    opts: &ScanOptions,
+    mut after_each: impl FnMut(&mut OccupancyTree, ScanReport),
+) -> Result<()> {
+    for scan in scans {
+        let report = if simple {
+            tree.insert_point_cloud_rays(&scan.points.points, scan.origin, InnerNodes::Update)
+        } else {
+            tree.insert_point_cloud(&scan.points.points, scan.origin, opts)
+                .with_context(|| format!("scan {}", scan.id))?
+        };
+        if let Some(c) = &scan.colors {
+            integrate_colors(tree, &scan.points.points, c);
+        }
+        after_each(tree, report);
+    }
+    Ok(())
+}
+
+/// What went into the map, counted as the scans stream past.
+#[derive(Default)]
+struct Tally {
+    /// Ids of the scans handed to insertion, in order.
+    ids: Vec<u32>,
+    points: usize,
+    /// Finite points without a key in the map.
+    out_of_map: usize,
+    /// Points with a NaN or infinite coordinate (never inserted).
+    non_finite: usize,
+}
+
+impl Tally {
+    fn count(&mut self, scan: &Scan, keys: &KeySpace) {
+        self.ids.push(scan.id);
+        self.points += scan.points.len();
+        for &p in &scan.points.points {
+            if !p.is_finite() {
+                self.non_finite += 1;
+            } else if keys.key(p).is_err() {
+                self.out_of_map += 1;
+            }
+        }
+    }
+
+    /// Warnings for what the map lacks: no scans, no points, points that
+    /// could not be placed.
+    fn warn(&self, a: &Args, input: &str, announced: usize) {
+        let scans = self.ids.len();
+        if let Some(asked) = a.scans.filter(|&s| s > announced) {
+            warn(&format!("--scans {asked} asks for more than the {announced} scans of {input}; all were inserted"));
+        }
+        if scans == 0 {
+            warn(&format!("{input} holds no scans: the map is empty"));
+        } else if self.points == 0 {
+            warn(&format!("the {scans} scans of {input} hold no points: the map is empty"));
+        }
+        if self.non_finite > 0 {
+            warn(&format!(
+                "{} of {} points have NaN or infinite coordinates and were skipped",
+                self.non_finite, self.points
+            ));
+        }
+        if self.out_of_map > 0 {
+            let what = match a.out_of_map {
+                OutOfMapArg::Octomap if a.discretize => {
+                    "wrapped around to the other side of the map, as OctoMap's discretized insertion does"
+                }
+                OutOfMapArg::Octomap => "were not marked and cast no ray (beyond a --max-range cut), as in OctoMap",
+                OutOfMapArg::Skip | OutOfMapArg::Error => "were skipped (--out-of-map skip)",
+            };
+            warn(&format!(
+                "{} of {} points lie outside the map, which spans ±{:?} m at --res {:?}; they {what}",
+                self.out_of_map,
+                self.points,
+                32768.0 * a.res,
+                a.res
+            ));
+        }
+    }
+}
+
+/// The input as messages name it.
+fn input_name(a: &Args) -> String {
+    match &a.input {
+        Some(path) => input::name(path),
+        None => format!("{} point files", a.points.len()),
+    }
+}
+
 pub fn run(a: Args) -> Result<()> {
     let format = MapFormat::of(&a.output)?;
     let sensor = sensor_model(&a)?;
@@ -210,31 +389,31 @@ pub fn run(a: Args) -> Result<()> {
     if a.color && format == MapFormat::Bt {
         bail!("{}: a colour map needs .ot or .olm output (.bt holds no colours)", a.output.display());
     }
+    resolution_arg(a.res)?;
+    let max_range = max_range_arg(a.max_range)?;
+    scans_arg(a.scans)?;
+    if a.threads.is_some_and(|t| !(1..=MAX_THREADS).contains(&t)) {
+        bail!("--threads must be between 1 and {MAX_THREADS}, got {}", a.threads.unwrap_or_default());
+    }
     let kind = if a.color { NodeKind::Color } else { NodeKind::Plain };
     let mut tree = OccupancyTree::with_kind(a.res, sensor, kind)?;
-    if a.threads == Some(0) {
-        bail!("--threads must be at least 1");
-    }
-    if let Some(r) = a.max_range {
-        if !r.is_finite() {
-            bail!("--max-range must be a finite number, got {r}");
+    let input = input_name(&a);
+    let mut graph = a.input.as_deref().map(input::open_graph).transpose()?;
+    let (announced, source): (usize, Scans<'_>) = match graph.as_mut() {
+        Some(reader) => {
+            let announced = reader.announced() as usize;
+            let scans = reader.by_ref().map(|node| {
+                let node = node.with_context(|| format!("cannot read {input}"))?;
+                let (points, origin) = node.graph2tree();
+                Ok(Scan { id: node.id, points, origin, colors: None })
+            });
+            (announced, Box::new(scans))
         }
-    }
-    let (mut g, mut colors, input) = match &a.input {
-        Some(input) => (
-            graph::read_file(input).with_context(|| format!("cannot read {}", input.display()))?,
-            Vec::new(),
-            input.display().to_string(),
-        ),
-        None => {
-            let (g, colors) = point_files(&a)?;
-            (g, colors, format!("{} point files", a.points.len()))
-        }
+        None => (a.points.len(), point_files(&a)?),
     };
-    let n = a.scans.unwrap_or(g.nodes.len()).min(g.nodes.len());
-    let points: usize = g.nodes[..n].iter().map(|s| s.scan.points.len()).sum();
+    let n = a.scans.map_or(announced, |s| s.min(announced));
     let opts = ScanOptions {
-        max_range: a.max_range,
+        max_range,
         discretize: a.discretize,
         inner: InnerNodes::Update,
         bbx: None,
@@ -246,87 +425,103 @@ pub fn run(a: Args) -> Result<()> {
         threads: a.threads,
     };
     let bar = progress(n as u64, "inserting scans");
-    let (mut non_finite, mut skipped_out_of_map, start) = (0, 0, Instant::now());
-    g.nodes.truncate(n);
-    colors.truncate(n);
-    let mut after_each = |tree: &mut OccupancyTree, report: ScanReport| {
-        non_finite += report.non_finite;
-        skipped_out_of_map += report.out_of_map;
+    let (keys, mut tally, mut failure, start) = (KeySpace::new(a.res), Tally::default(), None, Instant::now());
+    let mut reading = Duration::ZERO;
+    let after_each = |tree: &mut OccupancyTree, _: ScanReport| {
         if a.compress_ml {
             tree.to_max_likelihood();
             tree.prune();
         }
         bar.inc(1);
     };
-    if a.simple || a.color {
-        // scan by scan: colours are blended in after each scan's occupancy
-        let mut colors = colors.into_iter();
-        for mut node in std::mem::take(&mut g.nodes) {
-            let (cloud, origin) = node.graph2tree();
-            node.scan = Default::default(); // release each scan once transformed
-            let report = if a.simple {
-                tree.insert_point_cloud_rays(&cloud.points, origin, InnerNodes::Update)
-            } else {
-                tree.insert_point_cloud(&cloud.points, origin, &opts).with_context(|| format!("scan {}", node.id))?
-            };
-            if let Some(c) = colors.next() {
-                integrate_colors(&mut tree, &cloud.points, &c);
-            }
-            after_each(&mut tree, report);
+    // the first read error ends the scans; it is reported once those before
+    // it are in (nothing is written then)
+    let mut source = source.take(n);
+    let (failure_slot, counted, read_time) = (&mut failure, &mut tally, &mut reading);
+    let scans = std::iter::from_fn(move || {
+        if failure_slot.is_some() {
+            return None;
         }
+        let started = Instant::now();
+        let scan = source.next();
+        *read_time += started.elapsed();
+        match scan? {
+            Ok(scan) => {
+                counted.count(&scan, &keys);
+                Some(scan)
+            }
+            Err(e) => {
+                *failure_slot = Some(e);
+                None
+            }
+        }
+    });
+    let inserted = if a.simple || a.color {
+        insert_one_by_one(&mut tree, scans, a.simple, &opts, after_each)
     } else {
-        // scan by scan, each released once transformed; with several
-        // threads the following scans are cast while one is applied
-        let ids: Vec<_> = g.nodes.iter().map(|node| node.id).collect();
-        let scans = std::mem::take(&mut g.nodes).into_iter().map(|node| {
-            let (cloud, origin) = node.graph2tree();
-            (cloud.points, origin)
-        });
-        tree.insert_point_clouds(scans, &opts, after_each)
-            .map_err(|(i, e)| anyhow::Error::new(e).context(format!("scan {}", ids[i])))?;
+        // with several threads the following scans are cast while one is applied
+        tree.insert_point_clouds(scans.map(|scan| (scan.points.points, scan.origin)), &opts, after_each)
+            .map_err(|(i, e)| anyhow::Error::new(e).context(format!("scan {}", tally.ids[i])))
+    };
+    bar.finish_and_clear();
+    // a scan refused comes before one that could not be read
+    inserted?;
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    if let Some(reader) = graph.filter(|_| n == announced) {
+        // every scan was taken: the rest of the file must be well-formed too
+        reader.edges().with_context(|| format!("cannot read {input}"))?;
     }
     if a.color {
         // inner nodes: maximum occupancy and average colour of their children
+        let phase = spinner("updating inner nodes");
         tree.update_inner_occupancy();
+        phase.finish_and_clear();
     }
-    let seconds = start.elapsed().as_secs_f64();
-    bar.finish_and_clear();
+    let (seconds, read_seconds) = (start.elapsed().as_secs_f64(), reading.as_secs_f64());
+    tally.warn(&a, &input, announced);
+    let (scans, points) = (tally.ids.len(), tally.points);
     // one tree throughout (no copies): peak memory is the tree, compacted
     // in place, plus a scan's key sets
+    let phase = spinner("compacting the tree");
     tree.compact();
+    phase.set_message("counting nodes");
     let full = statistics(&tree);
     if format != MapFormat::Bt {
+        phase.set_message(format!("writing {}", a.output.display()));
         save_map(&tree, &a.output)?;
     }
+    phase.set_message("converting to maximum likelihood");
     tree.to_max_likelihood();
+    phase.set_message("pruning");
     tree.prune();
+    phase.set_message("compacting the tree");
     tree.compact();
+    phase.set_message("counting nodes");
     let ml_stats = statistics(&tree);
     if format == MapFormat::Bt {
         // already maximum likelihood and pruned: what writeBinary writes
+        phase.set_message(format!("writing {}", a.output.display()));
         write_atomically(&a.output, |w| bt::write_const(&tree, w))
             .with_context(|| format!("cannot write {}", a.output.display()))?;
     }
+    phase.finish_and_clear();
     if a.json {
         let out = serde_json::json!({
             "input": input, "output": a.output, "tree_type": ot::TreeKind::of(kind).id(),
-            "scans": n, "points": points,
-            "non_finite_points_skipped": non_finite,
-            "out_of_map_points_skipped": skipped_out_of_map,
-            "insert_seconds": seconds,
+            "scans": scans, "points": points,
+            "non_finite_points_skipped": tally.non_finite,
+            "out_of_map_points": tally.out_of_map,
+            "insert_seconds": seconds, "read_seconds": read_seconds,
             "points_per_second": points as f64 / seconds.max(1e-12),
             "tree": full, "max_likelihood_tree": ml_stats,
         });
         println!("{out}");
     } else {
-        println!("Data points in graph: {points} ({n} scans)");
-        if non_finite > 0 {
-            println!("Skipped {non_finite} points with NaN or infinite coordinates");
-        }
-        if skipped_out_of_map > 0 {
-            println!("Skipped {skipped_out_of_map} points outside the map");
-        }
+        println!("Data points in graph: {points} ({scans} scans)");
         println!("time to insert scans: {seconds} sec");
+        println!("time to read them, included above (scans are read as they are inserted): {read_seconds} sec");
         println!("time to insert 100.000 points took: {} sec (avg)\n", seconds / (points as f64 / 100000.0));
         print_statistics("Pruned tree (lossless compression)", &full);
         print_statistics("Pruned max-likelihood tree (lossy compression)", &ml_stats);

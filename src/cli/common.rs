@@ -168,6 +168,21 @@ pub fn progress(len: u64, what: &str) -> indicatif::ProgressBar {
     bar
 }
 
+/// A spinner naming the phase under way (change it with `set_message`)
+/// and the time since it appeared, on a terminal; hidden otherwise, so
+/// that piped runs stay quiet. Dropped (on an error too), it clears its line.
+pub fn spinner(what: &str) -> indicatif::ProgressBar {
+    use std::io::IsTerminal;
+    if !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new_spinner().with_finish(indicatif::ProgressFinish::AndClear);
+    bar.set_style(indicatif::ProgressStyle::with_template("{spinner} {msg} ({elapsed})").expect("valid template"));
+    bar.set_message(what.to_string());
+    bar.enable_steady_tick(std::time::Duration::from_millis(100));
+    bar
+}
+
 /// Three finite numbers from a clap `num_args = 3` flag, as a float point.
 pub fn point_arg(v: &[f64], flag: &str) -> Result<octolinear::Point3> {
     if v.len() != 3 || v.iter().any(|c| !c.is_finite()) {
@@ -176,12 +191,12 @@ pub fn point_arg(v: &[f64], flag: &str) -> Result<octolinear::Point3> {
     Ok(octolinear::Point3::new(v[0] as f32, v[1] as f32, v[2] as f32))
 }
 
-/// Checks a `--depth` value (1..=16; 0 means 16 as in OctoMap's iterators).
+/// Checks a `--depth` value: 1 (the root's children) to 16 (voxels).
 pub fn depth_arg(d: u8) -> Result<u8> {
-    if d > 16 {
+    if !(1..=16).contains(&d) {
         bail!("--depth must be between 1 and 16, got {d}");
     }
-    Ok(if d == 0 { 16 } else { d })
+    Ok(d)
 }
 
 /// Writes a file atomically through `write`, with the path in the error.

@@ -2,9 +2,11 @@
 //! voxels a scan observes (free along rays, occupied at end points) a map
 //! classifies the same way (OctoMap paper, Sect. 5.3).
 
-use super::common::load_map;
+use super::build::{max_range_arg, resolution_arg, scans_arg};
+use super::common::{load_map, spinner};
+use super::input;
 use anyhow::{bail, Context, Result};
-use octolinear::formats::graph::{self, ScanGraph};
+use octolinear::formats::graph::ScanGraph;
 use octolinear::scan::OutOfMap;
 use octolinear::{InnerNodes, OccupancyTree, ScanOptions};
 use std::path::PathBuf;
@@ -21,7 +23,7 @@ use std::path::PathBuf;
 /// (default 5) every K-th scan is left out of the map and evaluated; with
 /// `--folds K` each of the K folds is held out in turn (cross-validation).
 /// With two inputs (MAP SCANS.graph), the given map is evaluated on every
-/// scan.
+/// scan. The `.graph` may be `-` for standard input.
 ///
 /// Example: octolinear eval map.bt scans.graph --json
 ///
@@ -29,22 +31,26 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub struct Args {
-    /// `MAP SCANS.graph`, or only `SCANS.graph` to build and hold out.
+    /// `MAP SCANS.graph`, or only `SCANS.graph` to build and hold out
+    /// (`-` reads the scans from standard input).
     #[arg(num_args = 1..=2, required = true, value_names = ["MAP", "SCANS"])]
     inputs: Vec<PathBuf>,
-    /// Voxel size when building (metres).
+    /// Voxel size when building (metres; as for `build`).
     #[arg(long, default_value_t = 0.1)]
     res: f64,
-    /// Cut rays at this range (metres), when building and evaluating.
+    /// Cut rays at this range (metres, positive; leave it out for no
+    /// limit), when building and evaluating.
     #[arg(long)]
     max_range: Option<f64>,
-    /// Only use the first N scans.
+    /// Only use the first N scans (at least 1).
     #[arg(long, value_name = "N")]
     scans: Option<usize>,
-    /// Hold out every K-th scan (eval_octree_accuracy uses 5).
+    /// Hold out every K-th scan (eval_octree_accuracy uses 5); K from 2 to
+    /// the number of scans.
     #[arg(long, value_name = "K", conflicts_with = "folds")]
     holdout: Option<usize>,
-    /// K-fold cross-validation: build K maps, each without one fold.
+    /// K-fold cross-validation: build K maps, each without one fold; K from
+    /// 2 to the number of scans.
     #[arg(long, value_name = "K")]
     folds: Option<usize>,
     /// One JSON object instead of text.
@@ -162,20 +168,26 @@ fn print(label: &str, a: &Accuracy) {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    if let Some(r) = a.max_range {
-        if !r.is_finite() {
-            bail!("--max-range must be a finite number, got {r}");
-        }
+    let max_range = max_range_arg(a.max_range)?;
+    scans_arg(a.scans)?;
+    if a.inputs.len() == 2 && (a.holdout.is_some() || a.folds.is_some()) {
+        bail!("--holdout and --folds build their own map: give only the .graph file");
+    }
+    if a.inputs.len() == 1 {
+        resolution_arg(a.res)?;
     }
     let graph_path = a.inputs.last().expect("one input at least");
-    let g = graph::read_file(graph_path).with_context(|| format!("cannot read {}", graph_path.display()))?;
+    let phase = spinner(&format!("reading {}", input::name(graph_path)));
+    let g = input::open_graph(graph_path)?
+        .into_graph()
+        .with_context(|| format!("cannot read {}", input::name(graph_path)))?;
     let n = a.scans.unwrap_or(g.nodes.len()).min(g.nodes.len());
     if a.inputs.len() == 2 {
-        if a.holdout.is_some() || a.folds.is_some() {
-            bail!("--holdout and --folds build their own map: give only the .graph file");
-        }
+        phase.set_message(format!("loading {}", a.inputs[0].display()));
         let tree = load_map(&a.inputs[0])?.tree;
-        let acc = evaluate(&tree, &g, n, a.max_range, |_| true)?;
+        phase.set_message(format!("evaluating {n} scans"));
+        let acc = evaluate(&tree, &g, n, max_range, |_| true)?;
+        phase.finish_and_clear();
         if a.json {
             println!("{}", acc.json());
         } else {
@@ -183,16 +195,17 @@ pub fn run(a: Args) -> Result<()> {
         }
         return Ok(());
     }
-    if !(a.res.is_finite() && a.res > 0.0) {
-        bail!("--res must be a positive finite number, got {}", a.res);
-    }
-    let (k, folds) = match (a.holdout, a.folds) {
-        (_, Some(k)) => (k, k),
-        (Some(k), None) => (k, 1),
-        (None, None) => (5, 1),
+    let (k, folds, flag) = match (a.holdout, a.folds) {
+        (_, Some(k)) => (k, k, "--folds"),
+        (Some(k), None) => (k, 1, "--holdout"),
+        (None, None) => (5, 1, "the default --holdout"),
     };
     if k < 2 {
         bail!("--holdout / --folds must be at least 2, got {k}");
+    }
+    if k > n {
+        // scan k (1-based) is the first held out by fold 0
+        bail!("{flag} {k} needs at least {k} scans, only {n} are used (a held-out set would be empty)");
     }
     // fold f holds out the scans whose 1-based number is f modulo k
     // (eval_octree_accuracy's held-out scans are fold 0)
@@ -201,9 +214,12 @@ pub fn run(a: Args) -> Result<()> {
         let held_out = |i: usize| (i + 1) % k == f;
         // eval_octree_accuracy expands the tree first; lookups give the
         // same answers on the pruned tree, so we skip that
-        let tree = build(&g, n, a.res, a.max_range, |i| !held_out(i))?;
-        results.push(evaluate(&tree, &g, n, a.max_range, held_out)?);
+        phase.set_message(format!("fold {}/{folds}: building the map", f + 1));
+        let tree = build(&g, n, a.res, max_range, |i| !held_out(i))?;
+        phase.set_message(format!("fold {}/{folds}: evaluating", f + 1));
+        results.push(evaluate(&tree, &g, n, max_range, held_out)?);
     }
+    phase.finish_and_clear();
     let mut total = Accuracy::default();
     for r in &results {
         total.add(r);

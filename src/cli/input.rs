@@ -1,43 +1,142 @@
-//! Point cloud files for `build --points`: PLY (ASCII, binary little or big
+//! Inputs of `build` and `eval`: `.graph` files read scan by scan, and
+//! point cloud files for `build --points`: PLY (ASCII, binary little or big
 //! endian), PCD (ascii, binary, binary_compressed), LAS/LAZ and plain xyz,
 //! each with a sensor pose. Colours (for `build --color`) come from PLY and
-//! PCD files (the readers in `octolinear::formats` say how).
+//! PCD files (the readers in `octolinear::formats` say how). `-` stands for
+//! standard input; pipes, FIFOs and `/dev/stdin` are read as streams.
 
 use anyhow::{bail, Context, Result};
+use octolinear::formats::graph::{self, ScanReader};
 use octolinear::formats::{pcd, ply, xyz, ColoredCloud as Scan};
 use octolinear::{Point3, PointCloud, Pose6D};
+use std::io::{BufReader, Read, Seek};
 use std::path::Path;
 
 /// An RGB colour per point.
 pub type Colors = Vec<[u8; 3]>;
 
-/// Reads the points of a file, by extension; with `colors`, also the
-/// points' colours where the format has them (PLY, PCD).
+/// How an input is named in messages: `-` is standard input.
+pub fn name(path: &Path) -> String {
+    if is_stdin(path) {
+        "standard input".to_string()
+    } else {
+        path.display().to_string()
+    }
+}
+
+fn is_stdin(path: &Path) -> bool {
+    path.as_os_str() == "-"
+}
+
+/// A `.graph` read scan by scan from a file, pipe or FIFO, or from standard
+/// input for `-`. Only a regular file's counts are checked against its
+/// length before reading; the others are checked as their data arrives.
+pub fn open_graph(path: &Path) -> Result<ScanReader<Box<dyn Read + Send>>> {
+    let (reader, len): (Box<dyn Read + Send>, _) = if is_stdin(path) {
+        (Box::new(BufReader::with_capacity(1 << 16, std::io::stdin())), None)
+    } else {
+        let file = std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
+        let len = graph::stream_len(&file).with_context(|| format!("cannot read {}", path.display()))?;
+        (Box::new(BufReader::with_capacity(1 << 16, file)), len)
+    };
+    ScanReader::with_len(reader, len).with_context(|| format!("cannot read {}", name(path)))
+}
+
+/// Point formats, by extension or by content.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum PointFormat {
+    Ply,
+    Pcd,
+    Las,
+    Xyz,
+}
+
+/// The format of a file's first bytes: the PLY magic, the LAS signature,
+/// a PCD header keyword after `#` comment lines; anything else is xyz text.
+fn sniff(bytes: &[u8]) -> PointFormat {
+    if bytes.starts_with(b"ply\n") || bytes.starts_with(b"ply\r\n") {
+        return PointFormat::Ply;
+    }
+    if bytes.starts_with(b"LASF") {
+        return PointFormat::Las;
+    }
+    let first = bytes.split(|&b| b == b'\n').map(|l| l.trim_ascii()).find(|l| !l.is_empty() && l[0] != b'#');
+    let keyword = first.and_then(|l| l.split(|b| b.is_ascii_whitespace()).next()).unwrap_or_default();
+    const PCD_KEYS: [&[u8]; 10] =
+        [b"VERSION", b"FIELDS", b"SIZE", b"TYPE", b"COUNT", b"WIDTH", b"HEIGHT", b"VIEWPOINT", b"POINTS", b"DATA"];
+    if PCD_KEYS.contains(&keyword) {
+        PointFormat::Pcd
+    } else {
+        PointFormat::Xyz
+    }
+}
+
+/// Reads the points of a `--points` argument; with `colors`, also the
+/// points' colours where the format has them (PLY, PCD). The format comes
+/// from the extension; a name without one (`-`, `/dev/stdin`, a `<(...)`
+/// pipe) is recognised by its first bytes (see [`sniff`]).
 pub fn read_scan(path: &Path, colors: bool) -> Result<Scan> {
-    let ext = super::common::extension(path, &["ply", "pcd", "las", "laz", "xyz", "txt"])?;
-    let ctx = || format!("{}: not a valid .{ext} file", path.display());
+    let ext = if path.extension().is_some() && !is_stdin(path) {
+        Some(super::common::extension(path, &["ply", "pcd", "las", "laz", "xyz", "txt"])?)
+    } else {
+        None
+    };
+    let format = ext.as_deref().map(|e| match e {
+        "ply" => PointFormat::Ply,
+        "pcd" => PointFormat::Pcd,
+        "las" | "laz" => PointFormat::Las,
+        _ => PointFormat::Xyz,
+    });
+    let name = name(path);
+    let ctx = |format: PointFormat| {
+        let described = match (&ext, format) {
+            (Some(e), _) => format!(".{e}"),
+            (None, PointFormat::Ply) => "PLY".into(),
+            (None, PointFormat::Pcd) => "PCD".into(),
+            (None, PointFormat::Las) => "LAS/LAZ".into(),
+            (None, PointFormat::Xyz) => "xyz".into(),
+        };
+        format!("{name}: not a valid {described} file")
+    };
     let plain = |cloud| Scan { cloud, colors: None };
-    match ext.as_str() {
-        "las" | "laz" => return without_panics(|| read_las(path)).map(plain).with_context(ctx),
-        "xyz" | "txt" => {
-            let f = std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
-            return xyz::read(std::io::BufReader::new(f)).map(plain).with_context(ctx);
+    // regular LAS/LAZ files are read in batches, text files line by line;
+    // everything else is read whole, which pipes allow
+    let regular = std::fs::metadata(path).is_ok_and(|m| m.is_file());
+    match format {
+        Some(PointFormat::Las) if regular => {
+            let las = without_panics(|| read_las(std::fs::File::open(path)?));
+            return las.map(plain).with_context(|| ctx(PointFormat::Las));
+        }
+        Some(PointFormat::Xyz) => {
+            let f = std::fs::File::open(path).with_context(|| format!("cannot open {name}"))?;
+            let cloud = xyz::read(BufReader::with_capacity(1 << 16, f));
+            return cloud.map(plain).with_context(|| ctx(PointFormat::Xyz));
         }
         _ => {}
     }
-    let bytes = std::fs::read(path).with_context(|| format!("cannot open {}", path.display()))?;
-    match ext.as_str() {
-        "ply" => ply::read(&bytes, colors).map_err(anyhow::Error::from),
-        _ => pcd::read(&bytes, colors).map_err(anyhow::Error::from),
+    let bytes = if is_stdin(path) {
+        let mut bytes = Vec::new();
+        std::io::stdin().read_to_end(&mut bytes).context("cannot read standard input")?;
+        bytes
+    } else {
+        std::fs::read(path).with_context(|| format!("cannot open {name}"))?
+    };
+    let format = format.unwrap_or_else(|| sniff(&bytes));
+    match format {
+        PointFormat::Ply => ply::read(&bytes, colors).map_err(anyhow::Error::from),
+        PointFormat::Pcd => pcd::read(&bytes, colors).map_err(anyhow::Error::from),
+        PointFormat::Las => without_panics(|| read_las(std::io::Cursor::new(bytes))).map(plain),
+        PointFormat::Xyz => xyz::read(&bytes[..]).map(plain).map_err(anyhow::Error::from),
     }
-    .with_context(ctx)
+    .with_context(|| ctx(format))
 }
 
 // ----- LAS / LAZ -----------------------------------------------------------
 
-fn read_las(path: &Path) -> Result<PointCloud> {
-    check_laz_chunk_table(path)?;
-    let mut reader = las::Reader::from_path(path)?;
+fn read_las(mut source: impl Read + Seek + Send + Sync + 'static) -> Result<PointCloud> {
+    check_laz_chunk_table(&mut source)?;
+    source.rewind()?;
+    let mut reader = las::Reader::new(BufReader::with_capacity(1 << 16, source))?;
     // in batches: `read_all` reserves what the header's point count says,
     // which a damaged header makes terabytes (an allocation failure aborts)
     let mut batch = las::PointDataBuilder::new().for_header(reader.header()).build();
@@ -73,10 +172,9 @@ fn without_panics<T>(read: impl FnOnce() -> Result<T>) -> Result<T> {
 /// 8 bytes of the point data, or the file's last 8 bytes when those do not
 /// point past them. Other files, and files too short to say, are left to
 /// the las crate's own checks.
-fn check_laz_chunk_table(path: &Path) -> Result<()> {
-    use std::io::{Read, Seek, SeekFrom};
-    let mut f = std::fs::File::open(path)?;
-    let len = f.metadata()?.len();
+fn check_laz_chunk_table(f: &mut (impl Read + Seek)) -> Result<()> {
+    use std::io::SeekFrom;
+    let len = f.seek(SeekFrom::End(0))?;
     let mut at = |offset: u64, buf: &mut [u8]| -> Option<()> {
         f.seek(SeekFrom::Start(offset)).ok()?;
         f.read_exact(buf).ok()
@@ -130,4 +228,29 @@ pub fn read_trajectory(path: &Path) -> Result<Vec<Pose6D>> {
         poses.push(pose(&v).with_context(|| format!("{} line {}", path.display(), n + 1))?);
     }
     Ok(poses)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn formats_are_recognised_by_their_first_bytes() {
+        let sniffed = |text: &[u8]| match sniff(text) {
+            PointFormat::Ply => "ply",
+            PointFormat::Pcd => "pcd",
+            PointFormat::Las => "las",
+            PointFormat::Xyz => "xyz",
+        };
+        assert_eq!(sniffed(b"ply\nformat ascii 1.0\n"), "ply");
+        assert_eq!(sniffed(b"ply\r\nformat ascii 1.0\r\n"), "ply");
+        assert_eq!(sniffed(b"LASF\x00\x00"), "las");
+        assert_eq!(sniffed(b"# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z\n"), "pcd");
+        assert_eq!(sniffed(b"FIELDS x y z\n"), "pcd");
+        assert_eq!(sniffed(b"# x y z\n\n1 2 3\n"), "xyz");
+        assert_eq!(sniffed(b"1,2,3\n"), "xyz");
+        assert_eq!(sniffed(b""), "xyz");
+        // a text file that merely mentions a keyword later is still xyz
+        assert_eq!(sniffed(b"1 2 3\nVERSION\n"), "xyz");
+    }
 }

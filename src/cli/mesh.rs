@@ -22,7 +22,7 @@ pub struct Args {
     /// Output mesh (.ply).
     #[arg(short, long)]
     output: PathBuf,
-    /// Cubes of this depth (16 = full resolution).
+    /// Cubes of this depth (1 to 16: 16 = full resolution, lower = coarser).
     #[arg(long, default_value_t = 16)]
     depth: u8,
     /// Text PLY instead of binary little endian.

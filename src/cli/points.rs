@@ -26,7 +26,7 @@ pub struct Args {
     /// Free voxels instead of occupied ones.
     #[arg(long)]
     free: bool,
-    /// Tree depth of the voxels (16 = full resolution, lower = coarser;
+    /// Tree depth of the voxels (1 to 16: 16 = full resolution, lower = coarser;
     /// a coarse node is occupied when any voxel below it is).
     #[arg(long, default_value_t = 16)]
     depth: u8,

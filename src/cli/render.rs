@@ -42,16 +42,17 @@ pub struct Args {
     /// Vertical field of view in degrees (perspective view).
     #[arg(long, default_value_t = 60.0)]
     fov: f64,
-    /// Image width in pixels.
+    /// Image width in pixels (1 to 16384; width × height at most 2^26).
     #[arg(long, default_value_t = 800)]
     width: u32,
-    /// Image height in pixels (top view default: from the map's aspect).
+    /// Image height in pixels (1 to 16384; default: 3/4 of the width for
+    /// the perspective view, from the map's aspect for the top view).
     #[arg(long)]
     height: Option<u32>,
     /// Tint free space (top view).
     #[arg(long)]
     free: bool,
-    /// Draw nodes of this depth (16 = full resolution; lower = coarser).
+    /// Draw nodes of this depth (1 to 16: 16 = full resolution, lower = coarser).
     #[arg(long, default_value_t = 16)]
     depth: u8,
 }
@@ -59,6 +60,9 @@ pub struct Args {
 const UNKNOWN: [u8; 3] = [16, 16, 16];
 const FREE: [u8; 3] = [70, 84, 110];
 const MAX_SIDE: u32 = 16384;
+/// Pixels of an image: the top view holds 12 bytes a pixel while drawing
+/// (768 MiB at this limit, 8192 x 8192).
+const MAX_PIXELS: u64 = 1 << 26;
 
 /// Blue (low) .. cyan .. green .. yellow .. red (high).
 pub fn height_colour(t: f64) -> [f64; 3] {
@@ -95,7 +99,8 @@ fn top_view(tree: &OccupancyTree, a: &Args, depth: u8) -> Result<(u32, u32, Vec<
     let (zlo, zhi) = occupied.map_or((lo[2], hi[2]), |(l, h)| (l[2], h[2]));
     let (dx, dy) = (hi[0] - lo[0], hi[1] - lo[1]);
     let w = a.width;
-    let h = a.height.unwrap_or_else(|| ((f64::from(w) * dy / dx).round() as u32).clamp(1, (4 * w).min(MAX_SIDE)));
+    let most = (4 * w).min(MAX_SIDE).min((MAX_PIXELS / u64::from(w)) as u32);
+    let h = a.height.unwrap_or_else(|| ((f64::from(w) * dy / dx).round() as u32).clamp(1, most));
     let s = (dx / f64::from(w)).max(dy / f64::from(h));
     let (cx, cy) = ((lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0);
     let (ox, oy) = (cx - s * f64::from(w) / 2.0, cy + s * f64::from(h) / 2.0);
@@ -186,6 +191,11 @@ pub fn coarse_occupied(tree: &OccupancyTree, depth: u8) -> Result<OccupancyTree>
     Ok(coarse)
 }
 
+/// The perspective view's default height: a 4:3 image.
+fn perspective_height(width: u32) -> u32 {
+    (width * 3 / 4).max(1)
+}
+
 fn perspective(tree: &OccupancyTree, a: &Args, depth: u8) -> Result<(u32, u32, Vec<u8>)> {
     if a.free {
         bail!("--free applies to --view top only");
@@ -221,7 +231,7 @@ fn perspective(tree: &OccupancyTree, a: &Args, depth: u8) -> Result<(u32, u32, V
         .or_else(|| normalised(cross(forward, [0.0, 1.0, 0.0])))
         .expect("one of two axes is not parallel");
     let up = cross(right, forward);
-    let (w, h) = (a.width, a.height.unwrap_or(a.width * 3 / 4).max(1));
+    let (w, h) = (a.width, a.height.unwrap_or(perspective_height(a.width)));
     let tan = (a.fov.to_radians() / 2.0).tan();
     let aspect = f64::from(w) / f64::from(h);
     let origin = Point3::new(eye[0] as f32, eye[1] as f32, eye[2] as f32);
@@ -286,6 +296,20 @@ pub fn run(a: Args) -> Result<()> {
     let depth = depth_arg(a.depth)?;
     if a.width == 0 || a.width > MAX_SIDE || a.height.is_some_and(|h| h == 0 || h > MAX_SIDE) {
         bail!("--width and --height must be between 1 and {MAX_SIDE}");
+    }
+    let height = match (a.height, a.view) {
+        (Some(h), _) => Some((h, "--height")),
+        (None, View::Perspective) => Some((perspective_height(a.width), "the default --height")),
+        (None, View::Top) => None, // from the map's aspect, within the limit
+    };
+    if let Some((h, name)) = height {
+        let pixels = u64::from(a.width) * u64::from(h);
+        if pixels > MAX_PIXELS {
+            bail!(
+                "--width {} × {name} {h} = {pixels} pixels exceeds the limit of {MAX_PIXELS} (2^26, 8192 × 8192)",
+                a.width
+            );
+        }
     }
     let tree = load_map(&a.map)?.tree;
     let (w, h, img) = match a.view {

@@ -1,6 +1,7 @@
 //! `octolinear simulate`: procedural scenes scanned by a spinning lidar.
 
-use anyhow::{Context, Result};
+use super::common::spinner;
+use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
 use octolinear::formats::graph;
 use octolinear::simulate::{simulate, LidarConfig, SceneKind};
@@ -14,13 +15,16 @@ enum Scene {
 
 /// Write a `.graph` file of simulated lidar scans (deterministic from the seed).
 ///
+/// Every scan is held in memory until the file is written: a scan casts at
+/// most 2^24 rays (beams × steps), all scans together at most 2^28.
+///
 /// Example: octolinear simulate --scene indoor --scans 16 --seed 1 -o indoor.graph
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub struct Args {
     #[arg(long, value_enum, default_value = "indoor")]
     scene: Scene,
-    /// Number of scans along the trajectory.
+    /// Number of scans along the trajectory (at least 1).
     #[arg(long, default_value_t = 16)]
     scans: usize,
     #[arg(long, default_value_t = 1)]
@@ -65,8 +69,14 @@ pub fn run(a: Args) -> Result<()> {
     if let Some(d) = a.dropout {
         cfg.dropout = d;
     }
+    if a.scans == 0 {
+        bail!("--scans must be at least 1");
+    }
+    let phase = spinner(&format!("simulating {} scans", a.scans));
     let g = simulate(kind, a.scans, a.seed, &cfg)?;
+    phase.set_message(format!("writing {}", a.output.display()));
     graph::write_file(&g, &a.output).with_context(|| format!("cannot write {}", a.output.display()))?;
+    phase.finish_and_clear();
     eprintln!("wrote {} scans, {} points to {}", g.nodes.len(), g.num_points(), a.output.display());
     Ok(())
 }

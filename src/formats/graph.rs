@@ -101,6 +101,9 @@ pub enum GraphError {
     BadMarker { offset: u64, expected: i32, found: i32, context: String },
     #[error("{what} count {count} at byte offset {offset} needs at least {needed} bytes, only {remaining} remain")]
     CountTooLarge { offset: u64, what: &'static str, count: u32, needed: u64, remaining: u64 },
+    /// The memory for what the data holds so far could not be had.
+    #[error("at byte offset {offset}, {context}: cannot allocate memory for {count} {what}")]
+    OutOfMemory { offset: u64, what: &'static str, count: u64, context: String },
 }
 
 const POINT_BYTES: usize = 4 + 3 * 8;
@@ -167,6 +170,22 @@ impl<R: Read> Input<R> {
             (count as usize).min(BLIND_RESERVE)
         }
     }
+
+    /// Makes room for `more` elements in `v`, or names what could not be had.
+    fn reserve<T>(
+        &self,
+        v: &mut Vec<T>,
+        more: usize,
+        what: &'static str,
+        context: &dyn Fn() -> String,
+    ) -> Result<(), GraphError> {
+        v.try_reserve(more).map_err(|_| GraphError::OutOfMemory {
+            offset: self.offset,
+            what,
+            count: (v.len() + more) as u64,
+            context: context(),
+        })
+    }
 }
 
 fn f64_at(b: &[u8], at: usize) -> f64 {
@@ -208,12 +227,16 @@ fn read_pose<R: Read>(input: &mut Input<R>, context: &dyn Fn() -> String) -> Res
 fn read_cloud<R: Read>(input: &mut Input<R>, node: usize) -> Result<PointCloud, GraphError> {
     let count = input.u32(&|_| format!("point count of node {node}"))?;
     input.check_count("point", count, POINT_BYTES as u64, POSE_BYTES as u64 + 4)?;
-    let mut cloud = PointCloud::with_capacity(input.reserve_hint(count));
-    let mut buf = vec![0u8; POINT_CHUNK.min(count as usize) * POINT_BYTES];
-    let mut done = 0usize;
+    let mut cloud = PointCloud::new();
     let total = count as usize;
+    let context = || format!("points of node {node} ({total} announced)");
+    input.reserve(&mut cloud.points, input.reserve_hint(count), "points", &context)?;
+    let mut buf = vec![0u8; POINT_CHUNK.min(total) * POINT_BYTES];
+    let mut done = 0usize;
     while done < total {
         let n = (total - done).min(POINT_CHUNK);
+        // grows with the data actually present (the count alone may lie)
+        input.reserve(&mut cloud.points, n, "points", &context)?;
         let chunk = &mut buf[..n * POINT_BYTES];
         let base = input.offset;
         input.fill(chunk, &|filled| format!("point {} of node {node}", done + filled / POINT_BYTES)).map_err(|e| {
@@ -236,52 +259,150 @@ fn read_cloud<R: Read>(input: &mut Input<R>, node: usize) -> Result<PointCloud, 
     Ok(cloud)
 }
 
-fn read_input<R: Read>(mut input: Input<R>) -> Result<ScanGraph, GraphError> {
-    let n_nodes = input.u32(&|_| "node count".to_string())?;
-    input.check_count("node", n_nodes, MIN_NODE_BYTES, 4)?;
-    let mut nodes = Vec::with_capacity(input.reserve_hint(n_nodes));
-    for i in 0..n_nodes as usize {
-        let scan = read_cloud(&mut input, i)?;
-        let pose = read_pose(&mut input, &|| format!("pose of node {i}"))?;
-        let id = input.u32(&|_| format!("id of node {i}"))?;
-        nodes.push(ScanNode { id, pose, scan });
+/// Decodes a graph scan by scan from any [`Read`]: the node count when
+/// created, then one [`ScanNode`] per [`Iterator::next`], so that a caller
+/// inserting scans into a map holds one scan at a time, whether the input
+/// is a file, a pipe or standard input. After the last scan,
+/// [`ScanReader::edges`] reads the edge list. The first error ends the
+/// iteration; errors name the node and the byte offset.
+pub struct ScanReader<R> {
+    input: Input<R>,
+    nodes: u32,
+    next: u32,
+    failed: bool,
+}
+
+impl<R: Read> ScanReader<R> {
+    /// Reads the node count of a stream of unknown length (buffer it
+    /// yourself: reads are small).
+    pub fn new(reader: R) -> Result<Self, GraphError> {
+        Self::with_len(reader, None)
     }
-    let n_edges = input.u32(&|_| "edge count".to_string())?;
-    input.check_count("edge", n_edges, EDGE_BYTES as u64, 0)?;
-    let mut edges = Vec::with_capacity(input.reserve_hint(n_edges));
-    for i in 0..n_edges as usize {
-        let mut ids = [0u8; 8];
-        input.fill(&mut ids, &|_| format!("node ids of edge {i}"))?;
-        let constraint = read_pose(&mut input, &|| format!("constraint of edge {i}"))?;
-        let mut w = [0u8; 8];
-        input.fill(&mut w, &|_| format!("weight of edge {i}"))?;
-        edges.push(ScanEdge {
-            first: u32::from_le_bytes([ids[0], ids[1], ids[2], ids[3]]),
-            second: u32::from_le_bytes([ids[4], ids[5], ids[6], ids[7]]),
-            constraint,
-            weight: f64::from_le_bytes(w),
-        });
+
+    /// As [`Self::new`], with the input's total length when it is known (a
+    /// regular file, a slice): counts that cannot fit are refused up front.
+    pub fn with_len(reader: R, len: Option<u64>) -> Result<Self, GraphError> {
+        let mut input = Input { inner: reader, offset: 0, len };
+        let nodes = input.u32(&|_| "node count".to_string())?;
+        input.check_count("node", nodes, MIN_NODE_BYTES, 4)?;
+        Ok(ScanReader { input, nodes, next: 0, failed: false })
     }
-    // Trailing bytes are ignored, as in OctoMap.
-    Ok(ScanGraph { nodes, edges })
+
+    /// The node count the input announces.
+    pub fn announced(&self) -> u32 {
+        self.nodes
+    }
+
+    /// Bytes consumed so far.
+    pub fn offset(&self) -> u64 {
+        self.input.offset
+    }
+
+    fn node(&mut self) -> Result<ScanNode, GraphError> {
+        let i = self.next as usize;
+        let scan = read_cloud(&mut self.input, i)?;
+        let pose = read_pose(&mut self.input, &|| format!("pose of node {i}"))?;
+        let id = self.input.u32(&|_| format!("id of node {i}"))?;
+        Ok(ScanNode { id, pose, scan })
+    }
+
+    /// Reads the scans not read yet (dropping them) and then the edge
+    /// list. Bytes after the edges are ignored, as in OctoMap.
+    pub fn edges(mut self) -> Result<Vec<ScanEdge>, GraphError> {
+        if self.failed {
+            let source = io::Error::other("the edge list follows a node that could not be read");
+            return Err(GraphError::Io { offset: self.input.offset, source });
+        }
+        for node in self.by_ref() {
+            node?;
+        }
+        let input = &mut self.input;
+        let n_edges = input.u32(&|_| "edge count".to_string())?;
+        input.check_count("edge", n_edges, EDGE_BYTES as u64, 0)?;
+        let mut edges = Vec::new();
+        let context = || format!("edge list ({n_edges} announced)");
+        input.reserve(&mut edges, input.reserve_hint(n_edges), "edges", &context)?;
+        for i in 0..n_edges as usize {
+            let mut ids = [0u8; 8];
+            input.fill(&mut ids, &|_| format!("node ids of edge {i}"))?;
+            let constraint = read_pose(input, &|| format!("constraint of edge {i}"))?;
+            let mut w = [0u8; 8];
+            input.fill(&mut w, &|_| format!("weight of edge {i}"))?;
+            input.reserve(&mut edges, 1, "edges", &context)?;
+            edges.push(ScanEdge {
+                first: u32::from_le_bytes([ids[0], ids[1], ids[2], ids[3]]),
+                second: u32::from_le_bytes([ids[4], ids[5], ids[6], ids[7]]),
+                constraint,
+                weight: f64::from_le_bytes(w),
+            });
+        }
+        Ok(edges)
+    }
+
+    /// The whole graph: every node, then the edges.
+    pub fn into_graph(mut self) -> Result<ScanGraph, GraphError> {
+        let mut nodes = Vec::new();
+        let context = || "node list".to_string();
+        self.input.reserve(&mut nodes, self.input.reserve_hint(self.nodes), "nodes", &context)?;
+        while let Some(node) = self.next() {
+            let node = node?;
+            self.input.reserve(&mut nodes, 1, "nodes", &context)?;
+            nodes.push(node);
+        }
+        let edges = self.edges()?;
+        Ok(ScanGraph { nodes, edges })
+    }
+}
+
+impl<R: Read> Iterator for ScanReader<R> {
+    type Item = Result<ScanNode, GraphError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.failed || self.next == self.nodes {
+            return None;
+        }
+        let node = self.node();
+        self.failed = node.is_err();
+        self.next += 1;
+        Some(node)
+    }
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        let left = if self.failed { 0 } else { (self.nodes - self.next) as usize };
+        (0, Some(left))
+    }
 }
 
 /// Reads a graph from a stream (buffer it yourself for files, or use [`read_file`]).
 pub fn read(reader: impl Read) -> Result<ScanGraph, GraphError> {
-    read_input(Input { inner: reader, offset: 0, len: None })
+    ScanReader::new(reader)?.into_graph()
 }
 
 /// Reads a graph from memory; counts are checked against the slice length.
 pub fn read_bytes(bytes: &[u8]) -> Result<ScanGraph, GraphError> {
-    read_input(Input { inner: bytes, offset: 0, len: Some(bytes.len() as u64) })
+    ScanReader::with_len(bytes, Some(bytes.len() as u64))?.into_graph()
 }
 
-/// Reads a `.graph` file; counts are checked against the file length.
-pub fn read_file(path: impl AsRef<Path>) -> Result<ScanGraph, GraphError> {
+/// Opens a `.graph` file for reading scan by scan. The counts of a regular
+/// file are checked against its length; a pipe, FIFO or device is read as
+/// a stream.
+pub fn open(path: impl AsRef<Path>) -> Result<ScanReader<io::BufReader<fs::File>>, GraphError> {
     let io_err = |source| GraphError::Io { offset: 0, source };
     let file = fs::File::open(path).map_err(io_err)?;
-    let len = file.metadata().map_err(io_err)?.len();
-    read_input(Input { inner: io::BufReader::with_capacity(1 << 16, file), offset: 0, len: Some(len) })
+    let len = stream_len(&file).map_err(io_err)?;
+    ScanReader::with_len(io::BufReader::with_capacity(1 << 16, file), len)
+}
+
+/// The length of a regular file; `None` for a pipe, FIFO, socket or device,
+/// whose metadata says nothing about what can be read from it.
+pub fn stream_len(file: &fs::File) -> io::Result<Option<u64>> {
+    let meta = file.metadata()?;
+    Ok(meta.is_file().then_some(meta.len()))
+}
+
+/// Reads a `.graph` file (see [`open`]).
+pub fn read_file(path: impl AsRef<Path>) -> Result<ScanGraph, GraphError> {
+    open(path)?.into_graph()
 }
 
 fn put_vector(out: &mut impl Write, v: Point3) -> io::Result<()> {
@@ -341,4 +462,110 @@ pub fn write(graph: &ScanGraph, writer: impl Write) -> io::Result<()> {
 /// Writes atomically (see [`super::write_atomically`]).
 pub fn write_file(graph: &ScanGraph, path: impl AsRef<Path>) -> io::Result<()> {
     super::write_atomically(path.as_ref(), |w| write(graph, w))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Hands out at most 7 bytes per read, like a pipe between processes.
+    struct Trickle<'a>(&'a [u8]);
+
+    impl Read for Trickle<'_> {
+        fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+            let n = buf.len().min(7).min(self.0.len());
+            buf[..n].copy_from_slice(&self.0[..n]);
+            self.0 = &self.0[n..];
+            Ok(n)
+        }
+    }
+
+    fn sample() -> (ScanGraph, Vec<u8>) {
+        let mut g = ScanGraph::new();
+        for n in [3usize, 0, 5000] {
+            let cloud: PointCloud = (0..n).map(|i| Point3::new(i as f32, 1.0, -2.5)).collect();
+            g.add_node(cloud, Pose6D::from_euler(1.0, 2.0, 3.0, 0.1, 0.2, 0.3));
+            g.connect_previous();
+        }
+        let mut bytes = Vec::new();
+        write(&g, &mut bytes).unwrap();
+        (g, bytes)
+    }
+
+    #[test]
+    fn scans_stream_one_by_one_from_a_pipe() {
+        let (g, bytes) = sample();
+        let mut reader = ScanReader::new(Trickle(&bytes)).unwrap();
+        assert_eq!(reader.announced(), 3);
+        assert_eq!(reader.size_hint(), (0, Some(3)));
+        let first = reader.next().unwrap().unwrap();
+        assert_eq!(first, g.nodes[0]);
+        assert_eq!(reader.offset(), 4 + 4 + 3 * 28 + 64 + 4);
+        let rest: Vec<ScanNode> = reader.by_ref().map(Result::unwrap).collect();
+        assert_eq!(rest, g.nodes[1..]);
+        assert_eq!(reader.edges().unwrap(), g.edges);
+        assert_eq!(read(Trickle(&bytes)).unwrap(), g);
+    }
+
+    #[test]
+    fn edges_read_past_the_scans_not_taken() {
+        let (g, bytes) = sample();
+        let mut reader = ScanReader::new(&bytes[..]).unwrap();
+        reader.next().unwrap().unwrap();
+        assert_eq!(reader.edges().unwrap(), g.edges);
+    }
+
+    #[test]
+    fn a_truncated_stream_names_the_scan_and_the_offset() {
+        let (g, bytes) = sample();
+        // cut inside point 10 of node 2 (the third scan)
+        let node2 = 4 + 2 * (4 + 64 + 4) + 3 * 28;
+        let cut = node2 + 4 + 10 * 28 + 5;
+        let mut reader = ScanReader::new(Trickle(&bytes[..cut])).unwrap();
+        assert_eq!(reader.next().unwrap().unwrap(), g.nodes[0]);
+        assert_eq!(reader.next().unwrap().unwrap(), g.nodes[1]);
+        let err = reader.next().unwrap().unwrap_err();
+        match &err {
+            GraphError::Truncated { offset, missing, context } => {
+                assert_eq!((*offset, *missing), (cut as u64, 23));
+                assert_eq!(context, "point 10 of node 2");
+            }
+            e => panic!("{e}"),
+        }
+        assert!(err.to_string().contains(&format!("byte offset {cut} inside point 10 of node 2")), "{err}");
+        assert!(reader.next().is_none(), "the first error ends the scans");
+        assert!(reader.edges().is_err());
+    }
+
+    #[test]
+    fn a_point_count_larger_than_the_data_is_an_error() {
+        // a stream has no length to check counts against: what is reserved
+        // grows with the data, which here ends after one point
+        let mut bytes = 1u32.to_le_bytes().to_vec();
+        bytes.extend(u32::MAX.to_le_bytes());
+        let mut one = Vec::new();
+        put_vector(&mut one, Point3::new(1.0, 2.0, 3.0)).unwrap();
+        bytes.extend(&one);
+        let err = ScanReader::new(&bytes[..]).unwrap().next().unwrap().unwrap_err();
+        assert!(matches!(err, GraphError::Truncated { offset: 36, .. }), "{err}");
+        // with the length known, the count is refused before any reading
+        bytes.extend([0u8; 68]);
+        let err = ScanReader::with_len(&bytes[..], Some(bytes.len() as u64)).unwrap().next().unwrap().unwrap_err();
+        assert!(matches!(err, GraphError::CountTooLarge { offset: 4, what: "point", .. }), "{err}");
+    }
+
+    #[test]
+    fn pipes_have_no_length_and_files_do() {
+        let dir = std::env::temp_dir();
+        let path = dir.join(format!("octolinear-graph-len-{}", std::process::id()));
+        std::fs::write(&path, [0u8; 10]).unwrap();
+        assert_eq!(stream_len(&fs::File::open(&path).unwrap()).unwrap(), Some(10));
+        std::fs::remove_file(&path).unwrap();
+        #[cfg(target_os = "linux")]
+        {
+            let (r, _w) = std::io::pipe().unwrap();
+            let f = fs::File::from(std::os::fd::OwnedFd::from(r));
+            assert_eq!(stream_len(&f).unwrap(), None);
+        }
+    }
 }

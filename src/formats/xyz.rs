@@ -1,11 +1,13 @@
 //! Plain-text point clouds: one `x y z` per line (see `formats/xyz.md`).
 //!
 //! OctoMap's `Pointcloud::read` extracts floats with C++ `>>` from a token
-//! stream and silently stops at the first token it cannot parse. We accept
-//! exactly the inputs on which that yields the whole file and produce the same
-//! floats (glibc `strtof` and Rust's parser both round correctly); anything
-//! OctoMap would cut short or regroup (comments, two or four numbers on a
-//! line, `nan`, `inf`, overflow, `1.5.3`) is an error with its line number.
+//! stream and silently stops at the first token it cannot parse. We read
+//! every file on which that yields the whole file to the same floats (glibc
+//! `strtof` and Rust's parser both round correctly), and also what other
+//! tools write and OctoMap would cut short: `#` comments (whole lines or
+//! after the numbers) and values separated by commas or semicolons. Anything
+//! else OctoMap would cut short or regroup (two or four numbers on a line,
+//! `nan`, `inf`, overflow, `1.5.3`) is an error with its line number.
 
 use std::io::{self, BufRead, BufWriter, Write};
 
@@ -19,7 +21,7 @@ pub enum XyzError {
         #[source]
         source: io::Error,
     },
-    #[error("line {line}: expected 3 numbers, found {found} tokens")]
+    #[error("line {line}: expected 3 numbers, found {found} values")]
     TokenCount { line: u64, found: usize },
     #[error("line {line}: {token:?} is not a decimal number")]
     NotANumber { line: u64, token: String },
@@ -75,8 +77,27 @@ pub(crate) fn parse_point(tokens: &[&[u8]], line: u64) -> Result<Point3, XyzErro
     Ok(Point3::from_array(c))
 }
 
-/// Reads a cloud. Blank (whitespace-only) lines are skipped; every other line
-/// must hold exactly three numbers. Lines are 1-based in errors.
+/// The values of a line (its comment already cut off): split at commas or
+/// semicolons when it has any, each value trimmed of whitespace (an empty
+/// one is kept, to be refused as not a number), else at whitespace.
+fn values(text: &[u8]) -> Vec<&[u8]> {
+    let separator = |b: &u8| *b == b',' || *b == b';';
+    if !text.iter().any(separator) {
+        return c_tokens(text).collect();
+    }
+    text.split(separator)
+        .map(|v| {
+            let start = v.iter().position(|&b| !is_c_space(b)).unwrap_or(v.len());
+            let end = v.iter().rposition(|&b| !is_c_space(b)).map_or(start, |e| e + 1);
+            &v[start..end]
+        })
+        .collect()
+}
+
+/// Reads a cloud: one point per line, three numbers separated by
+/// whitespace, or by commas or semicolons (whitespace around them
+/// allowed). Blank lines and everything from a `#` to the end of its line
+/// are skipped. Lines are 1-based in errors.
 pub fn read(mut reader: impl BufRead) -> Result<PointCloud, XyzError> {
     let mut cloud = PointCloud::new();
     let mut buf = Vec::new();
@@ -88,10 +109,17 @@ pub fn read(mut reader: impl BufRead) -> Result<PointCloud, XyzError> {
         if n == 0 {
             return Ok(cloud);
         }
-        let tokens: Vec<&[u8]> = c_tokens(&buf).collect();
-        match tokens.len() {
+        let text = buf.split(|&b| b == b'#').next().unwrap_or_default();
+        let values = values(text);
+        match values.len() {
             0 => continue,
-            3 => cloud.push(parse_point(&tokens, line)?),
+            3 => {
+                cloud.points.try_reserve(1).map_err(|_| {
+                    let why = format!("cannot allocate memory for {} points", cloud.len() + 1);
+                    XyzError::Io { line, source: io::Error::new(io::ErrorKind::OutOfMemory, why) }
+                })?;
+                cloud.push(parse_point(&values, line)?)
+            }
             found => return Err(XyzError::TokenCount { line, found }),
         }
     }
@@ -125,4 +153,38 @@ pub fn write(cloud: &PointCloud, writer: impl Write) -> io::Result<()> {
         writeln!(out, "{} {} {}", format_f32(p.x), format_f32(p.y), format_f32(p.z))?;
     }
     out.flush()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn points(text: &str) -> Vec<[f32; 3]> {
+        read(text.as_bytes()).unwrap().iter().map(|p| p.to_array()).collect()
+    }
+
+    fn error(text: &str) -> String {
+        read(text.as_bytes()).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn comments_blank_lines_commas_and_semicolons() {
+        let text = "# x y z written by a scanner\n\n1 2 3\n4,5,6 # trailing note\n  7 ; 8;9\r\n\t# indented comment\n-1.5, +.25 ,1e-3\n";
+        assert_eq!(points(text), [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0], [-1.5, 0.25, 0.001]]);
+        assert_eq!(points("#only comments\n#\n"), Vec::<[f32; 3]>::new());
+        assert_eq!(points("1 2 3#no space before the comment"), [[1.0, 2.0, 3.0]]);
+    }
+
+    #[test]
+    fn bad_rows_name_their_line() {
+        assert_eq!(error("1,2,3\n1,,3\n"), "line 2: \"\" is not a decimal number");
+        assert_eq!(error("# header\n1,2,3,\n"), "line 2: expected 3 numbers, found 4 values");
+        assert_eq!(error("1 2 3\n\n1,2\n"), "line 3: expected 3 numbers, found 2 values");
+        assert_eq!(error("1 2 3 4 # four\n"), "line 1: expected 3 numbers, found 4 values");
+        assert_eq!(error("1 2,3,4\n"), "line 1: \"1 2\" is not a decimal number");
+        // a decimal comma is not a separator here: the values do not count up
+        assert_eq!(error("1,5;2,5;3,5\n"), "line 1: expected 3 numbers, found 6 values");
+        assert_eq!(error("1;nan;3\n"), "line 1: \"nan\" is not a decimal number");
+        assert_eq!(error("1 2 1e39\n"), "line 1: \"1e39\" is not finite as a float (OctoMap stops reading here)");
+    }
 }
