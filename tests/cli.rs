@@ -1993,3 +1993,19 @@ fn build_help_lists_every_format_it_takes() {
     ok(&["build", f.p("s.graph"), "-o", f.p("m.olm")]);
     assert!(ok(&["verify", f.p("m.olm")]).contains(": ok"));
 }
+
+/// A map of eight free leaves just below the root holds 8 × 8^15 free
+/// voxels: `to-points --free` refuses that before allocating, and gives
+/// the coarse voxels at a depth that fits.
+#[test]
+fn to_points_refuses_more_points_than_it_can_hold() {
+    let f = Fixture::new();
+    let mut bytes = b"# Octomap OcTree binary file\n#\n#\nid OcTree\nsize 9\nres 0.1\ndata\n".to_vec();
+    bytes.extend([0x55, 0x55]); // the root's eight children: free leaves
+    let map = f.write("free.bt", bytes);
+    fail(&["to-points", map, "-o", f.p("all.xyz"), "--free"], "exceed the limit of 268435456 (2^28) points");
+    assert!(!f.path("all.xyz").exists());
+    ok(&["to-points", map, "-o", f.p("coarse.xyz"), "--free", "--depth", "5"]);
+    let written = std::fs::read_to_string(f.path("coarse.xyz")).unwrap();
+    assert_eq!(written.lines().count(), 8 * 8usize.pow(4));
+}

@@ -1,7 +1,7 @@
 //! `octolinear build`: OctoMap's `graph2tree` — integrate the scans of a
 //! `.graph` file into a map.
 
-use super::common::{progress, save_map, spinner, MapFormat};
+use super::common::{format_g6, progress, save_map, spinner, MapFormat};
 use super::input;
 use anyhow::{bail, Context, Result};
 use octolinear::formats::{bt, ot, write_atomically};
@@ -170,7 +170,9 @@ fn print_statistics(title: &str, s: &serde_json::Value) {
         mb(&s["memory_bytes"])
     );
     println!("Full grid: {} byte ({:.6} MB)", s["full_grid_bytes"], mb(&s["full_grid_bytes"]));
-    let m = &s["metric_size"];
+    // as graph2tree prints it (C++ stream precision 6), without the
+    // binary noise of the full double
+    let m: Vec<String> = (0..3).map(|i| format_g6(s["metric_size"][i].as_f64().unwrap_or(f64::NAN))).collect();
     println!("Size: {} x {} x {} m^3\n", m[0], m[1], m[2]);
 }
 

@@ -35,6 +35,19 @@ pub struct Args {
     ascii: bool,
 }
 
+/// The most points `to-points` writes: 3 GB of coordinates in memory, and
+/// a point count every format's header can hold.
+const MAX_POINTS: u64 = 1 << 28;
+
+/// How many voxels [`for_each_voxel`] gives (saturating: a map of large
+/// free leaves expanded to full depth may hold more than `u64` counts).
+fn count_voxels(tree: &OccupancyTree, depth: u8, want: impl Fn(f32) -> bool) -> u64 {
+    tree.leaves(depth)
+        .filter(|leaf| want(leaf.value))
+        .map(|leaf| 1u64.checked_shl(3 * u32::from(depth - leaf.depth)).unwrap_or(u64::MAX))
+        .fold(0u64, u64::saturating_add)
+}
+
 /// Calls `f(key, centre)` for every node at `depth` (expanding coarser
 /// leaves) whose value satisfies `want`, in depth-first child order.
 pub fn for_each_voxel(
@@ -65,11 +78,16 @@ pub fn run(a: Args) -> Result<()> {
     let tree = load_map(&a.map)?.tree;
     let sensor = *tree.sensor();
     let free = a.free;
-    let mut points = Vec::new();
-    for_each_voxel(&tree, depth, |v| sensor.is_occupied(v) != free, |_, p, _| points.push(p));
-    if points.len() > u32::MAX as usize {
-        bail!("{} points are too many for one file", points.len());
+    let count = count_voxels(&tree, depth, |v| sensor.is_occupied(v) != free);
+    if count > MAX_POINTS {
+        bail!(
+            "{} {} voxels at depth {depth} exceed the limit of {MAX_POINTS} (2^28) points; a lower --depth gives fewer",
+            count,
+            if free { "free" } else { "occupied" }
+        );
     }
+    let mut points = Vec::with_capacity(count as usize);
+    for_each_voxel(&tree, depth, |v| sensor.is_occupied(v) != free, |_, p, _| points.push(p));
     write_output(a.output.path(), |w| match format.as_str() {
         "xyz" => octolinear::formats::xyz::write(&points.clone().into(), w),
         "pcd" => write_pcd(&points, w),
