@@ -11,7 +11,8 @@
 #[path = "../benches/common/mod.rs"]
 mod common;
 
-use octolinear::{MortonCode, OccupancyTree, RayFan, ScanOptions};
+use octolinear::ray::RayFan;
+use octolinear::{MortonCode, OccupancyTree, ScanOptions};
 use std::hint::black_box;
 use std::time::Instant;
 

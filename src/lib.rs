@@ -33,14 +33,16 @@ pub mod tree;
 
 pub use collection::{MapCollection, MapNode};
 pub use formats::graph::{ScanEdge, ScanGraph, ScanNode};
+pub use formats::ot::AnyTree;
+pub use formats::TreeFileError;
 pub use geometry::{Point3, PointCloud, Pose6D, Quaternion};
 pub use key::{Key, KeyError, KeySpace};
 pub use mapped::{MapView, MappedMap, OlmError};
 pub use morton::MortonCode;
-pub use ray::{CastOptions, CastOutcome, FanRay, RayFan, RayKeys};
-pub use scan::{OutOfMap, ScanOptions, ScanReport, UpdateBox};
-pub use sensor::{SensorModel, SensorProbabilities};
+pub use ray::{CastError, CastOptions, CastOutcome, RayKeys};
+pub use scan::{OutOfMap, ScanError, ScanOptions, ScanReport, UpdateBox};
+pub use sensor::{SensorError, SensorModel, SensorProbabilities};
 pub use tree::{
-    Bounds, BoundsRule, Clock, Compaction, CountingTree, Found, InnerNodes, KeyBox, NodeKind, OccupancyTree,
-    SearchIndex, TreeError,
+    Bounds, BoundsRule, Clock, Compaction, CountingTree, Found, InnerNodes, KeyBox, NodeItem, NodeKind, OccupancyTree,
+    SearchIndex, TreeError, TreeKind,
 };

@@ -12,7 +12,7 @@ mod common;
 use common::*;
 use octolinear::formats::{bt, ot};
 use octolinear::mapped::{
-    self, format, MapItem, MapView, MappedMap, OccupancyLookup, OlmError, SearchBlocksSection, Variant, WriteOptions,
+    self, format, MapView, MappedMap, OccupancyLookup, OlmError, SearchBlocksSection, Variant, WriteOptions,
 };
 use octolinear::ray::CastError;
 use octolinear::simulate::{simulate, LidarConfig, SceneKind, SplitMix64};
@@ -120,7 +120,7 @@ enum Iter {
     Box(KeyBox),
 }
 
-fn item(i: MapItem<'_>) -> Item {
+fn item(i: octolinear::tree::NodeItem<'_>) -> Item {
     (i.key, i.depth, i.value.to_bits(), i.is_leaf, i.extra)
 }
 

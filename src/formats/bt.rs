@@ -13,6 +13,7 @@ use crate::sensor::SensorModel;
 use crate::tree::{default_extra, LabelFill, NodeKind, OccupancyTree};
 use crate::tree::{in_leaf_pool, NodeId, Parts};
 use std::io::{self, BufRead, Write};
+use std::path::Path;
 
 /// Reads a `.bt` file into a tree with the default sensor model.
 pub fn read(r: impl BufRead) -> Result<OccupancyTree, TreeFileError> {
@@ -340,4 +341,15 @@ fn write_const_node(a: Parts<'_>, sensor: &SensorModel, n: NodeId, out: &mut Vec
             }
         }
     }
+}
+
+/// Reads a `.bt` file from disk ([`read`]).
+pub fn read_file(path: impl AsRef<Path>) -> Result<OccupancyTree, TreeFileError> {
+    read(super::buffered_file(path.as_ref())?)
+}
+
+/// Writes a `.bt` file atomically ([`write`] into a temporary file that
+/// replaces `path` once complete).
+pub fn write_file(tree: &OccupancyTree, path: impl AsRef<Path>) -> io::Result<()> {
+    super::write_atomically(path.as_ref(), |w| write(tree, w))
 }

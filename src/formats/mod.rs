@@ -21,6 +21,7 @@ pub use header::{format_double, Header};
 pub use scalar::ColoredCloud;
 
 use std::io;
+use std::path::Path;
 
 /// Why an `.ot` or `.bt` file (or a ROS `Octomap` message) could not be
 /// read. Every variant that concerns a place in the input names its byte
@@ -47,6 +48,12 @@ pub enum TreeFileError {
     UnsupportedTreeType(String),
     #[error("not an OctoMap {expected} at byte {offset}: {reason}")]
     WrongFormat { offset: u64, expected: &'static str, reason: String },
+}
+
+/// A file opened for reading with a 64 KiB buffer, the size the readers
+/// are tuned for.
+fn buffered_file(path: &Path) -> io::Result<io::BufReader<std::fs::File>> {
+    Ok(io::BufReader::with_capacity(1 << 16, std::fs::File::open(path)?))
 }
 
 fn at_byte(offset: &Option<u64>) -> String {

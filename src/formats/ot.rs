@@ -14,52 +14,15 @@ use crate::sensor::SensorModel;
 use crate::tree::{in_leaf_pool, leaf_index, NodeId, Parts};
 use crate::tree::{CountingTree, NodeKind, NodeRef, OccupancyTree, PreorderBuilder};
 use std::io::{self, BufRead, Write};
+use std::path::Path;
 
-/// The tree types an `.ot` file may hold, by their header id.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum TreeKind {
-    OcTree,
-    OcTreeStamped,
-    ColorOcTree,
-    CountingOcTree,
-}
+pub use crate::tree::TreeKind;
 
-impl TreeKind {
-    pub fn from_id(id: &str) -> Option<TreeKind> {
-        match id {
-            "OcTree" => Some(TreeKind::OcTree),
-            "OcTreeStamped" => Some(TreeKind::OcTreeStamped),
-            "ColorOcTree" => Some(TreeKind::ColorOcTree),
-            // CountingOcTree does not override getTreeType()
-            "OcTreeBase" => Some(TreeKind::CountingOcTree),
-            _ => None,
-        }
-    }
-
-    /// The id OctoMap writes for this type.
-    pub fn id(self) -> &'static str {
-        match self {
-            TreeKind::OcTree => "OcTree",
-            TreeKind::OcTreeStamped => "OcTreeStamped",
-            TreeKind::ColorOcTree => "ColorOcTree",
-            TreeKind::CountingOcTree => "OcTreeBase",
-        }
-    }
-
-    pub fn of(kind: NodeKind) -> TreeKind {
-        match kind {
-            NodeKind::Plain => TreeKind::OcTree,
-            NodeKind::Color => TreeKind::ColorOcTree,
-            NodeKind::Stamped => TreeKind::OcTreeStamped,
-        }
-    }
-
-    /// Bytes of one node's payload.
-    fn payload_len(self) -> usize {
-        match self {
-            TreeKind::ColorOcTree => 7,
-            _ => 4,
-        }
+/// Bytes of one node's payload in an `.ot` file of trees of `kind`.
+fn payload_len(kind: TreeKind) -> usize {
+    match kind {
+        TreeKind::ColorOcTree => 7,
+        _ => 4,
     }
 }
 
@@ -185,7 +148,7 @@ fn read_nodes<R: BufRead, const N: usize>(
     size_hint: u64,
     decode: impl Fn(&[u8; N]) -> (f32, Option<u32>),
 ) -> Result<PreorderBuilder, TreeFileError> {
-    debug_assert_eq!(N, kind.payload_len() + 1);
+    debug_assert_eq!(N, payload_len(kind) + 1);
     let mut b = PreorderBuilder::with_hint(node_kind(kind), usize::try_from(size_hint).unwrap_or(usize::MAX));
     // reserve at once what the header announces, as far as the bytes at
     // hand can hold it (the whole rest when reading from memory)
@@ -337,4 +300,20 @@ impl<const P: usize, F: Fn(f32, u32) -> [u8; P], W: Write> NodeStream<'_, F, W> 
         }
         Ok(())
     }
+}
+
+/// Reads an `.ot` file from disk ([`read`]).
+pub fn read_file(path: impl AsRef<Path>) -> Result<AnyTree, TreeFileError> {
+    read(super::buffered_file(path.as_ref())?)
+}
+
+/// Writes an occupancy tree's `.ot` file atomically ([`write`] into a
+/// temporary file that replaces `path` once complete).
+pub fn write_file(tree: &OccupancyTree, path: impl AsRef<Path>) -> io::Result<()> {
+    super::write_atomically(path.as_ref(), |w| write(tree, w))
+}
+
+/// Writes a counting tree's `.ot` file atomically ([`write_counting`]).
+pub fn write_counting_file(tree: &CountingTree, path: impl AsRef<Path>) -> io::Result<()> {
+    super::write_atomically(path.as_ref(), |w| write_counting(tree, w))
 }

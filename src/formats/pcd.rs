@@ -59,7 +59,7 @@ pub enum PcdError {
 
 /// LZF decompression (liblzf's format, as PCL's `binary_compressed` uses)
 /// of `input` into exactly `out_len` bytes.
-pub fn lzf_decompress(input: &[u8], out_len: usize) -> Result<Vec<u8>, PcdError> {
+pub(crate) fn lzf_decompress(input: &[u8], out_len: usize) -> Result<Vec<u8>, PcdError> {
     let lzf = |offset, reason| PcdError::Lzf { offset, reason };
     // three input bytes give at most 264 output bytes (a long back
     // reference): a lying size fails here, and the reservation is bounded

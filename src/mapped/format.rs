@@ -65,48 +65,21 @@ pub(crate) mod field {
     pub const FILE_LENGTH: usize = 80;
 }
 
-/// The tree type stored. The full variant of a colour or stamped tree has
-/// a [`SectionKind::Colors`] or [`SectionKind::Stamps`] section; the
-/// maximum-likelihood variant, like `.bt`, keeps only the type (nodes read
-/// back white, or with stamp 0). A counting tree exists in the full
-/// variant only, its values section holding each node's `u32` count.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum TreeKind {
-    OcTree = 0,
-    ColorOcTree = 1,
-    OcTreeStamped = 2,
-    CountingOcTree = 3,
-}
+/// The tree type stored ([`crate::tree::TreeKind`]). The full variant of a
+/// colour or stamped tree has a [`SectionKind::Colors`] or
+/// [`SectionKind::Stamps`] section; the maximum-likelihood variant, like
+/// `.bt`, keeps only the type (nodes read back white, or with stamp 0). A
+/// counting tree exists in the full variant only, its values section
+/// holding each node's `u32` count.
+pub use crate::tree::TreeKind;
 
-impl TreeKind {
-    /// The node kind of the in-memory occupancy tree; `None` for a
-    /// counting tree (a [`crate::CountingTree`]).
-    pub fn node_kind(self) -> Option<crate::tree::NodeKind> {
-        match self {
-            TreeKind::OcTree => Some(crate::tree::NodeKind::Plain),
-            TreeKind::ColorOcTree => Some(crate::tree::NodeKind::Color),
-            TreeKind::OcTreeStamped => Some(crate::tree::NodeKind::Stamped),
-            TreeKind::CountingOcTree => None,
-        }
-    }
-
-    pub fn of(kind: crate::tree::NodeKind) -> TreeKind {
-        match kind {
-            crate::tree::NodeKind::Plain => TreeKind::OcTree,
-            crate::tree::NodeKind::Color => TreeKind::ColorOcTree,
-            crate::tree::NodeKind::Stamped => TreeKind::OcTreeStamped,
-        }
-    }
-
-    /// The OctoMap class name, for messages (`.ot` headers name a counting
-    /// tree `OcTreeBase`; this says `CountingOcTree`).
-    pub fn name(self) -> &'static str {
-        match self {
-            TreeKind::OcTree => "OcTree",
-            TreeKind::ColorOcTree => "ColorOcTree",
-            TreeKind::OcTreeStamped => "OcTreeStamped",
-            TreeKind::CountingOcTree => "CountingOcTree",
-        }
+/// The header's code for a tree type.
+fn tree_kind_code(kind: TreeKind) -> u8 {
+    match kind {
+        TreeKind::OcTree => 0,
+        TreeKind::ColorOcTree => 1,
+        TreeKind::OcTreeStamped => 2,
+        TreeKind::CountingOcTree => 3,
     }
 }
 
@@ -598,7 +571,7 @@ pub(crate) fn encode(h: &Header) -> [u8; HEADER_LEN] {
     put(field::VERSION_MINOR, &h.version.1.to_le_bytes());
     put(field::ENDIAN, &ENDIAN_CHECK.to_le_bytes());
     put(field::HEADER_LEN, &(HEADER_LEN as u32).to_le_bytes());
-    put(field::TREE_KIND, &[h.kind as u8]);
+    put(field::TREE_KIND, &[tree_kind_code(h.kind)]);
     put(field::VARIANT, &[h.variant as u8]);
     put(field::INDEX, &[h.index as u8]);
     put(field::RANK_BLOCK_LOG2, &[h.rank_block_log2]);

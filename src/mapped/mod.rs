@@ -79,7 +79,7 @@ mod write;
 pub use format::{
     Header, Index, Section, SectionKind, TreeKind, Variant, HEADER_LEN, MAGIC, VERSION_MAJOR, VERSION_MINOR,
 };
-pub use query::{cast_ray, MapItem, OccupancyLookup};
+pub use query::{cast_ray, OccupancyLookup};
 pub use verify::VerifyReport;
 pub use write::{
     counting_to_bytes, to_bytes, write, write_counting, write_counting_file, write_file, write_file_with,
@@ -90,7 +90,7 @@ use crate::geometry::Point3;
 use crate::key::{Key, KeyError, KeySpace, TREE_DEPTH};
 use crate::ray::{CastError, CastOptions, CastOutcome};
 use crate::sensor::SensorModel;
-use crate::tree::{CountingTree, Found, KeyBox, LevelTables, OccupancyTree, PreorderBuilder, Trunks};
+use crate::tree::{CountingTree, Found, KeyBox, LevelTables, NodeItem, OccupancyTree, PreorderBuilder, Trunks};
 use format::Meta;
 use nav::{with_nav, AnyNav, Extras, MlNav, Nav, Node, PtrNav, RankNav};
 use query::RawIter;
@@ -256,10 +256,10 @@ enum IterInner<'a> {
 }
 
 impl<'a> Iterator for MapIter<'a> {
-    type Item = MapItem<'a>;
+    type Item = NodeItem<'a>;
 
     #[inline]
-    fn next(&mut self) -> Option<MapItem<'a>> {
+    fn next(&mut self) -> Option<NodeItem<'a>> {
         match &mut self.0 {
             IterInner::Rank(i) => i.next_item(),
             IterInner::Ptr(i) => i.next_item(),
@@ -270,7 +270,7 @@ impl<'a> Iterator for MapIter<'a> {
     /// One match on the layout, then a loop without it.
     #[inline]
     fn fold<B, F: FnMut(B, Self::Item) -> B>(self, init: B, mut f: F) -> B {
-        fn run<'a, N: Nav, B>(i: RawIter<'a, N>, acc: B, f: &mut impl FnMut(B, MapItem<'a>) -> B) -> B {
+        fn run<'a, N: Nav, B>(i: RawIter<'a, N>, acc: B, f: &mut impl FnMut(B, NodeItem<'a>) -> B) -> B {
             i.fold(acc, f)
         }
         match self.0 {

@@ -10,12 +10,12 @@ use super::nav::{Extras, Nav, Node, RankNav};
 use super::search_blocks::{Below, SearchBlocks};
 use crate::geometry::Point3;
 use crate::key::packed;
-use crate::key::{adjust_key_to_depth, Key, KeySpace, KEY_CENTER, TREE_DEPTH};
+use crate::key::{adjust_key_to_depth, Key, KeySpace, TREE_DEPTH};
 use crate::morton::MortonCode;
 use crate::ray::{CastError, CastOptions, CastOutcome};
 use crate::sensor::SensorModel;
 use crate::tree::blocks::BLOCK_DEPTH;
-use crate::tree::{Found, KeyBox, LastAnswer, OccupancyTree, Trunks};
+use crate::tree::{Found, KeyBox, LastAnswer, NodeItem, OccupancyTree, Trunks};
 
 /// What ray casting needs from a map: OctoMap's `search` and its key space.
 /// Implemented by [`OccupancyTree`] and by the mapped views, so that one
@@ -216,50 +216,6 @@ pub(crate) fn search_many<N: Nav>(
     }
 }
 
-/// Does the node at `key`/`depth` overlap the box? (OctoMap's test, as
-/// `KeyBox` applies it in the tree's iterator.)
-#[inline]
-fn overlaps(b: &KeyBox, key: Key, depth: u8) -> bool {
-    let off = (KEY_CENTER >> depth) as i32;
-    (0..3).all(|i| {
-        let k = i32::from(key.0[i]);
-        i32::from(b.min.0[i]) <= k + off && i32::from(b.max.0[i]) >= k - off
-    })
-}
-
-/// One node as a mapped iterator reports it (the fields of the tree's
-/// `NodeItem`).
-#[derive(Clone, Copy, Debug)]
-pub struct MapItem<'a> {
-    /// The key OctoMap's iterator computes (centre key of the node).
-    pub key: Key,
-    pub depth: u8,
-    pub value: f32,
-    /// No children, or at the iteration's depth limit.
-    pub is_leaf: bool,
-    /// Colour (`r | g << 8 | b << 16`) or time stamp, by the map's kind;
-    /// 0 for plain maps (as the tree's `NodeItem::extra`).
-    pub extra: u32,
-    keys: &'a KeySpace,
-}
-
-impl MapItem<'_> {
-    /// Edge length in metres.
-    pub fn size(&self) -> f64 {
-        self.keys.node_size(self.depth)
-    }
-
-    /// Centre in metres (double, as OctoMap's `getX/Y/Z`).
-    pub fn center(&self) -> [f64; 3] {
-        self.key.0.map(|k| self.keys.key_to_coord_at_depth(k, self.depth))
-    }
-
-    /// Centre as a float point (`getCoordinate`).
-    pub fn center_point(&self) -> Point3 {
-        self.keys.key_to_point_at_depth(self.key, self.depth)
-    }
-}
-
 /// Depth-first iteration over one layout: one frame per open level, with
 /// the node's children (as the layout finds them) and the packed key of
 /// child 0 (see [`crate::key::packed`]).
@@ -314,7 +270,7 @@ impl<'a, N: Nav> RawIter<'a, N> {
     /// children when it is to be descended; `None` when it is not reported
     /// (an inner node of a leaf iteration, or unreadable bytes).
     #[inline(always)]
-    fn visit(&mut self, n: Node, packed: u64, depth: u8) -> Option<MapItem<'a>> {
+    fn visit(&mut self, n: Node, packed: u64, depth: u8) -> Option<NodeItem<'a>> {
         if self.budget == 0 {
             self.len = 0;
             return None;
@@ -338,11 +294,11 @@ impl<'a, N: Nav> RawIter<'a, N> {
             }
         }
         let key = packed::unpack(packed);
-        Some(MapItem { key, depth, value, is_leaf, extra: self.extras.get(n), keys: self.keys })
+        Some(NodeItem::new(key, depth, value, self.extras.get(n), is_leaf, self.keys))
     }
 
     #[inline]
-    pub fn next_item(&mut self) -> Option<MapItem<'a>> {
+    pub fn next_item(&mut self) -> Option<NodeItem<'a>> {
         self.advance(false)
     }
 
@@ -350,7 +306,7 @@ impl<'a, N: Nav> RawIter<'a, N> {
     /// next in a walk of all leaves, they are taken in one loop here: the
     /// same steps as [`Self::next_item`]'s without its frame handling and
     /// tests.
-    pub fn fold<B>(mut self, mut acc: B, f: &mut impl FnMut(B, MapItem<'a>) -> B) -> B {
+    pub fn fold<B>(mut self, mut acc: B, f: &mut impl FnMut(B, NodeItem<'a>) -> B) -> B {
         let voxels = self.leaves_only && self.bbx.is_none() && self.max_depth == TREE_DEPTH;
         loop {
             if voxels && self.len == TREE_DEPTH as usize {
@@ -371,14 +327,7 @@ impl<'a, N: Nav> RawIter<'a, N> {
                     // `visit` reports it as a leaf all the same)
                     if let Some((value, _)) = self.nav.get(n) {
                         let key = packed::unpack(packed::child(fr.child0, pos, TREE_DEPTH - 1));
-                        let item = MapItem {
-                            key,
-                            depth: TREE_DEPTH,
-                            value,
-                            is_leaf: true,
-                            extra: self.extras.get(n),
-                            keys: self.keys,
-                        };
+                        let item = NodeItem::new(key, TREE_DEPTH, value, self.extras.get(n), true, self.keys);
                         acc = f(acc, item);
                     }
                 }
@@ -395,7 +344,7 @@ impl<'a, N: Nav> RawIter<'a, N> {
     /// [`Self::next_item`]; with `stop_at_voxels`, returns `None` also when
     /// the next frame holds a depth-15 node's voxels (`len` is then 16).
     #[inline(always)]
-    fn advance(&mut self, stop_at_voxels: bool) -> Option<MapItem<'a>> {
+    fn advance(&mut self, stop_at_voxels: bool) -> Option<NodeItem<'a>> {
         if self.root_pending {
             self.root_pending = false;
             let root = self.nav.root()?;
@@ -419,7 +368,7 @@ impl<'a, N: Nav> RawIter<'a, N> {
             f.next += 1;
             let child = packed::child(f.child0, pos, depth as u8);
             let depth = depth as u8 + 1;
-            if self.bbx.is_some_and(|b| !overlaps(&b, packed::unpack(child), depth)) {
+            if self.bbx.is_some_and(|b| !b.overlaps(packed::unpack(child), depth)) {
                 continue;
             }
             if let Some(item) = self.visit(n, child, depth) {

@@ -386,6 +386,7 @@ impl Parts<'_> {
 
 impl NodeArena {
     /// An arena holding only a root (id 0) with the given value.
+    #[cfg(test)]
     pub fn with_root(value: f32) -> Self {
         Self::with_root_and_extras(value, None)
     }
@@ -461,11 +462,6 @@ impl NodeArena {
     #[inline]
     pub fn free_slot_count(&self) -> usize {
         self.free.slots + self.leaf_free.slots
-    }
-
-    #[inline(always)]
-    pub fn has_extras(&self) -> bool {
-        self.default_extra.is_some()
     }
 
     /// The extra of `n` (0 when extras are off).
@@ -745,19 +741,6 @@ impl NodeArena {
         id
     }
 
-    /// Gives a leaf `n` at `depth` the children in `mask`, each a new leaf
-    /// holding `value`; returns the id of the first.
-    pub fn add_children(&mut self, n: NodeId, mask: u8, value: f32, depth: u8) -> NodeId {
-        NodeStore::add_children(self, n, mask, value, self.default_extra, depth)
-    }
-
-    /// Adds the children in `add` (none of which exists yet) to `n`, which
-    /// lies at `depth`, as leaves holding `value`, moving its group once;
-    /// returns the first id.
-    pub fn add_missing_children(&mut self, n: NodeId, add: u8, value: f32, depth: u8) -> NodeId {
-        NodeStore::add_missing_children(self, n, add, value, depth)
-    }
-
     /// Expands a leaf `n` at `depth`: eight children holding its value and
     /// extra (OctoMap's `expandNode` copies the node's data).
     pub fn expand_node(&mut self, n: NodeId, depth: u8) {
@@ -789,12 +772,6 @@ impl NodeArena {
         }
         self.free_run(old, old_len);
         freed
-    }
-
-    /// Removes all children of `n` (and their subtrees); returns the number
-    /// of nodes freed.
-    pub fn remove_all_children(&mut self, n: NodeId) -> usize {
-        NodeStore::remove_all_children(self, n)
     }
 
     #[cfg(test)]

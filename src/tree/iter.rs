@@ -16,7 +16,7 @@ impl KeyBox {
     /// Does the node at `key`/`depth` overlap the box? (OctoMap's test,
     /// which widens by the half-size offset on both sides.)
     #[inline]
-    fn overlaps(&self, key: Key, depth: u8) -> bool {
+    pub(crate) fn overlaps(&self, key: Key, depth: u8) -> bool {
         let off = (KEY_CENTER >> depth) as i32;
         (0..3).all(|i| {
             let k = i32::from(key.0[i]);
@@ -25,21 +25,30 @@ impl KeyBox {
     }
 }
 
-/// One node as iteration reports it.
+/// One node as iteration reports it, from an in-memory tree or a mapped
+/// map.
 #[derive(Clone, Copy, Debug)]
 pub struct NodeItem<'a> {
     /// The key OctoMap's iterator computes (centre key of the node).
     pub key: Key,
+    /// Depth of the node (0 = root, 16 = voxel).
     pub depth: u8,
+    /// Log-odds occupancy (a counting tree's count, as a float).
     pub value: f32,
-    /// Colour or stamp, by the tree's kind (0 for plain trees).
+    /// Colour (`r | g << 8 | b << 16`) or time stamp, by the tree's kind;
+    /// 0 for plain trees.
     pub extra: u32,
     /// No children, or at the iteration's depth limit.
     pub is_leaf: bool,
     keys: &'a KeySpace,
 }
 
-impl NodeItem<'_> {
+impl<'a> NodeItem<'a> {
+    #[inline]
+    pub(crate) fn new(key: Key, depth: u8, value: f32, extra: u32, is_leaf: bool, keys: &'a KeySpace) -> Self {
+        NodeItem { key, depth, value, extra, is_leaf, keys }
+    }
+
     /// Edge length in metres.
     pub fn size(&self) -> f64 {
         self.keys.node_size(self.depth)

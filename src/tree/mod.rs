@@ -5,18 +5,21 @@ pub(crate) mod blocks;
 mod counting;
 mod cursor;
 mod iter;
+mod kind;
 mod level_index;
 mod parallel;
 mod search_index;
 mod trunk;
 
+pub use arena::ArenaUsage;
 pub(crate) use arena::LabelFill;
 pub(crate) use arena::{in_leaf_pool, leaf_index, prefetch_lines, Parts, WHOLE_PREFETCH_BYTES};
-pub use arena::{ArenaUsage, NodeArena, NodeId};
+pub(crate) use arena::{NodeArena, NodeId};
 use arena::{NodeStore, PreorderFill};
 pub use counting::CountingTree;
 pub(crate) use cursor::{LastAnswer, PathSearch};
 pub use iter::{KeyBox, NodeItem, NodeIter};
+pub use kind::{NodeKind, TreeKind};
 use level_index::{LevelSlot, Reach};
 #[cfg(test)]
 pub(crate) use parallel::MIN_CODES as PARALLEL_MIN_CODES;
@@ -64,21 +67,6 @@ pub struct Found {
     /// Colour (`r | g << 8 | b << 16`) or time stamp, by the tree's
     /// [`NodeKind`]; 0 for plain trees.
     pub extra: u32,
-}
-
-/// What nodes carry beyond log-odds, and the OctoMap rules that come with it.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum NodeKind {
-    /// `OcTree`.
-    #[default]
-    Plain,
-    /// `ColorOcTree`: an RGB colour per node, white meaning "not set".
-    /// Pruning ignores colours (a pruned node gets its children's average
-    /// colour); inner colours are averaged by `update_inner_occupancy`.
-    Color,
-    /// `OcTreeStamped`: the time of the last update per node. Updates stamp
-    /// the voxel and the inner nodes on its path; pruning needs equal stamps.
-    Stamped,
 }
 
 /// An RGB colour packed as `r | g << 8 | b << 16`; white means unset.
