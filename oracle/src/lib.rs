@@ -17,6 +17,7 @@
 //! enabled and aborts when an inner node is deleted.
 
 use std::fmt;
+use std::path::{Path, PathBuf};
 use std::ptr::NonNull;
 
 /// How to install the library the oracle needs.
@@ -72,6 +73,31 @@ fn skip_decision(test_name: &str, available: bool, ci: Option<&str>) -> SkipDeci
     } else {
         SkipDecision::Skip(msg)
     }
+}
+
+/// Environment variable naming another directory of golden vectors than the
+/// one the repository carries.
+pub const GOLDEN_ENV: &str = "OCTOLINEAR_GOLDEN";
+
+/// Where the tests find OctoMap's recorded answers, the golden vectors (see
+/// `tests/golden/README.md`): `tests/golden` of this workspace, which the
+/// repository carries, or the directory `OCTOLINEAR_GOLDEN` names. Panics,
+/// naming the directory, when it holds no `manifest.json`: a test must not
+/// pass without the data it checks against.
+pub fn golden_dir() -> PathBuf {
+    let (dir, from) = match std::env::var_os(GOLDEN_ENV).filter(|d| !d.is_empty()) {
+        Some(dir) => (PathBuf::from(dir), GOLDEN_ENV),
+        None => {
+            let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("the oracle is a workspace member");
+            (workspace.join("tests").join("golden"), "the workspace's tests/golden")
+        }
+    };
+    assert!(
+        dir.join("manifest.json").is_file(),
+        "golden vectors not found: {} (from {from}) has no manifest.json",
+        dir.display()
+    );
+    dir
 }
 
 /// Sensor model probabilities. They are applied like OctoMap's `graph2tree`
