@@ -12,6 +12,11 @@
 //! for `search` and the iterators `0` means "full depth" as in OctoMap. A depth
 //! above 16 panics (the Debian library would abort on its assertion).
 //!
+//! OctoMap's console output (its warnings, `MapCollection`'s per-ray lines)
+//! is printed with `print!`/`eprint!` on the thread that called OctoMap, so
+//! the test harness keeps it with the test that caused it (with glibc; on
+//! other C libraries it stays on the console).
+//!
 //! OctoMap is not thread-safe, and [`OracleTree`] is neither `Send` nor `Sync`.
 //! `deleteNode` is deliberately not exposed: Debian's build has assertions
 //! enabled and aborts when an inner node is deleted.
@@ -369,6 +374,7 @@ mod ffi {
     }
 
     shim_fns! {
+        fn olo_route_output(write: extern "C" fn(i32, *const std::ffi::c_char, usize)) -> i32;
         fn olo_free(p: *mut core::ffi::c_void);
         fn olo_tree_new(resolution: f64) -> *mut OloTree;
         fn olo_tree_new_sensor(resolution: f64, cmin: f64, cmax: f64, hit: f64, miss: f64) -> *mut OloTree;
@@ -458,6 +464,35 @@ mod ffi {
             occupancy: *mut f64, rays: *const f32, max_ranges: *const f64, n_rays: usize, ignore_unknown: i32,
             hits: *mut u8, ends: *mut f32) -> i64;
     }
+}
+
+/// `true` when OctoMap is built in. The first call routes OctoMap's console
+/// output through [`print_octomap_output`]; every way into OctoMap calls this
+/// first.
+fn octomap_ready() -> bool {
+    static ROUTE: std::sync::Once = std::sync::Once::new();
+    if available() {
+        // SAFETY: the callback stays valid for the life of the process, and
+        // the Once makes this the first shim call of any thread.
+        ROUTE.call_once(|| unsafe {
+            ffi::olo_route_output(print_octomap_output);
+        });
+    }
+    available()
+}
+
+/// Prints what OctoMap writes to stdout or stderr (`stream` 1 or 2) with
+/// `print!` or `eprint!` on the thread that wrote it. The test harness thus
+/// keeps OctoMap's warnings with the output of the test that caused them:
+/// shown when that test fails or with `--nocapture`, and silent otherwise.
+extern "C" fn print_octomap_output(stream: i32, data: *const std::ffi::c_char, len: usize) {
+    if data.is_null() {
+        return;
+    }
+    // SAFETY: the shim passes `len` readable bytes at `data`.
+    let text = String::from_utf8_lossy(unsafe { std::slice::from_raw_parts(data.cast::<u8>(), len) });
+    // A print that fails (closed stdout) panics; that must not unwind into C++.
+    let _ = std::panic::catch_unwind(|| if stream == 1 { print!("{text}") } else { eprint!("{text}") });
 }
 
 /// Copies a shim-allocated array into a `Vec` and frees it.
@@ -553,7 +588,7 @@ impl OracleTree {
 
     /// `OcTree(resolution)` with OctoMap's sensor defaults left untouched.
     pub fn new(resolution: f64) -> Result<Self, OracleError> {
-        if !available() {
+        if !octomap_ready() {
             return Err(OracleError::Unavailable);
         }
         validate_resolution(resolution)?;
@@ -564,7 +599,7 @@ impl OracleTree {
     /// `OcTree(resolution)` then the sensor model set graph2tree-style
     /// (`setClampingThresMin/Max`, `setProbHit`, `setProbMiss`).
     pub fn with_sensor(resolution: f64, sensor: &SensorParams) -> Result<Self, OracleError> {
-        if !available() {
+        if !octomap_ready() {
             return Err(OracleError::Unavailable);
         }
         validate_resolution(resolution)?;
@@ -579,7 +614,7 @@ impl OracleTree {
     /// probabilities are read back from the fresh tree (`getProbHit()` ...) and
     /// set again graph2tree-style.
     pub fn with_graph2tree_default(resolution: f64) -> Result<Self, OracleError> {
-        if !available() {
+        if !octomap_ready() {
             return Err(OracleError::Unavailable);
         }
         validate_resolution(resolution)?;
@@ -590,7 +625,7 @@ impl OracleTree {
     /// `AbstractOcTree::read` of `.ot` bytes; `None` on failure or if the file is
     /// not an `OcTree`. The sensor model is OctoMap's default (`.ot` does not store it).
     pub fn read_ot(bytes: &[u8]) -> Option<Self> {
-        if !available() {
+        if !octomap_ready() {
             return None;
         }
         // SAFETY: the shim copies `bytes` (pointer + length valid for the call).
@@ -599,7 +634,7 @@ impl OracleTree {
 
     /// A fresh `OcTree(0.1)` + `readBinary` of `.bt` bytes; `None` on failure.
     pub fn read_bt(bytes: &[u8]) -> Option<Self> {
-        if !available() {
+        if !octomap_ready() {
             return None;
         }
         // SAFETY: the shim copies `bytes` (pointer + length valid for the call).
@@ -1166,7 +1201,7 @@ impl OracleColorTree {
     /// `ColorOcTree(resolution)`, then, with `sensor`, the probabilities set
     /// in graph2tree order.
     pub fn new(resolution: f64, sensor: Option<&SensorParams>) -> Result<Self, OracleError> {
-        if !available() {
+        if !octomap_ready() {
             return Err(OracleError::Unavailable);
         }
         validate_resolution(resolution)?;
@@ -1184,7 +1219,7 @@ impl OracleColorTree {
     /// `ColorOcTree(resolution)` with the sensor model read back and set
     /// again in graph2tree order (what `octolinear build` does by default).
     pub fn with_graph2tree_default(resolution: f64) -> Result<Self, OracleError> {
-        if !available() {
+        if !octomap_ready() {
             return Err(OracleError::Unavailable);
         }
         validate_resolution(resolution)?;
@@ -1332,7 +1367,7 @@ impl fmt::Debug for OracleStampedTree {
 
 impl OracleStampedTree {
     pub fn new(resolution: f64) -> Result<Self, OracleError> {
-        if !available() {
+        if !octomap_ready() {
             return Err(OracleError::Unavailable);
         }
         validate_resolution(resolution)?;
@@ -1463,7 +1498,7 @@ pub fn map_collection_query(
     rays: &[CollectionRay],
     ignore_unknown: bool,
 ) -> Result<CollectionAnswers, OracleError> {
-    if !available() {
+    if !octomap_ready() {
         return Err(OracleError::Unavailable);
     }
     let path = std::ffi::CString::new(path.to_str().ok_or(OracleError::InvalidArgument("path is not UTF-8"))?)
