@@ -1,6 +1,6 @@
 //! Seed corpora for the fuzz targets: `cargo run --release --example
 //! fuzz_seeds -- [GOLDEN_DIR]` writes `fuzz/corpus/<target>/` seeds. The
-//! small golden `.ot`, `.bt` and `.graph` files (default `../shared/golden`)
+//! small golden `.ot`, `.bt` and `.graph` files (default `tests/golden`)
 //! are copied, and the small `.ot` files also converted to `.olm` (full,
 //! maximum likelihood, pointer index, with the search-blocks section). Small PLY (ascii, binary of both byte orders), PCD
 //! (ascii, binary, compressed) and binvox files are made here. The corpus
@@ -15,7 +15,9 @@ use std::path::{Path, PathBuf};
 const MAX_SEED: u64 = 20_000;
 
 fn main() {
-    let golden = PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| "../shared/golden".into()));
+    let golden = std::env::args()
+        .nth(1)
+        .map_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden"), PathBuf::from);
     let corpus = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus");
     let write = |target: &str, name: &str, bytes: &[u8]| {
         let dir = corpus.join(target);

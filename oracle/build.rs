@@ -49,7 +49,8 @@ fn main() {
 fn unavailable(why: &str) {
     println!(
         "cargo::warning=octolinear-oracle: OctoMap oracle disabled ({why}); \
-         oracle tests will be skipped. Install with: apt-get install -y liboctomap-dev"
+         the tests that compare against it fail unless OCTOLINEAR_SKIP_ORACLE=1. \
+         Install with: apt-get install -y liboctomap-dev"
     );
 }
 

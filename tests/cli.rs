@@ -45,15 +45,20 @@ fn fail_usage(args: &[&str], needle: &str) {
     assert!(err.contains(needle), "{err:?} lacks {needle:?}");
 }
 
-/// A Debian OctoMap tool, or `None` with one line saying the test part is skipped.
+/// A Debian OctoMap tool. When it is not installed the test fails, or with
+/// `OCTOLINEAR_SKIP_ORACLE=1` skips the part that needs it (`None`, and a
+/// line saying so; see `octolinear_oracle::skip_without_octomap`).
 fn tool(name: &str) -> Option<PathBuf> {
     let p = Path::new("/usr/bin").join(name);
     if p.exists() {
-        Some(p)
-    } else {
-        eprintln!("skipped: {name} is not installed");
-        None
+        return Some(p);
     }
+    let test = std::thread::current().name().unwrap_or("cli").to_string();
+    octolinear_oracle::skip_without_octomap(
+        &test,
+        &format!("{name} is not installed (apt-get install -y octomap-tools)"),
+    );
+    None
 }
 
 fn oracle(tool: &Path, args: &[&str]) -> String {

@@ -708,10 +708,6 @@ fn deep_bt_mutants(mut emit: impl FnMut(String, Vec<u8>)) {
 // ---------------------------------------------------------------------------
 // Inputs.
 
-fn golden_root() -> Option<PathBuf> {
-    common::golden("corruption").map(|g| g.root)
-}
-
 fn load(root: &Path, rel: &str) -> Vec<u8> {
     common::read_maybe_gz(&root.join(rel))
 }
@@ -772,17 +768,16 @@ fn ot_mutants() {
     let mut tally = Tally::default();
     let mut bases: Vec<(String, Vec<u8>, usize)> =
         small_trees().iter().map(|(name, t)| (format!("small {name}"), ot_bytes(t), 60)).collect();
-    if let Some(root) = golden_root() {
-        for (rel, n) in [
-            ("cases/delete_syn_room_r0.1/single_before.ot", 60),
-            ("cases/delete_syn_room_r0.1/empty.ot", 30),
-            ("cases/delete_syn_edges_r0.2/after_deletes.ot", 60),
-            ("cases/counting_syn_edges_r0.05/counting.ot", 40),
-            ("cases/color_syn_room_r0.1/color.ot.gz", 12),
-            ("cases/stamped_syn_room_r0.1/stamped.ot.gz", 12),
-        ] {
-            bases.push((rel.to_string(), load(&root, rel), n));
-        }
+    let root = octolinear_oracle::golden_dir();
+    for (rel, n) in [
+        ("cases/delete_syn_room_r0.1/single_before.ot", 60),
+        ("cases/delete_syn_room_r0.1/empty.ot", 30),
+        ("cases/delete_syn_edges_r0.2/after_deletes.ot", 60),
+        ("cases/counting_syn_edges_r0.05/counting.ot", 40),
+        ("cases/color_syn_room_r0.1/color.ot.gz", 12),
+        ("cases/stamped_syn_room_r0.1/stamped.ot.gz", 12),
+    ] {
+        bases.push((rel.to_string(), load(&root, rel), n));
     }
     let others: Vec<Vec<u8>> = bases.iter().map(|b| b.1.clone()).collect();
     let others: Vec<&[u8]> = others.iter().map(|v| &v[..]).collect();
@@ -814,15 +809,14 @@ fn bt_mutants() {
             bases.push((format!("legacy small {name}"), legacy(0.1, t.size() as u32, &body), 20));
         }
     }
-    if let Some(root) = golden_root() {
-        for (rel, n) in [
-            ("inputs/geb079.bt", 50),
-            ("cases/delete_syn_room_r0.1/empty.bt", 30),
-            ("cases/bbx_spherical_scan_originout_r0.1_mrm1_d0/tree.bt", 60),
-            ("cases/color_syn_room_r0.1/color.bt", 60),
-        ] {
-            bases.push((rel.to_string(), load(&root, rel), n));
-        }
+    let root = octolinear_oracle::golden_dir();
+    for (rel, n) in [
+        ("inputs/geb079.bt", 50),
+        ("cases/delete_syn_room_r0.1/empty.bt", 30),
+        ("cases/bbx_spherical_scan_originout_r0.1_mrm1_d0/tree.bt", 60),
+        ("cases/color_syn_room_r0.1/color.bt", 60),
+    ] {
+        bases.push((rel.to_string(), load(&root, rel), n));
     }
     let others: Vec<Vec<u8>> = bases.iter().map(|b| b.1.clone()).collect();
     let others: Vec<&[u8]> = others.iter().map(|v| &v[..]).collect();
@@ -861,14 +855,13 @@ fn ros_mutants() {
             ot::AnyTree::Counting(c) => bases.push((format!("full {name}"), encode(&ros::full_counting_map_to_msg(c)))),
         }
     }
-    if let Some(root) = golden_root() {
-        let geb = bt::read(&load(&root, "inputs/geb079.bt")[..]).unwrap();
-        bases.push(("binary geb079".into(), encode(&ros::binary_map_to_msg(&geb))));
-        let counting = load(&root, "cases/counting_syn_edges_r0.05/counting.ot");
-        let mut full = vec![3u8 << 1 | 1 << 4];
-        full.extend_from_slice(split_header(&counting).1);
-        bases.push(("full counting golden".into(), full));
-    }
+    let root = octolinear_oracle::golden_dir();
+    let geb = bt::read(&load(&root, "inputs/geb079.bt")[..]).unwrap();
+    bases.push(("binary geb079".into(), encode(&ros::binary_map_to_msg(&geb))));
+    let counting = load(&root, "cases/counting_syn_edges_r0.05/counting.ot");
+    let mut full = vec![3u8 << 1 | 1 << 4];
+    full.extend_from_slice(split_header(&counting).1);
+    bases.push(("full counting golden".into(), full));
     let others: Vec<Vec<u8>> = bases.iter().map(|b| b.1.clone()).collect();
     let others: Vec<&[u8]> = others.iter().map(|v| &v[..]).collect();
     for (name, base) in &bases {
@@ -892,14 +885,11 @@ fn graph_mutants() {
     let mut small = Vec::new();
     graph::write(&small_graph(), &mut small).unwrap();
     let mut bases: Vec<(String, Vec<u8>, usize)> = vec![("small graph with edges".into(), small, 200)];
-    if let Some(root) = golden_root() {
-        for (rel, n) in [
-            ("inputs/syn_mapedge_r010.graph", 150),
-            ("inputs/syn_edges.graph", 100),
-            ("inputs/spherical_scan.graph", 20),
-        ] {
-            bases.push((rel.to_string(), load(&root, rel), n));
-        }
+    let root = octolinear_oracle::golden_dir();
+    for (rel, n) in
+        [("inputs/syn_mapedge_r010.graph", 150), ("inputs/syn_edges.graph", 100), ("inputs/spherical_scan.graph", 20)]
+    {
+        bases.push((rel.to_string(), load(&root, rel), n));
     }
     let others: Vec<Vec<u8>> = bases.iter().map(|b| b.1.clone()).collect();
     let others: Vec<&[u8]> = others.iter().map(|v| &v[..]).collect();
@@ -917,8 +907,7 @@ fn graph_mutants() {
         }
     }
     junk_mutants(&[&[1, 0, 0, 0][..]], &mut rng, 60, |what, m| tally.run(Format::Graph, &what, &m));
-    // without the golden inputs (a user's clone) only the small graph is mutated
-    tally.finish(Format::Graph, if bases.len() > 1 { 1500 } else { 1000 });
+    tally.finish(Format::Graph, 1500);
 }
 
 #[test]
@@ -929,14 +918,13 @@ fn text_mutants() {
     let mut log_text = Vec::new();
     log::write(&small_graph(), &mut log_text).unwrap();
     let mut log_bases: Vec<(String, Vec<u8>, usize)> = vec![("small log".into(), log_text, 200)];
-    if let Some(root) = golden_root() {
-        xyz_bases.push(("syn_mapedge_r010.scan0.xyz".into(), load(&root, "inputs/syn_mapedge_r010.scan0.xyz"), 150));
-        xyz_bases.push(("syn_edges.scan0.xyz".into(), load(&root, "inputs/syn_edges.scan0.xyz"), 100));
-        let g = graph::read_bytes(&load(&root, "inputs/syn_mapedge_r010.graph")).unwrap();
-        let mut text = Vec::new();
-        log::write(&g, &mut text).unwrap();
-        log_bases.push(("log of syn_mapedge_r010".into(), text, 150));
-    }
+    let root = octolinear_oracle::golden_dir();
+    xyz_bases.push(("syn_mapedge_r010.scan0.xyz".into(), load(&root, "inputs/syn_mapedge_r010.scan0.xyz"), 150));
+    xyz_bases.push(("syn_edges.scan0.xyz".into(), load(&root, "inputs/syn_edges.scan0.xyz"), 100));
+    let g = graph::read_bytes(&load(&root, "inputs/syn_mapedge_r010.graph")).unwrap();
+    let mut text = Vec::new();
+    log::write(&g, &mut text).unwrap();
+    log_bases.push(("log of syn_mapedge_r010".into(), text, 150));
     let specials: Vec<(&str, Vec<u8>)> = vec![
         ("long line", [b"1 2 ".to_vec(), vec![b'3'; 300_000], b"\n".to_vec()].concat()),
         ("long line without newline", vec![b'7'; 300_000]),
@@ -961,8 +949,7 @@ fn text_mutants() {
             tally.run(format, what, m);
         }
         junk_mutants(&[b"NODE 0 0 0 0 0 0\n"], &mut rng, 60, |what, m| tally.run(format, &what, &m));
-        // without the golden inputs (a user's clone) only the small bases are mutated
-        tally.finish(format, if bases.len() > 1 { 1000 } else { 400 });
+        tally.finish(format, 1000);
     }
 }
 

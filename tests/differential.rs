@@ -12,13 +12,10 @@
 //! `tests/regressions/mod.rs` (it is also written to `CARGO_TARGET_TMPDIR`).
 //! `slowest_random_cases` (ignored) reports where the run time goes.
 //!
-//! Knobs: `OCTOLINEAR_DIFF_SEED` (base seed, default fixed),
-//! `OCTOLINEAR_DIFF_SCALE` (multiplies the number of random cases) and
-//! `OCTOLINEAR_DIFF_VERBOSE=1`: OctoMap prints warnings ("out of bounds",
-//! "done.") straight to file descriptor 2, thousands of lines for these
-//! tests, so this binary points fd 2 at `/dev/null` unless that is set. The
-//! test harness still shows failures (it captures panic messages itself), but
-//! with `--nocapture` they are only visible with `OCTOLINEAR_DIFF_VERBOSE=1`.
+//! Knobs: `OCTOLINEAR_DIFF_SEED` (base seed, default fixed) and
+//! `OCTOLINEAR_DIFF_SCALE` (multiplies the number of random cases). OctoMap's
+//! own warnings ("out of bounds", thousands of lines for these tests) are
+//! part of each test's captured output: shown with a failure or `--nocapture`.
 //!
 //! Not compared: bounding-box insertion (Debian's 1.9.7 has OctoMap's old
 //! bounding-box semantics, octolinear follows 1.10) and NaN points (octolinear
@@ -400,30 +397,7 @@ fn bt_const_bytes(t: &OccupancyTree) -> Vec<u8> {
     v
 }
 
-/// Points file descriptor 2 at `/dev/null` (once) unless
-/// `OCTOLINEAR_DIFF_VERBOSE` is set; see the module documentation.
-fn quiet_octomap() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        if std::env::var_os("OCTOLINEAR_DIFF_VERBOSE").is_some() {
-            return;
-        }
-        #[cfg(unix)]
-        {
-            use std::os::fd::AsRawFd;
-            extern "C" {
-                fn dup2(oldfd: i32, newfd: i32) -> i32;
-            }
-            if let Ok(null) = std::fs::OpenOptions::new().write(true).open("/dev/null") {
-                // SAFETY: both descriptors are open; dup2 only replaces fd 2.
-                unsafe { dup2(null.as_raw_fd(), 2) };
-            }
-        }
-    });
-}
-
 fn new_pair(cfg: &Config) -> Pair {
-    quiet_octomap();
     let (ours, mut theirs) = match cfg.sensor {
         None => (OccupancyTree::new(cfg.res).unwrap(), OracleTree::new(cfg.res).unwrap()),
         Some(s) => {
@@ -1664,7 +1638,6 @@ fn thread_count_independence() {
             ..if kind == SceneKind::Indoor { LidarConfig::indoor() } else { LidarConfig::outdoor() }
         };
         let graph = simulate(kind, 3, 7 + i as u64, &lidar).unwrap();
-        quiet_octomap();
         let mut theirs = OracleTree::new(res).unwrap();
         let mut ours: Vec<OccupancyTree> = (0..3).map(|_| OccupancyTree::new(res).unwrap()).collect();
         for (s, node) in graph.nodes.iter().enumerate() {

@@ -11,8 +11,7 @@
 //! and a case whose call straddled two seconds is run again.
 //!
 //! Knobs: `OCTOLINEAR_DIFF_SEED` (base seed), `OCTOLINEAR_DIFF_SCALE`
-//! (multiplies the number of random cases), `OCTOLINEAR_DIFF_VERBOSE=1`
-//! (keep OctoMap's stderr chatter).
+//! (multiplies the number of random cases).
 
 use octolinear::formats::ot;
 use octolinear::geometry::graph2tree_transform;
@@ -23,26 +22,6 @@ use octolinear_oracle::{
     require_or_skip, ColorOp, OracleColorTree, OracleError, OracleStampedTree, SensorParams, StampedNode,
 };
 use std::process::Command;
-
-fn quiet_octomap() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        if std::env::var_os("OCTOLINEAR_DIFF_VERBOSE").is_some() {
-            return;
-        }
-        #[cfg(unix)]
-        {
-            use std::os::fd::AsRawFd;
-            extern "C" {
-                fn dup2(oldfd: i32, newfd: i32) -> i32;
-            }
-            if let Ok(null) = std::fs::OpenOptions::new().write(true).open("/dev/null") {
-                // SAFETY: both descriptors are open; dup2 only replaces fd 2.
-                unsafe { dup2(null.as_raw_fd(), 2) };
-            }
-        }
-    });
-}
 
 fn base_seed() -> u64 {
     std::env::var("OCTOLINEAR_DIFF_SEED").ok().and_then(|s| s.parse().ok()).unwrap_or(0x00c0_10c0_ffee)
@@ -127,7 +106,6 @@ fn apply_color(t: &mut OccupancyTree, op: ColorOp, pts: &[[f32; 3]], cols: &[[u8
 /// One random colour case; `Err` when OctoMap refused it (a ray too long for
 /// its `KeyRay`), a panic with the case's description when the trees differ.
 fn color_case(seed: u64, res: f64, custom_sensor: bool) -> Result<(), OracleError> {
-    quiet_octomap();
     let mut rng = SplitMix64(seed);
     let sensor = custom_sensor.then(|| SensorParams {
         prob_hit: rng.range(0.55, 0.95),
@@ -255,7 +233,6 @@ fn color_updates_on_pruned_leaves_match_octomap() {
     if !require_or_skip("color_updates_on_pruned_leaves_match_octomap") {
         return;
     }
-    quiet_octomap();
     let mut rng = SplitMix64(base_seed() ^ 0x5eed);
     for &res in &[0.1, 0.05] {
         let mut theirs = OracleColorTree::new(res, None).unwrap();
@@ -312,7 +289,6 @@ enum StampedStep {
 /// Runs `steps` on both trees; `None` when an OctoMap call straddled two
 /// seconds (the caller retries).
 fn stamped_run(res: f64, steps: &[StampedStep]) -> Option<()> {
-    quiet_octomap();
     let mut theirs = OracleStampedTree::new(res).unwrap();
     let mut ours = OccupancyTree::with_kind(res, SensorModel::default(), NodeKind::Stamped).unwrap();
     for (i, step) in steps.iter().enumerate() {
@@ -456,7 +432,6 @@ fn cli_color_build_matches_octomap() {
     if !require_or_skip("cli_color_build_matches_octomap") {
         return;
     }
-    quiet_octomap();
     let dir = tempfile::tempdir().unwrap();
     let mut rng = SplitMix64(base_seed() ^ 0xc11);
     let res = 0.05;

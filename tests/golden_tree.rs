@@ -29,9 +29,7 @@ fn bt_bytes(tree: &OccupancyTree, konst: bool) -> Vec<u8> {
 
 #[test]
 fn golden_coordinate_key_conversions() {
-    let Some(g) = golden("golden_coordinate_key_conversions") else {
-        return;
-    };
+    let g = golden();
     let case = g.case("coordkey");
     let mut f = Failures::default();
 
@@ -106,9 +104,7 @@ fn golden_coordinate_key_conversions() {
 
 #[test]
 fn golden_read_bt_expand_and_prune() {
-    let Some(g) = golden("golden_read_bt_expand_and_prune") else {
-        return;
-    };
+    let g = golden();
     let case = g.case("geb079_readbt");
     let id = "geb079_readbt";
     let expected = expected_stats(&g, case);
@@ -155,9 +151,7 @@ fn build_for_delete(g: &Golden, case: &Value) -> OccupancyTree {
 
 #[test]
 fn golden_delete_node_semantics() {
-    let Some(g) = golden("golden_delete_node_semantics") else {
-        return;
-    };
+    let g = golden();
     let mut f = Failures::default();
     for case in g.cases("delete") {
         let id = case["id"].as_str().unwrap();

@@ -11,6 +11,7 @@ use octolinear::formats::{log, xyz};
 use octolinear::geometry::{Point3, PointCloud, Pose6D, Quaternion};
 use octolinear::simulate::SplitMix64;
 use octolinear::{ScanEdge, ScanGraph};
+use octolinear_oracle::golden_dir;
 use sha2::{Digest, Sha256};
 
 /// Records the largest single allocation made by the current thread, so the
@@ -46,18 +47,6 @@ unsafe impl GlobalAlloc for TrackingAlloc {
 #[global_allocator]
 static GLOBAL: TrackingAlloc = TrackingAlloc;
 
-fn golden() -> Option<PathBuf> {
-    let dir = std::env::var_os("OCTOLINEAR_GOLDEN")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/golden"));
-    if dir.join("manifest.json").exists() {
-        Some(dir)
-    } else {
-        eprintln!("golden vectors not found at {}; skipping", dir.display());
-        None
-    }
-}
-
 fn graph_inputs(dir: &Path) -> Vec<PathBuf> {
     let mut v: Vec<PathBuf> = fs::read_dir(dir.join("inputs"))
         .unwrap()
@@ -79,7 +68,7 @@ fn parse_hex32(s: &str) -> u32 {
 
 #[test]
 fn golden_graphs_round_trip_byte_identically() {
-    let Some(dir) = golden() else { return };
+    let dir = golden_dir();
     for path in graph_inputs(&dir) {
         let bytes = fs::read(&path).unwrap();
         let g = graph::read_bytes(&bytes).unwrap();
@@ -95,7 +84,7 @@ fn golden_graphs_round_trip_byte_identically() {
 
 #[test]
 fn write_file_is_atomic_and_round_trips() {
-    let Some(dir) = golden() else { return };
+    let dir = golden_dir();
     let tmp = tempfile::tempdir().unwrap();
     let target = tmp.path().join("out.graph");
     for path in graph_inputs(&dir) {
@@ -109,7 +98,7 @@ fn write_file_is_atomic_and_round_trips() {
 
 #[test]
 fn graph2tree_matches_xyz_and_origins() {
-    let Some(dir) = golden() else { return };
+    let dir = golden_dir();
     let mut checked = 0;
     for path in graph_inputs(&dir) {
         let stem = path.file_stem().unwrap().to_string_lossy().into_owned();
@@ -173,7 +162,7 @@ fn stored_text(dir: &Path, file: &serde_json::Value) -> Option<String> {
 /// only) is reproduced exactly, and so are the xyz-input cases.
 #[test]
 fn golden_case_scans_and_world_points() {
-    let Some(dir) = golden() else { return };
+    let dir = golden_dir();
     let manifest: serde_json::Value =
         serde_json::from_str(&fs::read_to_string(dir.join("manifest.json")).unwrap()).unwrap();
     let mut compared = 0;
@@ -295,7 +284,7 @@ fn errors_carry_offsets_and_values() {
 /// allocation proportional to a forged size.
 #[test]
 fn corrupted_graphs_never_panic_or_overallocate() {
-    let Some(dir) = golden() else { return };
+    let dir = golden_dir();
     let mut rng = SplitMix64(0xC0FFEE);
     let (mut ok, mut err) = (0, 0);
     for path in graph_inputs(&dir) {

@@ -450,9 +450,7 @@ fn tiny_maps_empty_single_and_pruned() {
 /// the bytes the `.ot` reader and writer give, for every layout.
 #[test]
 fn golden_ot_files_round_trip() {
-    let Some(g) = golden("golden_ot_files_round_trip") else {
-        return;
-    };
+    let g = golden();
     let mut f = Failures::default();
     let (mut files, mut identical, mut counting) = (0, 0, 0);
     let mut kinds = std::collections::BTreeMap::new();
@@ -583,9 +581,7 @@ fn counting_trees_through_olm() {
 /// every stored `.bt` of the golden set.
 #[test]
 fn golden_bt_files_round_trip() {
-    let Some(g) = golden("golden_bt_files_round_trip") else {
-        return;
-    };
+    let g = golden();
     let mut f = Failures::default();
     let mut inputs = vec![("inputs/geb079.bt".to_string(), std::fs::read(g.input("inputs/geb079.bt")).unwrap())];
     for case in g.manifest["cases"].as_array().unwrap() {
@@ -646,9 +642,7 @@ fn opt_f32(v: Option<f32>) -> String {
 /// `tree.ot` is stored, answered from a memory-mapped `.olm`.
 #[test]
 fn golden_queries_from_mapped_files() {
-    let Some(g) = golden("golden_queries_from_mapped_files") else {
-        return;
-    };
+    let g = golden();
     let dir = tempfile::tempdir().unwrap();
     let mut f = Failures::default();
     let mut answered = 0;

@@ -78,7 +78,7 @@ fn empty_octree() {
 
 #[test]
 fn reference_octree_from_file() {
-    let Some(filename) = input("reference_octree_from_file", "geb079.bt") else { return };
+    let filename = input("geb079.bt");
     let tree = bt::read(BufReader::new(std::fs::File::open(filename).unwrap())).expect("readBinary");
     assert_eq!(tree.size(), 532566);
 

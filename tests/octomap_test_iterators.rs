@@ -168,7 +168,7 @@ fn iterate_empty_tree() {
 
 #[test]
 fn iterate_geb079() {
-    let Some(path) = input("iterate_geb079", "geb079.bt") else { return };
+    let path = input("geb079.bt");
     let mut tree = bt::read(BufReader::new(std::fs::File::open(path).unwrap())).expect("geb079.bt reads");
     assert!(tree.size() > 1);
 

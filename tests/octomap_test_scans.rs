@@ -25,7 +25,7 @@ fn compare_point(first: Point3, sec: Point3) {
 
 #[test]
 fn test_scans() {
-    let Some(filename) = input("test_scans", "spherical_scan.graph") else { return };
+    let filename = input("spherical_scan.graph");
     let reference_graph = graph::read_file(&filename).expect("reference graph reads");
 
     let point_on_surface = Point3::new(4.01, 0.01, 0.01);

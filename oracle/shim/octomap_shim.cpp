@@ -14,7 +14,8 @@
 //   * Points are float[3] (octomap::point3d), keys uint16_t[3].
 
 // Keep OctoMap's OCTOMAP_DEBUG chatter (compiled into this translation unit
-// through the templates) off stderr.  Warnings/errors are still printed.
+// through the templates) out.  Its warnings and errors go where
+// olo_route_output sends them.
 #define OCTOMAP_NODEBUGOUT 1
 
 #include <octomap/octomap.h>
@@ -28,11 +29,14 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <iostream>
 #include <limits>
 #include <new>
 #include <sstream>
+#include <streambuf>
 #include <string>
 #include <vector>
 
@@ -190,7 +194,86 @@ void set_sensor(OcTree* t, double cmin, double cmax, double hit, double miss) {
 
 }  // namespace
 
+// ---------------------------------------------------------------- console output
+//
+// OctoMap reports on the console four ways: printf and fprintf on the C
+// streams stdout and stderr (OCTOMAP_WARNING, MapCollection's per-ray lines,
+// also from inside liboctomap) and std::cout / std::cerr
+// (OCTOMAP_ERROR_STR, "Reading binary octree ...").  olo_route_output points
+// all four at a callback, unbuffered, so that every piece of text is handed
+// over on the thread that wrote it.
+
+typedef void (*OloWriteFn)(int stream, const char* data, size_t len);
+
+namespace {
+
+OloWriteFn g_write = nullptr;
+
+// A std::streambuf without a buffer: every character goes to g_write at once,
+// so it keeps no state that threads writing at the same time could share.
+class CallbackBuf : public std::streambuf {
+ public:
+  explicit CallbackBuf(int stream) : stream_(stream) {}
+
+ protected:
+  int_type overflow(int_type c) override {
+    if (!traits_type::eq_int_type(c, traits_type::eof())) {
+      char ch = traits_type::to_char_type(c);
+      g_write(stream_, &ch, 1);
+    }
+    return traits_type::not_eof(c);
+  }
+  std::streamsize xsputn(const char* s, std::streamsize n) override {
+    g_write(stream_, s, static_cast<size_t>(n));
+    return n;
+  }
+
+ private:
+  int stream_;
+};
+
+#if defined(__GLIBC__)
+// fopencookie write function; the cookie is the stream number (1 or 2).
+ssize_t cookie_write(void* cookie, const char* buf, size_t size) {
+  g_write(static_cast<int>(reinterpret_cast<intptr_t>(cookie)), buf, size);
+  return static_cast<ssize_t>(size);
+}
+#endif
+
+}  // namespace
+
 extern "C" {
+
+// Sends everything OctoMap writes to stdout (stream 1) or stderr (stream 2)
+// to `write` from now on, for the rest of the process.  Call it once, before
+// any other shim function.  OLO_EFAILED (nothing changed) where the C
+// library cannot make a stream of a callback (fopencookie is glibc's).
+int olo_route_output(OloWriteFn write) {
+#if defined(__GLIBC__)
+  cookie_io_functions_t io = {nullptr, cookie_write, nullptr, nullptr};
+  FILE* out = fopencookie(reinterpret_cast<void*>(1), "w", io);
+  FILE* err = fopencookie(reinterpret_cast<void*>(2), "w", io);
+  if (!out || !err || setvbuf(out, nullptr, _IONBF, 0) != 0 || setvbuf(err, nullptr, _IONBF, 0) != 0) {
+    if (out) fclose(out);
+    if (err) fclose(err);
+    return OLO_EFAILED;
+  }
+  g_write = write;
+  std::fflush(stdout);
+  std::fflush(stderr);
+  // glibc documents stdout and stderr as ordinary variables one may assign.
+  stdout = out;
+  stderr = err;
+  static CallbackBuf out_buf(1), err_buf(2);
+  std::cout.rdbuf(&out_buf);
+  std::cerr.rdbuf(&err_buf);
+  std::clog.rdbuf(&err_buf);
+  return OLO_OK;
+#else
+  (void)write;
+  return OLO_EFAILED;
+#endif
+}
 
 void olo_free(void* p) { std::free(p); }
 

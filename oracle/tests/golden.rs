@@ -1,12 +1,12 @@
-//! Sanity checks of the oracle against the golden vectors in
-//! `/work/shared/golden` (override with `OCTOLINEAR_GOLDEN_DIR`).
+//! Sanity checks of the oracle against the golden vectors in the workspace's
+//! `tests/golden` (see `octolinear_oracle::golden_dir`).
 //!
 //! They prove that the shim drives OctoMap exactly like the golden harness: the
 //! trees are rebuilt from the world-frame `.xyz` inputs and every output file the
 //! oracle can reproduce is compared by sha256 (also the `digest-only` ones,
 //! whose CSV text is regenerated here), together with the statistics.
 
-use octolinear_oracle::{available, require_or_skip, OracleTree, ScanBatch, SensorParams};
+use octolinear_oracle::{available, golden_dir, require_or_skip, OracleTree, ScanBatch, SensorParams};
 use serde_json::Value;
 use sha2::{Digest, Sha256};
 use std::collections::HashMap;
@@ -24,15 +24,14 @@ struct Golden {
     manifest: Value,
 }
 
+/// The golden vectors, or `None` when the oracle is unavailable and
+/// `OCTOLINEAR_SKIP_ORACLE=1` lets the test skip.
 fn golden(test_name: &str) -> Option<Golden> {
     if !require_or_skip(test_name) {
         return None;
     }
-    let dir = PathBuf::from(std::env::var("OCTOLINEAR_GOLDEN_DIR").unwrap_or_else(|_| "/work/shared/golden".into()));
-    let Ok(text) = std::fs::read_to_string(dir.join("manifest.json")) else {
-        println!("{test_name}: skipped, golden vectors not found at {}", dir.display());
-        return None;
-    };
+    let dir = golden_dir();
+    let text = std::fs::read_to_string(dir.join("manifest.json")).expect("manifest.json reads");
     Some(Golden { dir, manifest: serde_json::from_str(&text).expect("manifest.json parses") })
 }
 

@@ -15,23 +15,13 @@ pub struct Golden {
     pub manifest: Value,
 }
 
-/// The golden vectors, or `None` (with one line on stderr) when they are
-/// absent. Under CI (`CI=true`) their absence is a failure.
-pub fn golden(test: &str) -> Option<Golden> {
-    let root = std::env::var_os("OCTOLINEAR_GOLDEN")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/golden"));
-    let manifest_path = root.join("manifest.json");
-    let Ok(text) = std::fs::read_to_string(&manifest_path) else {
-        let msg = format!("{test}: skipped, golden vectors not found at {}", root.display());
-        if std::env::var("CI").as_deref() == Ok("true") {
-            panic!("{msg}");
-        }
-        eprintln!("{msg}");
-        return None;
-    };
+/// The golden vectors (`tests/golden`, see [`octolinear_oracle::golden_dir`]
+/// for where they are looked for); a test without them fails.
+pub fn golden() -> Golden {
+    let root = octolinear_oracle::golden_dir();
+    let text = std::fs::read_to_string(root.join("manifest.json")).expect("manifest.json reads");
     let manifest = serde_json::from_str(&text).expect("manifest.json parses");
-    Some(Golden { root, manifest })
+    Golden { root, manifest }
 }
 
 /// A file of a case: its digest, and its bytes when stored.

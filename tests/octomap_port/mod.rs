@@ -14,22 +14,11 @@ pub fn deg2rad(x: f64) -> f64 {
 }
 
 /// A data file OctoMap's CMakeLists passes to its tests (`share/data/...`),
-/// taken from the golden inputs. `None` (with one line on stderr) when they
-/// are absent; under CI (`CI=true`) their absence is a failure.
-pub fn input(test: &str, name: &str) -> Option<PathBuf> {
-    let root = std::env::var_os("OCTOLINEAR_GOLDEN")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/golden"));
-    let path = root.join("inputs").join(name);
-    if path.is_file() {
-        return Some(path);
-    }
-    let msg = format!("{test}: skipped, input {} not found", path.display());
-    if std::env::var("CI").as_deref() == Ok("true") {
-        panic!("{msg}");
-    }
-    eprintln!("{msg}");
-    None
+/// taken from the inputs of the golden vectors.
+pub fn input(name: &str) -> PathBuf {
+    let path = octolinear_oracle::golden_dir().join("inputs").join(name);
+    assert!(path.is_file(), "OctoMap test input {} not found", path.display());
+    path
 }
 
 /// `EXPECT_FLOAT_EQ` of OctoMap's `testing.h`: `|a - b| <= 1e-5`.
