@@ -1,20 +1,20 @@
 //! Layout ablation: octolinear's arenas against the paper's pointer tree,
 //! and the paper's Table 2 / Fig. 14 / Fig. 15 on simulated scans.
 //!
-//! `cargo bench --bench ablation` (add `-- --quick` for a small run,
+//! `cargo bench -p octolinear-ablation --bench ablation` (add `-- --quick` for a small run,
 //! `-- --help` for the options) writes `docs/ablation.md` and the SVG plots
 //! under `docs/ablation/`. Every measurement of a layout runs in a fresh
 //! child process (this binary re-invoked with `--child`), so resident
 //! memory and heap figures are not polluted by earlier builds.
 
-use octolinear::ablation::alloc::{self, CountingAlloc, MemSnapshot};
-use octolinear::ablation::pointer::PointerTree;
-use octolinear::ablation::report::{self, count, mib, ns_per, secs, table, Chart, Series};
-use octolinear::ablation::variants::{ArenaBatch, ArenaCompact, ArenaPerKey, Block8, MappedLayout, Split8};
-use octolinear::ablation::{cast_ray, graph2tree_sensor, paper_bytes, Layout, ScanKeys};
 use octolinear::formats::{bt, ot};
-use octolinear::simulate::{simulate, LidarConfig, SceneKind, SplitMix64};
 use octolinear::{BoundsRule, Key, OccupancyTree, Point3, ScanOptions};
+use octolinear_ablation::alloc::{self, CountingAlloc, MemSnapshot};
+use octolinear_ablation::pointer::PointerTree;
+use octolinear_ablation::report::{self, count, mib, ns_per, secs, table, Chart, Series};
+use octolinear_ablation::variants::{ArenaBatch, ArenaCompact, ArenaPerKey, Block8, MappedLayout, Split8};
+use octolinear_ablation::{cast_ray, graph2tree_sensor, paper_bytes, Layout, ScanKeys};
+use octolinear_sim::{simulate, LidarConfig, SceneKind, SplitMix64};
 use serde_json::{json, Value};
 use std::hint::black_box;
 use std::io::{Read, Write};
@@ -77,7 +77,7 @@ impl Opts {
             rays: 20_000,
             reps: 3,
             seed: 42,
-            out: Path::new(env!("CARGO_MANIFEST_DIR")).join("docs"),
+            out: Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs"),
             oracle: octolinear_oracle::available(),
         };
         let mut it = args.iter();
@@ -119,7 +119,7 @@ impl Opts {
                 "--no-oracle" => o.oracle = false,
                 "--help" | "-h" => {
                     println!(
-                        "cargo bench --bench ablation [-- OPTIONS]\n  --quick            small run (indoor 0.1, 0.2 m, 6 scans; outdoor 0.2, 0.4 m, 3 scans)\n  --res 0.05,0.1,0.2 indoor resolutions\n  --outdoor-res 0.1,0.2,0.4 outdoor resolutions\n  --scenes indoor,outdoor\n  --indoor-scans N / --outdoor-scans N\n  --queries N  --rays N  --reps N  --seed N\n  --out DIR          where ablation.md and ablation/*.svg go (default: docs/)\n  --no-oracle        skip OctoMap even when the oracle is built"
+                        "cargo bench -p octolinear-ablation --bench ablation [-- OPTIONS]\n  --quick            small run (indoor 0.1, 0.2 m, 6 scans; outdoor 0.2, 0.4 m, 3 scans)\n  --res 0.05,0.1,0.2 indoor resolutions\n  --outdoor-res 0.1,0.2,0.4 outdoor resolutions\n  --scenes indoor,outdoor\n  --indoor-scans N / --outdoor-scans N\n  --queries N  --rays N  --reps N  --seed N\n  --out DIR          where ablation.md and ablation/*.svg go (default: docs/)\n  --no-oracle        skip OctoMap even when the oracle is built"
                     );
                     std::process::exit(0);
                 }
@@ -146,9 +146,9 @@ impl Opts {
     /// The exact command that reproduces this run.
     fn command(&self) -> String {
         if self.quick {
-            "cargo bench --bench ablation -- --quick".into()
+            "cargo bench -p octolinear-ablation --bench ablation -- --quick".into()
         } else {
-            "cargo bench --bench ablation".into()
+            "cargo bench -p octolinear-ablation --bench ablation".into()
         }
     }
 }

@@ -1,6 +1,7 @@
-//! Seed corpora for the fuzz targets: `cargo run --release --example
-//! fuzz_seeds -- [GOLDEN_DIR]` writes `fuzz/corpus/<target>/` seeds. The
-//! small golden `.ot`, `.bt` and `.graph` files (default `../shared/golden`)
+//! Seed corpora for the fuzz targets: `cargo run --release -p
+//! octolinear-probes --bin fuzz_seeds -- [GOLDEN_DIR]` writes
+//! `fuzz/corpus/<target>/` seeds. The small golden `.ot`, `.bt` and
+//! `.graph` files (default `../shared/golden`)
 //! are copied, and the small `.ot` files also converted to `.olm` (full,
 //! maximum likelihood, pointer index, with the search-blocks section). Small PLY (ascii, binary of both byte orders), PCD
 //! (ascii, binary, compressed) and binvox files are made here. The corpus
@@ -16,7 +17,7 @@ const MAX_SEED: u64 = 20_000;
 
 fn main() {
     let golden = PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| "../shared/golden".into()));
-    let corpus = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus");
+    let corpus = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/corpus");
     let write = |target: &str, name: &str, bytes: &[u8]| {
         let dir = corpus.join(target);
         std::fs::create_dir_all(&dir).expect("corpus directory");
