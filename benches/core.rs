@@ -1,14 +1,14 @@
 //! Micro-benchmarks of the core: Morton codes, key conversion, search, leaf
 //! iteration, ray casting and the effect of arena compaction.
 //!
-//! `cargo bench --bench core`
+//! `cargo bench -p octolinear-benches --bench core`
 
 mod common;
 
 use common::*;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use octolinear::simulate::SceneKind;
 use octolinear::{CastOptions, Key, MortonCode, OccupancyTree, Point3};
+use octolinear_sim::SceneKind;
 use std::hint::black_box;
 use std::sync::OnceLock;
 use std::time::Duration;

@@ -1,15 +1,15 @@
 //! `.ot` and `.bt` read and write throughput (bytes of the file per second)
 //! on simulated maps.
 //!
-//! `cargo bench --bench formats`
+//! `cargo bench -p octolinear-benches --bench formats`
 
 mod common;
 
 use common::*;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use octolinear::formats::{bt, ot};
-use octolinear::simulate::SceneKind;
 use octolinear::OccupancyTree;
+use octolinear_sim::SceneKind;
 use std::hint::black_box;
 use std::time::Duration;
 

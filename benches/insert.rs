@@ -10,7 +10,7 @@
 //! own iteration order. Before timing, the three applications are checked
 //! to give the same `.ot` bytes.
 //!
-//! `cargo bench --bench insert` (filter e.g. `-- insert/indoor`).
+//! `cargo bench -p octolinear-benches --bench insert` (filter e.g. `-- insert/indoor`).
 //! Throughputs: `insert` and `compute_update` in points, `dedup` in raw
 //! codes, `apply` in voxel updates. Each scene and resolution also prints
 //! (stderr) its counts and the rates of a plain timing: points and voxel
@@ -22,8 +22,8 @@ use common::*;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use octolinear::formats::ot;
 use octolinear::scan::{KeySet, ScanUpdate};
-use octolinear::simulate::SceneKind;
 use octolinear::{InnerNodes, Key, OccupancyTree};
+use octolinear_sim::SceneKind;
 use std::cell::OnceCell;
 use std::time::{Duration, Instant};
 

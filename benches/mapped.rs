@@ -1,7 +1,7 @@
 //! `.olm` mapped maps against the in-memory arena: open time, random point
 //! queries, leaf iteration, `castRay`, and file sizes against `.ot`/`.bt`.
 //!
-//! `cargo bench --bench mapped` (modest sample sizes). Environment:
+//! `cargo bench -p octolinear-benches --bench mapped` (modest sample sizes). Environment:
 //! `OLM_BENCH_SCANS` (default 12) scans of the simulated outdoor map at
 //! 0.1 m; `OLM_SCALE=<scans>` instead runs the scale experiment: a map of
 //! that many outdoor scans at 0.05 m written to `OLM_SCALE_DIR` (default
@@ -11,8 +11,8 @@
 use criterion::{black_box, criterion_group, BenchmarkId, Criterion};
 use octolinear::formats::{bt, ot};
 use octolinear::mapped::{self, MappedMap, WriteOptions};
-use octolinear::simulate::{simulate, LidarConfig, SceneKind, SplitMix64};
 use octolinear::{CastOptions, Key, OccupancyTree, Point3, ScanOptions};
+use octolinear_sim::{simulate, LidarConfig, SceneKind, SplitMix64};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 

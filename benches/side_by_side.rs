@@ -2,7 +2,7 @@
 //! Debian's liboctomap behind a C++ shim) and octolinear, alternately, in
 //! one process. Each figure is the median of several repetitions.
 //!
-//! Run with `cargo bench --bench side_by_side` (add `-- --quick` for a
+//! Run with `cargo bench -p octolinear-benches --bench side_by_side` (add `-- --quick` for a
 //! small run; `-- --help` lists the options).
 
 mod common;
@@ -10,9 +10,9 @@ mod common;
 use common::*;
 use octolinear::formats::{bt, ot};
 use octolinear::mapped;
-use octolinear::simulate::SceneKind;
 use octolinear::{CastOptions, Found, OccupancyTree, Point3, SearchIndex};
 use octolinear_oracle::{OracleTree, ScanBatch};
+use octolinear_sim::SceneKind;
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 

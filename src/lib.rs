@@ -17,7 +17,6 @@
 //! # Ok(()) }
 //! ```
 
-pub mod ablation;
 pub mod collection;
 pub mod formats;
 pub mod geometry;
@@ -28,7 +27,6 @@ pub mod morton;
 pub mod ray;
 pub mod scan;
 pub mod sensor;
-pub mod simulate;
 pub mod tree;
 
 pub use collection::{MapCollection, MapNode};

@@ -2,8 +2,8 @@
 //! under an eighth after every scan and never changes the tree.
 
 use octolinear::formats::ot;
-use octolinear::simulate::{simulate, LidarConfig, SceneKind};
 use octolinear::{Compaction, OccupancyTree, ScanOptions};
+use octolinear_sim::{simulate, LidarConfig, SceneKind};
 
 fn free_fraction(tree: &OccupancyTree) -> f64 {
     let u = tree.arena_usage().expect("not empty");

@@ -24,9 +24,9 @@
 use octolinear::formats::{bt, ot};
 use octolinear::ray::CastError;
 use octolinear::sensor::{SensorModel, SensorProbabilities};
-use octolinear::simulate::{simulate, LidarConfig, SceneKind, SplitMix64};
 use octolinear::{CastOptions, InnerNodes, Key, OccupancyTree, Point3, ScanOptions};
 use octolinear_oracle::{require_or_skip, OracleError, OracleTree, SensorParams};
+use octolinear_sim::{simulate, LidarConfig, SceneKind, SplitMix64};
 use std::fmt::Write as _;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 

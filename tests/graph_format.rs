@@ -9,9 +9,9 @@ use std::path::{Path, PathBuf};
 use octolinear::formats::graph::{self, GraphError};
 use octolinear::formats::{log, xyz};
 use octolinear::geometry::{Point3, PointCloud, Pose6D, Quaternion};
-use octolinear::simulate::SplitMix64;
 use octolinear::{ScanEdge, ScanGraph};
 use octolinear_oracle::golden_dir;
+use octolinear_sim::SplitMix64;
 use sha2::{Digest, Sha256};
 
 /// Records the largest single allocation made by the current thread, so the

@@ -15,9 +15,9 @@ use octolinear::mapped::{
     self, format, MapView, MappedMap, OccupancyLookup, OlmError, SearchBlocksSection, Variant, WriteOptions,
 };
 use octolinear::ray::CastError;
-use octolinear::simulate::{simulate, LidarConfig, SceneKind, SplitMix64};
 use octolinear::{CastOptions, CastOutcome, CountingTree, Found, Key, KeyBox, NodeKind, OccupancyTree, Point3};
 use octolinear::{ScanOptions, SensorModel};
+use octolinear_sim::{simulate, LidarConfig, SceneKind, SplitMix64};
 use std::fmt::Write as _;
 
 // ----- maps ------------------------------------------------------------------

@@ -19,9 +19,9 @@
 //! not used (it is not part of this repository).
 
 use octolinear::formats::bt;
-use octolinear::simulate::SplitMix64;
 use octolinear::{CastOptions, InnerNodes, MapCollection, OccupancyTree, Point3, Pose6D};
 use octolinear_oracle::{map_collection_query, require_or_skip, CollectionRay};
+use octolinear_sim::SplitMix64;
 use std::path::Path;
 
 /// A hollow sphere of occupied voxels around `origin`, free inside, from

@@ -1,8 +1,8 @@
 //! Shared inputs of the benchmarks: simulated scenes and random queries.
 #![allow(dead_code)]
 
-use octolinear::simulate::{simulate, LidarConfig, SceneKind};
 use octolinear::{OccupancyTree, Point3, ScanOptions};
+use octolinear_sim::{simulate, LidarConfig, SceneKind};
 
 /// Seed of every simulated scene (fixed so runs are comparable).
 pub const SEED: u64 = 7;
@@ -28,7 +28,7 @@ pub fn scans(kind: SceneKind, scans: usize) -> Vec<Scan> {
         .collect()
 }
 
-/// For the probes in `examples/`: the scene and resolution their first two
+/// For the probes (`probes/src/bin/`): the scene and resolution their first two
 /// arguments name (`indoor|outdoor RES`; indoor, 0.2 m when absent) and the
 /// benchmark's scans of that scene (24 indoors, 6 outdoors).
 pub fn scene_from_args() -> (SceneKind, f64, Vec<Scan>) {

@@ -897,10 +897,13 @@ mod tests {
         assert!(matches!(err, Err(ScanError::Origin { .. })));
     }
 
-    /// `n` simulated indoor scans (points in the world frame, origin).
-    fn indoor_scans(n: usize, seed: u64) -> Vec<(Vec<Point3>, Point3)> {
-        let cfg = crate::simulate::LidarConfig::indoor();
-        let g = crate::simulate::simulate(crate::simulate::SceneKind::Indoor, n, seed, &cfg).unwrap();
+    /// The bundled sample's six scans of a simulated indoor lidar
+    /// (`samples/indoor.graph`), in the world frame, with their origins. At
+    /// 0.1 m each scan frees 39k to 72k voxels: enough for the threads to
+    /// share its tree update.
+    fn sample_scans() -> Vec<(Vec<Point3>, Point3)> {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/samples/indoor.graph");
+        let g = crate::formats::graph::read_file(path).unwrap();
         g.nodes.iter().map(|n| n.graph2tree()).map(|(c, o)| (c.points, o)).collect()
     }
 
@@ -915,7 +918,7 @@ mod tests {
         if crate::ray::wide::available() {
             for (res, max_range) in [(0.05, None), (0.2, None), (0.1, Some(2.5)), (0.02, Some(4.0))] {
                 let keys = KeySpace::new(res);
-                for (points, origin) in indoor_scans(2, 3) {
+                for (points, origin) in sample_scans().into_iter().take(2) {
                     let fan = RayFan::new(&keys, origin).ok();
                     let opts = ScanOptions { max_range, ..Default::default() };
                     let (mut wide, mut pairs) = (Casting::default(), Casting::default());
@@ -933,11 +936,11 @@ mod tests {
 
     #[test]
     fn thread_count_does_not_change_the_tree() {
-        let scans = indoor_scans(3, 5);
+        let scans = &sample_scans()[..3];
         let mut bytes = Vec::new();
         for threads in [1, 2, 8] {
             let mut t = OccupancyTree::new(0.05).unwrap();
-            for (points, origin) in &scans {
+            for (points, origin) in scans {
                 let opts = ScanOptions { threads: Some(threads), ..Default::default() };
                 t.insert_point_cloud(points, *origin, &opts).unwrap();
             }
@@ -946,14 +949,12 @@ mod tests {
         assert!(bytes[0] == bytes[1] && bytes[1] == bytes[2]);
     }
 
-    /// Outdoor scans' free-space batches are large enough to be shared by
-    /// the threads (`update_batch_split`), inside the pipeline, where the
-    /// thread waiting for work helps: the tree stays the one-thread tree.
+    /// Free-space batches large enough to be shared by the threads
+    /// (`update_batch_split`), inside the pipeline, where the thread waiting
+    /// for work helps: the tree stays the one-thread tree.
     #[test]
     fn shared_tree_updates_in_the_pipeline_give_the_same_tree() {
-        let cfg = crate::simulate::LidarConfig::outdoor();
-        let g = crate::simulate::simulate(crate::simulate::SceneKind::Outdoor, 3, 5, &cfg).unwrap();
-        let scans: Vec<_> = g.nodes.iter().map(|n| n.graph2tree()).map(|(c, o)| (c.points, o)).collect();
+        let scans = &sample_scans()[..3];
         let mut trees = Vec::new();
         for threads in [Some(1), Some(2), Some(8)] {
             let mut t = OccupancyTree::new(0.1).unwrap();
@@ -973,12 +974,10 @@ mod tests {
     /// tree is the one-thread tree. Each run is watched by a timer.
     #[test]
     fn many_threads_on_many_short_scans_always_finish() {
-        let cfg = crate::simulate::LidarConfig::outdoor();
-        let g = crate::simulate::simulate(crate::simulate::SceneKind::Outdoor, 2, 7, &cfg).unwrap();
-        let mut scans: Vec<(Vec<Point3>, Point3)> =
-            g.nodes.iter().map(|n| n.graph2tree()).map(|(c, o)| (c.points, o)).collect();
-        for (points, origin) in indoor_scans(2, 11) {
-            scans.extend(points.chunks(25).map(|c| (c.to_vec(), origin)));
+        let mut scans = sample_scans();
+        let short = scans.split_off(2);
+        for (points, origin) in &short[2..] {
+            scans.extend(points.chunks(25).map(|c| (c.to_vec(), *origin)));
         }
         let middle = scans.len() / 2;
         scans.swap(1, middle);
@@ -1012,7 +1011,7 @@ mod tests {
 
     #[test]
     fn pipelined_insertion_matches_scan_by_scan() {
-        let scans = indoor_scans(4, 9);
+        let scans = sample_scans().split_off(2);
         // colour trees must keep OctoMap's key order: colours blended in
         // after each scan make that order visible in the next one
         for kind in [NodeKind::Plain, NodeKind::Color, NodeKind::Stamped] {

@@ -251,8 +251,22 @@ mod tests {
     use crate::key::Key;
     use crate::morton::MortonCode;
     use crate::sensor::SensorModel;
-    use crate::simulate::SplitMix64;
     use crate::tree::{Clock, InnerNodes, NodeKind, OccupancyTree};
+
+    /// SplitMix64 (the simulator's generator): a fixed stream, so that the
+    /// random batches are the same on every run.
+    struct SplitMix64(u64);
+
+    impl SplitMix64 {
+        /// Uniform integer in `0..n`.
+        fn below(&mut self, n: u32) -> u32 {
+            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            ((((z ^ (z >> 31)) >> 32) * u64::from(n)) >> 32) as u32
+        }
+    }
 
     /// `n` random voxels (sorted codes, no repeats) in a cube of `side`
     /// voxels a side at the map's centre, where the first levels split.

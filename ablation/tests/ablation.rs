@@ -4,12 +4,12 @@
 //! measured bytes of the pointer and block layouts are what their formulas
 //! say, and that the pointer layout's formula is OctoMap's `memoryUsage()`.
 
-use octolinear::ablation::alloc::{self, CountingAlloc};
-use octolinear::ablation::pointer::PointerTree;
-use octolinear::ablation::variants::{ArenaBatch, ArenaCompact, ArenaPerKey, Block8, MappedLayout, Split8};
-use octolinear::ablation::{build, graph2tree_sensor, leaf_dump, tree_leaf_dump, Layout, LeafRecord, ScanKeys};
-use octolinear::simulate::{simulate, LidarConfig, SceneKind, SplitMix64};
 use octolinear::{InnerNodes, Key, OccupancyTree, Point3, ScanOptions, SensorModel};
+use octolinear_ablation::alloc::{self, CountingAlloc};
+use octolinear_ablation::pointer::PointerTree;
+use octolinear_ablation::variants::{ArenaBatch, ArenaCompact, ArenaPerKey, Block8, MappedLayout, Split8};
+use octolinear_ablation::{build, graph2tree_sensor, leaf_dump, tree_leaf_dump, Layout, LeafRecord, ScanKeys};
+use octolinear_sim::{simulate, LidarConfig, SceneKind, SplitMix64};
 
 #[global_allocator]
 static ALLOC: CountingAlloc = CountingAlloc;
@@ -143,8 +143,8 @@ fn searches_and_ray_casts_agree() {
         let t = i as f32 * 0.0125;
         let dir = Point3::new(t.cos(), t.sin(), 0.1 * (3.0 * t).sin());
         let o = s[0].1;
-        let x = octolinear::ablation::cast_ray(&a, ks, &sensor, o, dir, 20.0, false);
-        assert_eq!(x, octolinear::ablation::cast_ray(&p, ks, &sensor, o, dir, 20.0, false));
+        let x = octolinear_ablation::cast_ray(&a, ks, &sensor, o, dir, 20.0, false);
+        assert_eq!(x, octolinear_ablation::cast_ray(&p, ks, &sensor, o, dir, 20.0, false));
         hits += usize::from(x.is_some());
     }
     assert!(hits > 50, "only {hits} of 500 rays hit");
@@ -183,7 +183,7 @@ fn measured_bytes_match_the_layout_formulas_and_octomaps_memory_usage() {
     assert_eq!(pointer_bytes, p.bytes_formula());
     let (inner, leaves) = p.count_inner_and_leaves();
     assert_eq!(pointer_bytes, 16 * (inner + leaves) + 64 * inner);
-    assert_eq!(pointer_bytes, octolinear::ablation::paper_bytes(inner, leaves, 8));
+    assert_eq!(pointer_bytes, octolinear_ablation::paper_bytes(inner, leaves, 8));
     // OctoMap's memoryUsage() = the tree object (320 B) + the same formula
     assert_eq!(tree.octomap_memory_usage(), 320 + pointer_bytes);
     drop(p);

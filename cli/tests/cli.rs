@@ -2,6 +2,7 @@
 //! Debian's OctoMap tools where they exist (bytes of files, numbers they
 //! print), by content otherwise, and every error path a user can hit.
 
+#[path = "../../tests/common/mod.rs"]
 mod common;
 use common::lzf_compress;
 use octolinear::formats::{bt, graph, ot};
@@ -1574,7 +1575,7 @@ fn a_map_changed_under_query_is_an_error_or_harmless() {
 #[test]
 fn builds_on_many_threads_always_finish() {
     let f = Fixture::new();
-    let sample = concat!(env!("CARGO_MANIFEST_DIR"), "/samples/indoor.graph");
+    let sample = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/indoor.graph");
     ok(&["build", sample, "-o", f.p("one.bt"), "--threads", "1"]);
     let expected = std::fs::read(f.path("one.bt")).unwrap();
     for run in 0..8 {

@@ -1,6 +1,6 @@
 //! Prints the free fraction of arena slots after each scan while building a
 //! map from a `.graph` file, then the compaction's time and effect:
-//! `cargo run --release --example arena_usage -- SCANS.graph [RES] [manual]`
+//! `cargo run --release -p octolinear-probes --bin arena_usage -- SCANS.graph [RES] [manual]`
 //! (`manual`: no automatic compaction during the build).
 use octolinear::formats::graph;
 use octolinear::{Compaction, OccupancyTree, ScanOptions};

@@ -1,5 +1,5 @@
-//! How much of a scan's ray walking revisits voxels: `cargo run --release
-//! --example coverage_probe -- indoor|outdoor RES` walks the bench's scans'
+//! How much of a scan's ray walking revisits voxels: `cargo run --release -p
+//! octolinear-probes --bin coverage_probe -- indoor|outdoor RES` walks the bench's scans'
 //! rays in order with `RayKeys` and counts, per ray, the steps before its
 //! first voxel that no earlier ray of the same scan visited: the most an
 //! exact "skip what is already covered" scheme could leave out.
@@ -12,7 +12,7 @@
 //! from its start; a stretch counts when its box was covered before the
 //! ray. A probe.
 
-#[path = "../benches/common/mod.rs"]
+#[path = "../../../benches/common/mod.rs"]
 mod common;
 
 use octolinear::{Key, OccupancyTree};

@@ -1,5 +1,5 @@
-//! `octolinear` subcommands: one module per tool, all errors reported as
-//! one line on stderr with a non-zero exit code.
+//! The `octolinear` command-line tool: one module per subcommand, all
+//! errors reported as one line on stderr with a non-zero exit code.
 
 mod binvox;
 mod build;
@@ -66,8 +66,29 @@ fn set_signal_actions() {
 #[cfg(not(unix))]
 fn set_signal_actions() {}
 
+fn main() {
+    limit_heap_retention();
+    std::process::exit(run());
+}
+
+/// glibc raises its mmap threshold whenever a large block is freed, after
+/// which big arrays come from the heap and freed space stays resident; a
+/// fixed threshold keeps large buffers (key sets, arenas) in their own
+/// mappings, returned to the system when freed and grown in place.
+fn limit_heap_retention() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        const M_MMAP_THRESHOLD: libc::c_int = -3;
+        // SAFETY: mallopt only adjusts allocator tuning; called before any
+        // other thread exists.
+        unsafe {
+            libc::mallopt(M_MMAP_THRESHOLD, 128 * 1024);
+        }
+    }
+}
+
 /// Runs the tool; returns the process exit code.
-pub fn main() -> i32 {
+fn run() -> i32 {
     set_signal_actions();
     common::report_truncated_maps();
     let cli = match Cli::try_parse() {

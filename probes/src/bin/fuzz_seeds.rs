@@ -1,6 +1,7 @@
-//! Seed corpora for the fuzz targets: `cargo run --release --example
-//! fuzz_seeds -- [GOLDEN_DIR]` writes `fuzz/corpus/<target>/` seeds. The
-//! small golden `.ot`, `.bt` and `.graph` files (default `tests/golden`)
+//! Seed corpora for the fuzz targets: `cargo run --release -p
+//! octolinear-probes --bin fuzz_seeds -- [GOLDEN_DIR]` writes
+//! `fuzz/corpus/<target>/` seeds. The small golden `.ot`, `.bt` and
+//! `.graph` files (default `tests/golden`)
 //! are copied, and the small `.ot` files also converted to `.olm` (full,
 //! maximum likelihood, pointer index, with the search-blocks section). Small PLY (ascii, binary of both byte orders), PCD
 //! (ascii, binary, compressed) and binvox files are made here. The corpus
@@ -17,8 +18,8 @@ const MAX_SEED: u64 = 20_000;
 fn main() {
     let golden = std::env::args()
         .nth(1)
-        .map_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden"), PathBuf::from);
-    let corpus = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus");
+        .map_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/golden"), PathBuf::from);
+    let corpus = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/corpus");
     let write = |target: &str, name: &str, bytes: &[u8]| {
         let dir = corpus.join(target);
         std::fs::create_dir_all(&dir).expect("corpus directory");

@@ -1,10 +1,11 @@
-//! Scan insertion under a profiler: `cargo run --release --example
-//! insert_profile -- indoor|outdoor RES THREADS [SCANS]` builds the
-//! bench's simulated scans, then times their insertion into a fresh tree.
+//! Scan insertion under a profiler: `cargo run --release -p
+//! octolinear-probes --bin insert_profile -- indoor|outdoor RES THREADS
+//! [SCANS]` builds the bench's simulated scans, then times their insertion
+//! into a fresh tree.
 //! Meant for `valgrind --tool=callgrind` or `perf record`.
 
-use octolinear::simulate::{simulate, LidarConfig, SceneKind};
 use octolinear::{OccupancyTree, ScanOptions};
+use octolinear_sim::{simulate, LidarConfig, SceneKind};
 use std::time::Instant;
 
 fn main() {

@@ -8,8 +8,8 @@
 //! `AbstractOcTreeNode** children`. It exists to be measured, not used.
 
 use super::{Layout, MAX_DEPTH};
-use crate::key::Key;
-use crate::sensor::SensorModel;
+use octolinear::key::Key;
+use octolinear::sensor::SensorModel;
 
 /// Eight child slots; `None` is a null pointer.
 pub type Children = [Option<Box<Node>>; 8];

@@ -1,5 +1,5 @@
 //! Splits the cost of one-at-a-time random point search on a simulated map:
-//! `cargo run --release --example search_probe -- indoor|outdoor RES [N]`.
+//! `cargo run --release -p octolinear-probes --bin search_probe -- indoor|outdoor RES [N]`.
 //! Prints the fastest of several passes, in ns per query, for the key
 //! conversion alone, search by key and by point, through `SearchIndex`
 //! tables at depths 9-13, and on the mapped view, over the side-by-side
@@ -7,12 +7,12 @@
 //! and leaf iteration warm and cold. A probe for profiling, not a
 //! benchmark of record: the recorded figures are `side_by_side`'s.
 // the side-by-side benchmark's scenes and query mix
-#[path = "../benches/common/mod.rs"]
+#[path = "../../../benches/common/mod.rs"]
 mod common;
 
 use octolinear::mapped::{self, MappedMap};
-use octolinear::simulate::SceneKind;
 use octolinear::{OccupancyTree, Point3};
+use octolinear_sim::SceneKind;
 use std::hint::black_box;
 use std::time::Instant;
 

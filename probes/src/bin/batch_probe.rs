@@ -1,13 +1,13 @@
-//! One large batch update, serial against shared: `cargo run --release
-//! --example batch_probe -- outdoor|indoor RES SCAN [REPS]` inserts the
+//! One large batch update, serial against shared: `cargo run --release -p
+//! octolinear-probes --bin batch_probe -- outdoor|indoor RES SCAN [REPS]` inserts the
 //! bench's scans before `SCAN`, then times applying that scan's free-space
 //! batch to copies of the tree: with `update_batch`, and with
 //! `update_batch_shared` on pools of one and two threads (one thread shows
 //! what sharing costs, two what it gains). Prints CPU and wall times (the
 //! fastest of REPS).
 
-use octolinear::simulate::{simulate, LidarConfig, SceneKind};
 use octolinear::{InnerNodes, OccupancyTree, ScanOptions};
+use octolinear_sim::{simulate, LidarConfig, SceneKind};
 use std::time::Instant;
 
 fn main() {

@@ -1,5 +1,5 @@
 //! What a scan's ray walks cost without the rest of insertion:
-//! `cargo run --release --example walk_probe -- indoor|outdoor RES` sets up
+//! `cargo run --release -p octolinear-probes --bin walk_probe -- indoor|outdoor RES` sets up
 //! every ray of the bench's scans (as `insert_point_cloud` does), then walks
 //! them all, one at a time and two in lockstep, XOR-ing the voxel codes
 //! (no key lists, no filter, no sort, no tree). Prints the ray set-up cost
@@ -8,7 +8,7 @@
 //! the vector set-up and walk, with the scan's sets). A probe, not a
 //! benchmark of record.
 
-#[path = "../benches/common/mod.rs"]
+#[path = "../../../benches/common/mod.rs"]
 mod common;
 
 use octolinear::ray::RayFan;

@@ -1,8 +1,8 @@
 //! The procedural lidar simulator: determinism, ranges and plausibility.
 
 use octolinear::formats::graph;
-use octolinear::simulate::{simulate, LidarConfig, Scene, SceneKind, Surface};
 use octolinear::ScanGraph;
+use octolinear_sim::{simulate, LidarConfig, Scene, SceneKind, Surface};
 
 fn bytes(g: &ScanGraph) -> Vec<u8> {
     let mut out = Vec::new();

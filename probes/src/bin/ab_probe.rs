@@ -1,6 +1,6 @@
 //! One job per run on the side-by-side benchmark's scenes and query mix, for
 //! comparing two builds (run their binaries alternately) and for callgrind:
-//! `cargo run --release --example ab_probe -- indoor|outdoor RES JOB [compact]`.
+//! `cargo run --release -p octolinear-probes --bin ab_probe -- indoor|outdoor RES JOB [compact]`.
 //!
 //! * `time`: fastest of 9 passes over 1M queries, in ns per query: search by
 //!   key and by point on the tree, `search_many`, by key and by point on
@@ -20,13 +20,13 @@
 //! * `depths`: how deep the queries' answers lie (the last entry: no answer).
 //!
 //! `compact` compacts the tree first. A probe, not a benchmark of record.
-#[path = "../benches/common/mod.rs"]
+#[path = "../../../benches/common/mod.rs"]
 mod common;
 
 use octolinear::mapped::{self, MapView, MappedMap};
-use octolinear::simulate::SceneKind;
 use octolinear::{Key, OccupancyTree, Point3};
 use octolinear_oracle::{OracleTree, ScanBatch};
+use octolinear_sim::SceneKind;
 use std::hint::black_box;
 use std::time::Instant;
 

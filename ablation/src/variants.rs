@@ -16,11 +16,11 @@
 //!   the same in two arrays (values, child indices).
 
 use super::{Layout, MAX_DEPTH};
-use crate::key::Key;
-use crate::mapped::{self, MappedMap};
-use crate::morton::MortonCode;
-use crate::sensor::SensorModel;
-use crate::tree::{InnerNodes, OccupancyTree};
+use octolinear::key::Key;
+use octolinear::mapped::{self, MappedMap};
+use octolinear::morton::MortonCode;
+use octolinear::sensor::SensorModel;
+use octolinear::tree::{InnerNodes, OccupancyTree};
 
 // ----- octolinear's arena ------------------------------------------------
 

@@ -10,8 +10,8 @@
 
 use rayon::prelude::*;
 
-use crate::formats::graph::ScanGraph;
-use crate::geometry::{Point3, PointCloud, Pose6D, Quaternion};
+use octolinear::formats::graph::ScanGraph;
+use octolinear::geometry::{Point3, PointCloud, Pose6D, Quaternion};
 
 /// SplitMix64: tiny, fast, and its stream is fixed by definition.
 #[derive(Clone, Debug)]

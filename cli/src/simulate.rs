@@ -4,7 +4,7 @@ use super::common::spinner;
 use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
 use octolinear::formats::graph;
-use octolinear::simulate::{simulate, LidarConfig, SceneKind};
+use octolinear_sim::{simulate, LidarConfig, SceneKind};
 use std::path::PathBuf;
 
 #[derive(Clone, Copy, ValueEnum)]

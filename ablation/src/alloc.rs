@@ -5,7 +5,7 @@
 //!
 //! ```ignore
 //! #[global_allocator]
-//! static ALLOC: octolinear::ablation::alloc::CountingAlloc = octolinear::ablation::alloc::CountingAlloc;
+//! static ALLOC: octolinear_ablation::alloc::CountingAlloc = octolinear_ablation::alloc::CountingAlloc;
 //! ```
 //!
 //! [`CountingAlloc`] wraps [`System`] and counts the bytes Rust code

@@ -24,21 +24,21 @@
 //! leaf children or the maximum of the children. `tests/ablation.rs` checks
 //! that all of them dump the same leaves as [`OccupancyTree`].
 //!
-//! The harness itself is `benches/ablation.rs` (`cargo bench --bench
-//! ablation`), which writes `docs/ablation.md`.
+//! The harness itself is `benches/ablation.rs` (`cargo bench -p
+//! octolinear-ablation --bench ablation`), which writes `docs/ablation.md`.
 
 pub mod alloc;
 pub mod pointer;
 pub mod report;
 pub mod variants;
 
-use crate::geometry::Point3;
-use crate::key::{Key, KeySpace, TREE_DEPTH};
-use crate::morton::MortonCode;
-use crate::ray::RayKeys;
-use crate::scan::{ScanError, ScanOptions};
-use crate::sensor::SensorModel;
-use crate::tree::OccupancyTree;
+use octolinear::geometry::Point3;
+use octolinear::key::{Key, KeySpace, TREE_DEPTH};
+use octolinear::morton::MortonCode;
+use octolinear::ray::RayKeys;
+use octolinear::scan::{ScanError, ScanOptions};
+use octolinear::sensor::SensorModel;
+use octolinear::tree::OccupancyTree;
 
 /// Node storage under test. Implementations mirror OctoMap's update rule;
 /// they differ only in memory layout.
