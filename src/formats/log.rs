@@ -52,7 +52,7 @@ pub enum LogError {
         found: usize,
     },
     /// A token is not a decimal number as C++ `>>` reads a float
-    /// (`nan`, `inf` and hex included).
+    /// (`nan`, `inf` and hex numbers are refused).
     #[error("line {line}: {token:?} is not a decimal number")]
     NotANumber {
         /// The line.

@@ -34,7 +34,7 @@ pub enum XyzError {
         found: usize,
     },
     /// A value is not a decimal number as C++ `>>` reads a float
-    /// (`nan`, `inf` and hex included).
+    /// (`nan`, `inf` and hex numbers are refused).
     #[error("line {line}: {token:?} is not a decimal number")]
     NotANumber {
         /// The line.
