@@ -7,26 +7,67 @@ use std::ops::Range;
 /// of the file.
 #[derive(Debug, thiserror::Error)]
 pub enum BinvoxError {
+    /// The file does not start with the token `#binvox`.
     #[error("the first token is {found:?} instead of \"#binvox\"")]
-    NotBinvox { found: String },
+    NotBinvox {
+        /// The first token (empty when the file has none).
+        found: String,
+    },
+    /// The file ends where the header needs another number.
     #[error("the header ends before the {what}")]
-    HeaderEnds { what: &'static str },
+    HeaderEnds {
+        /// What was expected: `version`, `dimension`, `translation` or `scale`.
+        what: &'static str,
+    },
+    /// A header token that should be a number does not parse as one.
     #[error("header, byte {offset}: the {what} {token:?} is not a number")]
-    NotANumber { offset: usize, what: &'static str, token: String },
+    NotANumber {
+        /// Byte offset of the token.
+        offset: usize,
+        /// What the token should be: `version`, `dimension`, `translation` or `scale`.
+        what: &'static str,
+        /// The token as found.
+        token: String,
+    },
+    /// The file ends before the `data` token that closes the header.
     #[error("the header has no \"data\" line")]
     NoData,
+    /// The header has no `dim` line.
     #[error("the header has no \"dim\" line")]
     NoDim,
+    /// A side of the grid (`dim` as written: depth, height, width) is 0.
     #[error("dimension {0:?} is empty")]
     EmptyDim([usize; 3]),
+    /// The grid (`dim` as written) has more than `usize::MAX` voxels or a
+    /// side longer than `i32::MAX`.
     #[error("dimension {0:?} is too large")]
     TooLarge([usize; 3]),
+    /// The scale is not positive and finite, or a translation is not finite.
     #[error("scale {scale} / translation {translate:?} is not usable")]
-    BadPlacement { scale: f32, translate: [f32; 3] },
+    BadPlacement {
+        /// The `scale` value.
+        scale: f32,
+        /// The `translate` values.
+        translate: [f32; 3],
+    },
+    /// The run-length data ends before covering every voxel.
     #[error("the data ends after {read} of {size} voxels (byte {offset})")]
-    DataEnds { offset: usize, read: usize, size: usize },
+    DataEnds {
+        /// Byte offset of the end of the data (the file's length).
+        offset: usize,
+        /// Voxels covered by the complete runs read.
+        read: usize,
+        /// Voxels in the grid.
+        size: usize,
+    },
+    /// A run reaches beyond the last voxel of the grid.
     #[error("the run at byte {offset} goes past the {size} voxels of the grid")]
-    Overrun { offset: usize, size: usize },
+    Overrun {
+        /// Byte offset of the run's (value, count) pair.
+        offset: usize,
+        /// Voxels in the grid.
+        size: usize,
+    },
 }
 
 /// A binvox header and its run-length data.
@@ -34,7 +75,10 @@ pub enum BinvoxError {
 pub struct Binvox {
     /// `dim` as written: depth, height, width.
     pub dim: [usize; 3],
+    /// `translate`: the world position of the grid's origin (default 0 0 0).
     pub translate: [f32; 3],
+    /// `scale`: the grid's extent along its largest side, in world units
+    /// (default 1); the voxel size is `scale` / max(`dim`).
     pub scale: f32,
     /// Voxels in the grid (the product of `dim`).
     pub size: usize,

@@ -116,8 +116,13 @@ impl<R: BufRead> CountingReader<R> {
 /// The fields of a header.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Header {
+    /// The tree type from the `id` line (e.g. `OcTree`; the legacy id `1`
+    /// becomes `OcTree`).
     pub id: String,
+    /// The node count from the `size` line; 0 when absent.
     pub size: u64,
+    /// The voxel edge length from the `res` line, in metres (checked
+    /// positive and finite).
     pub resolution: f64,
     /// Byte offset of the `id` value, for errors about it.
     pub id_offset: u64,

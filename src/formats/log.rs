@@ -23,22 +23,51 @@ use super::graph::ScanGraph;
 use super::xyz::{c_tokens, parse_c_float, parse_point, token_str, FloatError, XyzError};
 use crate::geometry::{PointCloud, Pose6D};
 
+/// Why a log could not be read. Lines count from 1.
 #[derive(Debug, thiserror::Error)]
 pub enum LogError {
+    /// Opening or reading failed.
     #[error("I/O error at line {line}: {source}")]
     Io {
+        /// The line being read (0 when the file could not be opened).
         line: u64,
+        /// The underlying error.
         #[source]
         source: io::Error,
     },
+    /// A point line comes before any `NODE` line.
     #[error("line {line}: point before the first NODE line")]
-    PointBeforeNode { line: u64 },
+    PointBeforeNode {
+        /// The line.
+        line: u64,
+    },
+    /// A `NODE` line has fewer than 7 tokens, or a point line fewer than 3.
     #[error("line {line}: expected at least {expected} tokens, found {found}")]
-    TooFewTokens { line: u64, expected: usize, found: usize },
+    TooFewTokens {
+        /// The line.
+        line: u64,
+        /// Tokens needed: 7 for `NODE` lines (the keyword and six numbers), 3 for points.
+        expected: usize,
+        /// Tokens found.
+        found: usize,
+    },
+    /// A token is not a decimal number as C++ `>>` reads a float
+    /// (`nan`, `inf` and hex numbers are refused).
     #[error("line {line}: {token:?} is not a decimal number")]
-    NotANumber { line: u64, token: String },
+    NotANumber {
+        /// The line.
+        line: u64,
+        /// The token as found.
+        token: String,
+    },
+    /// A token overflows `f32`.
     #[error("line {line}: {token:?} is not finite as a float")]
-    NotFinite { line: u64, token: String },
+    NotFinite {
+        /// The line.
+        line: u64,
+        /// The token as found.
+        token: String,
+    },
 }
 
 impl From<XyzError> for LogError {

@@ -17,44 +17,145 @@ const MAX_HEADER_LINES: usize = 1000;
 /// the file; points count from 0.
 #[derive(Debug, thiserror::Error)]
 pub enum PcdError {
+    /// A header line is not UTF-8.
     #[error("header line at byte {offset} is not text")]
-    HeaderNotText { offset: usize },
+    HeaderNotText {
+        /// Byte offset of the start of that line.
+        offset: usize,
+    },
+    /// No line starts with `DATA` within the first 1000 lines.
     #[error("no DATA line within the first {MAX_HEADER_LINES} lines")]
     NoData,
+    /// A `SIZE`, `COUNT`, `WIDTH`, `HEIGHT` or `POINTS` value is not a
+    /// non-negative integer.
     #[error("header line at byte {offset}: {key} value {token:?} is not a count")]
-    BadCount { offset: usize, key: &'static str, token: String },
+    BadCount {
+        /// Byte offset of the start of the header line.
+        offset: usize,
+        /// The line's keyword, e.g. `SIZE`.
+        key: &'static str,
+        /// The value as found.
+        token: String,
+    },
+    /// `FIELDS` is empty or missing, or `SIZE`, `TYPE` and `COUNT` do not
+    /// give one value per field.
     #[error("FIELDS ({fields}), SIZE ({sizes}), TYPE ({types}) and COUNT ({counts}) do not match")]
-    FieldsMismatch { fields: usize, sizes: usize, types: usize, counts: usize },
+    FieldsMismatch {
+        /// Names on the `FIELDS` line.
+        fields: usize,
+        /// Values on the `SIZE` line.
+        sizes: usize,
+        /// Values on the `TYPE` line.
+        types: usize,
+        /// Values on the `COUNT` line (one per field when there is no such line).
+        counts: usize,
+    },
+    /// Neither `POINTS` nor both `WIDTH` and `HEIGHT` are given.
     #[error("no POINTS (or WIDTH and HEIGHT) line")]
     NoPointCount,
+    /// A size computed from the header overflows `usize`; names which one
+    /// (`WIDTH x HEIGHT`, the point size or the data size).
     #[error("{0} overflows")]
     Overflow(&'static str),
+    /// A `TYPE` and `SIZE` pair that is no PCD number type (`I`/`U` of 1, 2,
+    /// 4 or 8 bytes, `F` of 4 or 8).
     #[error("unknown TYPE {kind} of SIZE {size}")]
-    UnknownType { kind: String, size: usize },
+    UnknownType {
+        /// The `TYPE` letter.
+        kind: String,
+        /// The `SIZE` in bytes.
+        size: usize,
+    },
+    /// The `x`, `y` or `z` field (named) is missing.
     #[error("no {0} field")]
     MissingField(&'static str),
+    /// The colour field is not a single 4-byte value.
     #[error("field {field} has SIZE {size} COUNT {count}: a packed colour needs SIZE 4 COUNT 1")]
-    ColorField { field: String, size: usize, count: usize },
+    ColorField {
+        /// `rgb` or `rgba`.
+        field: String,
+        /// Its `SIZE` in bytes.
+        size: usize,
+        /// Its `COUNT`.
+        count: usize,
+    },
+    /// The `x`, `y` or `z` field (named) has `COUNT 0`.
     #[error("field {0} has COUNT 0")]
     ZeroCount(String),
+    /// The `DATA` value is not `ascii`, `binary` or `binary_compressed`.
     #[error("unknown DATA kind {0:?}")]
     UnknownDataKind(String),
+    /// `ascii` data that is not UTF-8.
     #[error("the ascii data starting at byte {offset} is not text")]
-    DataNotText { offset: usize },
+    DataNotText {
+        /// Byte offset of the start of the data.
+        offset: usize,
+    },
+    /// `ascii` data with fewer non-blank lines than points.
     #[error("the data ends after {read} of {points} points")]
-    Truncated { read: usize, points: usize },
+    Truncated {
+        /// Points read.
+        read: usize,
+        /// Points the header announces.
+        points: usize,
+    },
+    /// An `ascii` data line lacks a coordinate or colour, or holds one
+    /// that does not parse.
     #[error("point {row}: cannot read {what} from {line:?}")]
-    BadPoint { row: usize, what: String, line: String },
+    BadPoint {
+        /// The point's index.
+        row: usize,
+        /// `x y z`, or the name of the colour field.
+        what: String,
+        /// The data line.
+        line: String,
+    },
+    /// `binary` data shorter than the announced points.
     #[error("the binary data holds {have} bytes, {points} points need {need}")]
-    ShortBinary { have: usize, points: usize, need: usize },
+    ShortBinary {
+        /// Bytes after the header.
+        have: usize,
+        /// Points the header announces.
+        points: usize,
+        /// Bytes they need (points times the point size).
+        need: usize,
+    },
+    /// `binary_compressed` data with fewer than the 8 bytes of its two
+    /// size words.
     #[error("the compressed data at byte {offset} has no size words")]
-    NoSizeWords { offset: usize },
+    NoSizeWords {
+        /// Byte offset of the start of the data.
+        offset: usize,
+    },
+    /// The uncompressed size word does not match the announced points.
     #[error("the compressed data decompresses to {raw} bytes, {points} points need {need}")]
-    RawSize { raw: usize, points: usize, need: usize },
+    RawSize {
+        /// The uncompressed size the file gives, in bytes.
+        raw: usize,
+        /// Points the header announces.
+        points: usize,
+        /// Bytes they need (points times the point size).
+        need: usize,
+    },
+    /// The file ends before the compressed size word says the compressed
+    /// data does.
     #[error("the compressed data is shorter than its {comp} bytes: the file holds {have} after its size words")]
-    ShortCompressed { comp: usize, have: usize },
+    ShortCompressed {
+        /// The compressed size the file gives, in bytes.
+        comp: usize,
+        /// Bytes in the file after the size words.
+        have: usize,
+    },
+    /// The compressed data is not valid LZF or does not decompress to
+    /// exactly the uncompressed size.
     #[error("LZF data, input byte {offset}: {reason}")]
-    Lzf { offset: usize, reason: &'static str },
+    Lzf {
+        /// Byte offset within the compressed data (from just after the
+        /// size words), not from the start of the file.
+        offset: usize,
+        /// What is wrong.
+        reason: &'static str,
+    },
 }
 
 /// LZF decompression (liblzf's format, as PCL's `binary_compressed` uses)

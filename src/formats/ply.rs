@@ -19,33 +19,100 @@ const MAX_HEADER_LINES: usize = 10_000;
 /// the file; lines and rows count from 1 and 0.
 #[derive(Debug, thiserror::Error)]
 pub enum PlyError {
+    /// A header line is not UTF-8.
     #[error("header line at byte {offset} is not text")]
-    HeaderNotText { offset: usize },
+    HeaderNotText {
+        /// Byte offset of the start of that line.
+        offset: usize,
+    },
+    /// No line starts with `end_header` within the first 10 000 lines.
     #[error("the header has no \"end_header\" line within its first {MAX_HEADER_LINES} lines")]
     NoEndHeader,
+    /// The first line is not `ply`.
     #[error("does not start with a \"ply\" line")]
     NotPly,
+    /// A header line that cannot be used: an unknown keyword or format,
+    /// or an `element` or `property` line missing or misnaming a part.
     #[error("header line {line} (byte {offset}): {reason}: {text:?}")]
-    HeaderLine { line: usize, offset: usize, reason: &'static str, text: String },
+    HeaderLine {
+        /// The line's number.
+        line: usize,
+        /// Byte offset of the start of the line.
+        offset: usize,
+        /// What is wrong with it.
+        reason: &'static str,
+        /// The line, trimmed.
+        text: String,
+    },
+    /// The header has no `format` line.
     #[error("the header has no format line")]
     NoFormat,
+    /// The header declares no `vertex` element.
     #[error("the header has no vertex element")]
     NoVertex,
+    /// The `vertex` element lacks the `x`, `y` or `z` property (named).
     #[error("the vertex element has no {0} field")]
     MissingProperty(&'static str),
+    /// A coordinate or colour property (named) is declared as a list.
     #[error("vertex property {0} is a list, not a number")]
     ListProperty(String),
+    /// ASCII data that is not UTF-8.
     #[error("the ASCII data starting at byte {offset} is not text")]
-    DataNotText { offset: usize },
+    DataNotText {
+        /// Byte offset of the start of the data.
+        offset: usize,
+    },
+    /// The data ends before the `vertex` element's last row (or that of
+    /// an element before it) is complete.
     #[error("the data ends in {element} {row} of {count} (byte {offset})")]
-    Truncated { element: String, row: usize, count: usize, offset: usize },
+    Truncated {
+        /// The element being read, e.g. `vertex`.
+        element: String,
+        /// The row being read.
+        row: usize,
+        /// Rows the header announces for the element.
+        count: usize,
+        /// Byte offset of the missing value in binary files; the file's
+        /// length in ASCII ones.
+        offset: usize,
+    },
+    /// An ASCII token does not parse as a number.
     #[error("{element} {row}: {token:?} is not a number")]
-    NotANumber { element: String, row: usize, token: String },
+    NotANumber {
+        /// The element being read.
+        element: String,
+        /// The row being read.
+        row: usize,
+        /// The token as found.
+        token: String,
+    },
+    /// A list property's length is negative, fractional or too large.
     #[error("{element} {row}: list length {value} is not a count")]
-    BadListLength { element: String, row: usize, value: f64 },
+    BadListLength {
+        /// The element being read.
+        element: String,
+        /// The row being read.
+        row: usize,
+        /// The length as read.
+        value: f64,
+    },
+    /// A colour channel lies outside its range (checked only when colours
+    /// are asked for).
+    ///
     /// `kind` is "colour" or "float colour", `range` what it must lie in.
     #[error("vertex {row} {property}: {kind} {value} is outside {range}")]
-    Color { row: usize, property: String, kind: &'static str, value: f64, range: &'static str },
+    Color {
+        /// The vertex's row.
+        row: usize,
+        /// `red`, `green` or `blue`.
+        property: String,
+        /// `colour` for integer types, `float colour` for floats.
+        kind: &'static str,
+        /// The value as read.
+        value: f64,
+        /// `0..255` for integers, `0..1` for floats.
+        range: &'static str,
+    },
 }
 
 struct Property {

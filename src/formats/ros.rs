@@ -17,9 +17,14 @@ use crate::tree::{CountingTree, NodeKind, OccupancyTree};
 /// `int8[]` on the wire; the bytes are the same).
 #[derive(Clone, Debug, PartialEq)]
 pub struct OctomapMsg {
+    /// `true`: `data` is a `.bt` node stream (occupied/free bits only);
+    /// `false`: an `.ot` node stream (full node values).
     pub binary: bool,
+    /// OctoMap's tree type name, e.g. `OcTree` or `ColorOcTree`.
     pub id: String,
+    /// Edge length of the smallest voxels, in metres.
     pub resolution: f64,
+    /// The node stream, without any text header.
     pub data: Vec<u8>,
 }
 

@@ -6,6 +6,7 @@ use crate::geometry::{Point3, PointCloud};
 /// The points of a file and, when asked for and present, their colours.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ColoredCloud {
+    /// The points, in file order.
     pub cloud: PointCloud,
     /// One RGB colour per point; `None` when not asked for or the file has
     /// none.

@@ -13,20 +13,43 @@ use std::io::{self, BufRead, BufWriter, Write};
 
 use crate::geometry::{Point3, PointCloud};
 
+/// Why an `x y z` file could not be read. Lines count from 1.
 #[derive(Debug, thiserror::Error)]
 pub enum XyzError {
+    /// Opening or reading failed, or the points did not fit in memory.
     #[error("I/O error at line {line}: {source}")]
     Io {
+        /// The line being read (0 when the file could not be opened).
         line: u64,
+        /// The underlying error.
         #[source]
         source: io::Error,
     },
+    /// A line (comment removed) holds neither 0 nor 3 values.
     #[error("line {line}: expected 3 numbers, found {found} values")]
-    TokenCount { line: u64, found: usize },
+    TokenCount {
+        /// The line.
+        line: u64,
+        /// How many values it holds.
+        found: usize,
+    },
+    /// A value is not a decimal number as C++ `>>` reads a float
+    /// (`nan`, `inf` and hex numbers are refused).
     #[error("line {line}: {token:?} is not a decimal number")]
-    NotANumber { line: u64, token: String },
+    NotANumber {
+        /// The line.
+        line: u64,
+        /// The value as found.
+        token: String,
+    },
+    /// A value overflows `f32`.
     #[error("line {line}: {token:?} is not finite as a float (OctoMap stops reading here)")]
-    NotFinite { line: u64, token: String },
+    NotFinite {
+        /// The line.
+        line: u64,
+        /// The value as found.
+        token: String,
+    },
 }
 
 /// C++ `isspace` in the "C" locale (Rust's ASCII whitespace lacks `\v`).
