@@ -40,6 +40,7 @@ pub enum AnyTree {
 }
 
 impl AnyTree {
+    /// The tree's type, as named by the file's `id` line.
     pub fn kind(&self) -> TreeKind {
         match self {
             AnyTree::Occupancy(t) => TreeKind::of(t.kind()),
@@ -55,6 +56,7 @@ impl AnyTree {
         }
     }
 
+    /// The occupancy tree by value, if this is one.
     pub fn into_occupancy(self) -> Option<OccupancyTree> {
         match self {
             AnyTree::Occupancy(t) => Some(t),
