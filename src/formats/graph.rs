@@ -21,7 +21,7 @@ use crate::geometry::{graph2tree_transform, Point3, PointCloud, Pose6D, Quaterni
 pub struct ScanNode {
     /// The node's id, which edges refer to (OctoMap's `ScanNode::id`).
     pub id: u32,
-    /// Sensor pose in the world frame the scan was taken from.
+    /// Pose of the sensor, in the world frame, when the scan was taken.
     pub pose: Pose6D,
     /// The scan's points, in the sensor frame.
     pub scan: PointCloud,
@@ -103,7 +103,7 @@ pub enum GraphError {
     /// The underlying reader failed.
     #[error("I/O error at byte offset {offset}: {source}")]
     Io {
-        /// Byte offset the read was to start at.
+        /// Byte offset of the read that failed.
         offset: u64,
         /// The reader's error.
         #[source]
