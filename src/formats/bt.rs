@@ -348,7 +348,7 @@ pub fn read_file(path: impl AsRef<Path>) -> Result<OccupancyTree, TreeFileError>
     read(super::buffered_file(path.as_ref())?)
 }
 
-/// Writes a `.bt` file atomically ([`write`] into a temporary file that
+/// Writes a `.bt` file atomically ([`write()`] into a temporary file that
 /// replaces `path` once complete).
 pub fn write_file(tree: &OccupancyTree, path: impl AsRef<Path>) -> io::Result<()> {
     super::write_atomically(path.as_ref(), |w| write(tree, w))

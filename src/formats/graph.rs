@@ -19,8 +19,11 @@ use crate::geometry::{graph2tree_transform, Point3, PointCloud, Pose6D, Quaterni
 /// One scan: points in the sensor frame plus the pose they were taken from.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ScanNode {
+    /// The node's id, which edges refer to (OctoMap's `ScanNode::id`).
     pub id: u32,
+    /// Pose of the sensor, in the world frame, when the scan was taken.
     pub pose: Pose6D,
+    /// The scan's points, in the sensor frame.
     pub scan: PointCloud,
 }
 
@@ -40,20 +43,28 @@ pub fn graph2tree_scan(node: &ScanNode) -> (PointCloud, Point3) {
 /// not checked against the nodes (OctoMap only prints an error for them).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ScanEdge {
+    /// Id of the node the edge starts at.
     pub first: u32,
+    /// Id of the node the edge ends at.
     pub second: u32,
+    /// Pose of `second` relative to `first` (`first.pose.inv() * second.pose`
+    /// for edges made by [`ScanGraph::connect_previous`]).
     pub constraint: Pose6D,
+    /// Edge weight, stored as f64 in the file.
     pub weight: f64,
 }
 
 /// OctoMap's `ScanGraph`.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ScanGraph {
+    /// The scans, in file order.
     pub nodes: Vec<ScanNode>,
+    /// The constraints between scans, in file order.
     pub edges: Vec<ScanEdge>,
 }
 
 impl ScanGraph {
+    /// An empty graph.
     pub fn new() -> Self {
         Self::default()
     }
@@ -89,21 +100,64 @@ impl ScanGraph {
 /// Why a `.graph` file could not be read. Offsets are bytes from the start.
 #[derive(Debug, thiserror::Error)]
 pub enum GraphError {
+    /// The underlying reader failed.
     #[error("I/O error at byte offset {offset}: {source}")]
     Io {
+        /// Byte offset of the read that failed.
         offset: u64,
+        /// The reader's error.
         #[source]
         source: io::Error,
     },
+    /// The input ends inside a value.
     #[error("input ends at byte offset {offset} inside {context} ({missing} more bytes needed)")]
-    Truncated { offset: u64, missing: u64, context: String },
+    Truncated {
+        /// Byte offset where the input ends.
+        offset: u64,
+        /// Bytes still needed to complete the value.
+        missing: u64,
+        /// What was being read, e.g. "weight of edge 3".
+        context: String,
+    },
+    /// A vector's or quaternion's leading `i32` marker is not `3` or `4`.
     #[error("marker {found} at byte offset {offset} in {context}, expected {expected}")]
-    BadMarker { offset: u64, expected: i32, found: i32, context: String },
+    BadMarker {
+        /// Byte offset of the marker.
+        offset: u64,
+        /// The marker required there (3 for a vector, 4 for a quaternion).
+        expected: i32,
+        /// The marker read.
+        found: i32,
+        /// Where the marker is: the translation or rotation of which pose.
+        context: String,
+    },
+    /// A node, edge or point count announces more items than the rest of
+    /// the input (of known length) can hold.
     #[error("{what} count {count} at byte offset {offset} needs at least {needed} bytes, only {remaining} remain")]
-    CountTooLarge { offset: u64, what: &'static str, count: u32, needed: u64, remaining: u64 },
+    CountTooLarge {
+        /// Byte offset of the count.
+        offset: u64,
+        /// What is counted: "node", "edge" or "point".
+        what: &'static str,
+        /// The count read.
+        count: u32,
+        /// Smallest number of bytes that many items take.
+        needed: u64,
+        /// Bytes left in the input after the count.
+        remaining: u64,
+    },
     /// The memory for what the data holds so far could not be had.
     #[error("at byte offset {offset}, {context}: cannot allocate memory for {count} {what}")]
-    OutOfMemory { offset: u64, what: &'static str, count: u64, context: String },
+    OutOfMemory {
+        /// Byte offset reached when allocation failed.
+        offset: u64,
+        /// What was being stored: "nodes", "edges" or "points".
+        what: &'static str,
+        /// Number of items the allocation was for.
+        count: u64,
+        /// Which list was being read, e.g. "edge list (5 announced)".
+        context: String,
+    },
 }
 
 const POINT_BYTES: usize = 4 + 3 * 8;

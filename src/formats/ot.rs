@@ -40,6 +40,7 @@ pub enum AnyTree {
 }
 
 impl AnyTree {
+    /// The tree's OctoMap type (what an `.ot` file's `id` line names).
     pub fn kind(&self) -> TreeKind {
         match self {
             AnyTree::Occupancy(t) => TreeKind::of(t.kind()),
@@ -55,6 +56,7 @@ impl AnyTree {
         }
     }
 
+    /// The occupancy tree by value, if this is one.
     pub fn into_occupancy(self) -> Option<OccupancyTree> {
         match self {
             AnyTree::Occupancy(t) => Some(t),
@@ -307,7 +309,7 @@ pub fn read_file(path: impl AsRef<Path>) -> Result<AnyTree, TreeFileError> {
     read(super::buffered_file(path.as_ref())?)
 }
 
-/// Writes an occupancy tree's `.ot` file atomically ([`write`] into a
+/// Writes an occupancy tree's `.ot` file atomically ([`write()`] into a
 /// temporary file that replaces `path` once complete).
 pub fn write_file(tree: &OccupancyTree, path: impl AsRef<Path>) -> io::Result<()> {
     super::write_atomically(path.as_ref(), |w| write(tree, w))

@@ -139,6 +139,8 @@ pub enum SectionKind {
 }
 
 impl SectionKind {
+    /// The kind a section table entry's `kind` field names; `None` for an
+    /// unknown id.
     pub fn from_id(id: u16) -> Option<Self> {
         Some(match id {
             1 => SectionKind::Masks,
@@ -154,6 +156,7 @@ impl SectionKind {
         })
     }
 
+    /// Short lowercase name, e.g. "first-child", for messages.
     pub fn name(self) -> &'static str {
         match self {
             SectionKind::Masks => "masks",
@@ -175,33 +178,49 @@ pub const SECTION_OPTIONAL: u16 = 1;
 /// One section table entry.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Section {
+    /// The [`SectionKind`] id (kept raw: an optional kind may be unknown).
     pub kind: u16,
+    /// Flag bits, e.g. [`SECTION_OPTIONAL`].
     pub flags: u16,
     /// CRC-32 (IEEE, as zlib's) of the section's `length` bytes.
     pub crc32: u32,
+    /// Byte offset of the section from the start of the file, a multiple
+    /// of [`SECTION_ALIGN`].
     pub offset: u64,
+    /// Length of the section in bytes.
     pub length: u64,
 }
 
 /// Everything the header says.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Header {
+    /// Format version, (major, minor).
     pub version: (u16, u16),
+    /// The tree type stored.
     pub kind: TreeKind,
+    /// What each node holds.
     pub variant: Variant,
+    /// How a node's children are found.
     pub index: Index,
+    /// log2 of the records per rank-directory block; 0 with
+    /// [`Index::Pointers`].
     pub rank_block_log2: u8,
+    /// Voxel edge length in metres.
     pub resolution: f64,
+    /// The tree's sensor model (all zero for a counting tree).
     pub sensor: SensorModel,
     /// Maximum likelihood only: 0 empty tree, 1 free leaf, 2 occupied leaf,
     /// 3 inner node (then the root is inner record 0).
     pub root_label: u8,
     /// OctoMap's `size()` counter of the tree written (what `.ot` headers carry).
     pub size_counter: u64,
+    /// Number of nodes stored, at most [`MAX_NODES`].
     pub node_count: u64,
     /// Nodes with children.
     pub inner_count: u64,
+    /// Length of the whole file in bytes (checked against the actual length).
     pub file_length: u64,
+    /// The section table's entries, in table order.
     pub sections: Vec<Section>,
 }
 

@@ -101,30 +101,92 @@ use std::path::Path;
 /// Why an `.olm` file was refused.
 #[derive(Debug, thiserror::Error)]
 pub enum OlmError {
+    /// Opening, mapping or reading the file failed.
     #[error("I/O error: {0}")]
     Io(#[from] io::Error),
+    /// The first eight bytes are not [`MAGIC`].
     #[error("not an .olm file (magic bytes differ)")]
     BadMagic,
+    /// The file is shorter than the fixed header.
     #[error("file is {len} bytes, shorter than the {need}-byte header")]
-    TooShort { len: u64, need: u64 },
+    TooShort {
+        /// Length of the file in bytes.
+        len: u64,
+        /// Length of the header in bytes ([`HEADER_LEN`]).
+        need: u64,
+    },
+    /// The major version is not [`VERSION_MAJOR`].
     #[error("format version {major}.{minor} is not supported (this reader reads {VERSION_MAJOR}.x)")]
-    Version { major: u16, minor: u16 },
+    Version {
+        /// Major version the file states.
+        major: u16,
+        /// Minor version the file states.
+        minor: u16,
+    },
+    /// The endianness check word (byte 12) does not read as `0x0A0B0C0D`.
     #[error("endianness check word reads {found:#010x}, expected 0x0a0b0c0d (file written big-endian or corrupted)")]
-    Endianness { found: u32 },
+    Endianness {
+        /// The word read, little-endian.
+        found: u32,
+    },
+    /// The CRC-32 of the header bytes before the checksum field (byte 252)
+    /// differs from the one stored there.
     #[error("header checksum mismatch: stored {stored:#010x}, computed {computed:#010x}")]
-    HeaderChecksum { stored: u32, computed: u32 },
+    HeaderChecksum {
+        /// Checksum stored in the header.
+        stored: u32,
+        /// Checksum of the header bytes as they are.
+        computed: u32,
+    },
+    /// A header field holds a value out of range or inconsistent with the
+    /// others.
     #[error("header field {field} is invalid: {value}")]
-    BadField { field: &'static str, value: String },
+    BadField {
+        /// The field's name, e.g. "resolution" or "inner_count".
+        field: &'static str,
+        /// The value found, or why it is inconsistent.
+        value: String,
+    },
+    /// The file's length differs from the header's `file_length`.
     #[error("file is {actual} bytes but its header says {header} (truncated or extended)")]
-    FileLength { header: u64, actual: u64 },
+    FileLength {
+        /// Length the header states, in bytes.
+        header: u64,
+        /// Actual length of the file, in bytes.
+        actual: u64,
+    },
+    /// A section is misplaced, missing, duplicated, of the wrong length,
+    /// unknown and not optional, or holds invalid contents.
     #[error("{} section (kind {kind}): {reason}", section_name(*kind))]
-    Section { kind: u16, reason: String },
+    Section {
+        /// The section's [`SectionKind`] id.
+        kind: u16,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// A section's CRC-32 differs from the one in its table entry.
     #[error("{} section (kind {kind}): checksum mismatch (stored {stored:#010x}, computed {computed:#010x})", section_name(*kind))]
-    SectionChecksum { kind: u16, stored: u32, computed: u32 },
+    SectionChecksum {
+        /// The section's [`SectionKind`] id.
+        kind: u16,
+        /// Checksum stored in the section table.
+        stored: u32,
+        /// Checksum of the section's bytes as they are.
+        computed: u32,
+    },
+    /// The nodes do not form a valid tree (found by verification or while
+    /// building an in-memory tree).
     #[error("inconsistent tree structure: {0}")]
     Structure(String),
+    /// The map's tree type does not suit the operation, e.g.
+    /// [`MapView::to_tree`] on a counting map.
     #[error("this is a {found:?} map: {hint}")]
-    Kind { found: TreeKind, hint: &'static str },
+    Kind {
+        /// The map's tree type.
+        found: TreeKind,
+        /// What to do instead.
+        hint: &'static str,
+    },
 }
 
 /// A section kind's name for messages, or `unknown` for a kind this reader
@@ -157,14 +219,17 @@ impl<D: AsRef<[u8]>> MappedMap<D> {
         MapView::from_parts(self.data.as_ref(), &self.meta)
     }
 
+    /// The parsed header.
     pub fn header(&self) -> &Header {
         &self.meta.header
     }
 
+    /// The whole file's bytes.
     pub fn bytes(&self) -> &[u8] {
         self.data.as_ref()
     }
 
+    /// Gives back the bytes the map was made from.
     pub fn into_inner(self) -> D {
         self.data
     }
@@ -291,6 +356,7 @@ impl<'a> MapView<'a> {
         MapView { data, meta, nav: AnyNav::new(data, meta), extras: Extras::new(data, meta), blocks }
     }
 
+    /// The parsed header.
     pub fn header(&self) -> &'a Header {
         &self.meta.header
     }
@@ -301,22 +367,27 @@ impl<'a> MapView<'a> {
         self.meta.trunks.get_or_init(|| with_nav!(self.nav, |nav| query::trunks(nav))).as_ref()
     }
 
+    /// The whole file's bytes.
     pub fn bytes(&self) -> &'a [u8] {
         self.data
     }
 
+    /// Voxel edge length in metres.
     pub fn resolution(&self) -> f64 {
         self.meta.header.resolution
     }
 
+    /// The sensor model stored with the map (all zero for a counting map).
     pub fn sensor(&self) -> &'a SensorModel {
         &self.meta.header.sensor
     }
 
+    /// The key space of the map's resolution (point to key conversions).
     pub fn key_space(&self) -> &'a KeySpace {
         &self.meta.keys
     }
 
+    /// What each node holds: full log-odds or maximum likelihood.
     pub fn variant(&self) -> Variant {
         self.meta.header.variant
     }
@@ -331,14 +402,18 @@ impl<'a> MapView<'a> {
         self.meta.header.size_counter
     }
 
+    /// Number of nodes stored.
     pub fn node_count(&self) -> u64 {
         self.meta.header.node_count
     }
 
+    /// Whether the map has no nodes at all.
     pub fn is_empty(&self) -> bool {
         self.meta.header.node_count == 0
     }
 
+    /// Whether a log-odds `value` counts as occupied: at or above the
+    /// stored sensor model's occupancy threshold.
     pub fn is_occupied(&self, value: f32) -> bool {
         self.meta.header.sensor.is_occupied(value)
     }
@@ -571,6 +646,8 @@ struct IndexEntry {
 }
 
 impl<'a> MapSearchIndex<'a> {
+    /// Builds the tables for `view`, walking the levels down to the
+    /// deepest table.
     pub fn new(view: MapView<'a>) -> Self {
         let tables = with_nav!(view.nav, |nav| {
             let entry = |node: Node| {

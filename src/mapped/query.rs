@@ -21,7 +21,9 @@ use crate::tree::{Found, KeyBox, LastAnswer, NodeItem, OccupancyTree, Trunks};
 /// Implemented by [`OccupancyTree`] and by the mapped views, so that one
 /// [`cast_ray`] serves both (`ray.rs` could share it too).
 pub trait OccupancyLookup {
+    /// The key space of the map's resolution (point to key conversions).
     fn key_space(&self) -> &KeySpace;
+    /// The sensor model whose occupancy threshold classifies the values.
     fn sensor(&self) -> &SensorModel;
     /// OctoMap's `search(key, depth)`; depth 0 means 16.
     fn search(&self, key: Key, depth: u8) -> Option<Found>;

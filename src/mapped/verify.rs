@@ -13,8 +13,11 @@ use crate::key::TREE_DEPTH;
 /// What [`super::MapView::verify`] found.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct VerifyReport {
+    /// Nodes in the tree.
     pub nodes: u64,
+    /// Nodes with children.
     pub inner_nodes: u64,
+    /// Nodes without children (`nodes - inner_nodes`).
     pub leaves: u64,
     /// Depth of the deepest node (0 for a lone root or an empty tree).
     pub max_depth: u8,

@@ -18,6 +18,7 @@ use std::path::Path;
 /// How to write a map.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct WriteOptions {
+    /// What each node holds (default: [`Variant::Full`]).
     pub variant: Variant,
     /// [`Index::Pointers`] is for the full variant only.
     pub index: Index,
@@ -35,6 +36,7 @@ pub struct WriteOptions {
 /// `.olm` stays within 1.15x the size of its `.ot`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum SearchBlocksSection {
+    /// Never add it.
     #[default]
     Never,
     /// For maps with 2^17 or more nodes at depths 13–15, where the rank
