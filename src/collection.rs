@@ -16,27 +16,51 @@ use std::path::{Path, PathBuf};
 /// One submap and where it sits in the collection's frame.
 #[derive(Clone, Debug)]
 pub struct MapNode {
+    /// The submap's identifier (`MAPNODEID`).
     pub id: String,
     /// Submap frame in the collection frame.
     pub pose: Pose6D,
+    /// The submap's tree.
     pub map: OccupancyTree,
 }
 
 /// A set of posed submaps.
 #[derive(Clone, Debug, Default)]
 pub struct MapCollection {
+    /// The submaps, in file order.
     pub nodes: Vec<MapNode>,
 }
 
 /// Why a collection could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum CollectionError {
+    /// A file could not be opened, read or written.
     #[error("{path}: {source}")]
-    Io { path: PathBuf, source: io::Error },
+    Io {
+        /// The collection file or submap file concerned.
+        path: PathBuf,
+        /// The underlying I/O error.
+        source: io::Error,
+    },
+    /// The collection file is malformed.
     #[error("{path} line {line}: {reason}")]
-    Syntax { path: PathBuf, line: usize, reason: String },
+    Syntax {
+        /// The collection file.
+        path: PathBuf,
+        /// 1-based line number; 0 when a submap's entry ends with the file.
+        line: usize,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A submap's `.bt` file could not be decoded.
     #[error("submap {path}: {source}")]
-    Submap { path: PathBuf, source: TreeFileError },
+    Submap {
+        /// The submap file.
+        path: PathBuf,
+        /// Why it was refused.
+        source: TreeFileError,
+    },
+    /// No submap has the given id.
     #[error("no submap with id `{0}`")]
     UnknownId(String),
 }
@@ -132,6 +156,7 @@ impl MapCollection {
         .map_err(io_err(path))
     }
 
+    /// The submap with the given id, if any (the first one when ids repeat).
     pub fn node(&self, id: &str) -> Option<&MapNode> {
         self.nodes.iter().find(|n| n.id == id)
     }

@@ -17,20 +17,26 @@ use std::ops::{Add, AddAssign, DivAssign, Mul, MulAssign, Neg, Sub, SubAssign};
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 #[repr(C)]
 pub struct Point3 {
+    /// x coordinate, metres.
     pub x: f32,
+    /// y coordinate, metres.
     pub y: f32,
+    /// z coordinate, metres.
     pub z: f32,
 }
 
 impl Point3 {
+    /// A point from its three coordinates (`point3d(x, y, z)`).
     pub const fn new(x: f32, y: f32, z: f32) -> Self {
         Self { x, y, z }
     }
 
+    /// The coordinates as `[x, y, z]`.
     pub const fn to_array(self) -> [f32; 3] {
         [self.x, self.y, self.z]
     }
 
+    /// A point from `[x, y, z]`.
     pub const fn from_array(a: [f32; 3]) -> Self {
         Self::new(a[0], a[1], a[2])
     }
@@ -64,6 +70,7 @@ impl Point3 {
         self
     }
 
+    /// A normalised copy (see [`Point3::normalize`]); a zero vector stays zero.
     pub fn normalized(self) -> Self {
         let mut r = self;
         r.normalize();
@@ -127,6 +134,7 @@ impl Point3 {
         self
     }
 
+    /// True when all three coordinates are finite (no NaN, no infinity).
     pub fn is_finite(self) -> bool {
         self.x.is_finite() && self.y.is_finite() && self.z.is_finite()
     }
@@ -194,9 +202,13 @@ impl DivAssign<f32> for Point3 {
 /// OctoMap's `octomath::Quaternion`: four `float`s, scalar part `u` first.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Quaternion {
+    /// Scalar (real) part, OctoMap's `u`.
     pub u: f32,
+    /// First imaginary component.
     pub x: f32,
+    /// Second imaginary component.
     pub y: f32,
+    /// Third imaginary component.
     pub z: f32,
 }
 
@@ -216,16 +228,20 @@ fn max0(v: f64) -> f64 {
 }
 
 impl Quaternion {
+    /// The identity rotation `(1, 0, 0, 0)`.
     pub const IDENTITY: Self = Self::new(1.0, 0.0, 0.0, 0.0);
 
+    /// A quaternion from its components, scalar part `u` first (OctoMap's argument order).
     pub const fn new(u: f32, x: f32, y: f32, z: f32) -> Self {
         Self { u, x, y, z }
     }
 
+    /// The components as `[u, x, y, z]`.
     pub const fn to_array(self) -> [f32; 4] {
         [self.u, self.x, self.y, self.z]
     }
 
+    /// A quaternion from `[u, x, y, z]`.
     pub const fn from_array(a: [f32; 4]) -> Self {
         Self::new(a[0], a[1], a[2], a[3])
     }
@@ -282,6 +298,7 @@ impl Quaternion {
         self
     }
 
+    /// A normalised copy (see [`Quaternion::normalize`]).
     pub fn normalized(self) -> Self {
         let mut r = self;
         r.normalize();
@@ -336,6 +353,7 @@ impl Quaternion {
         Point3::new(roll, pitch, yaw)
     }
 
+    /// Bit patterns of `[u, x, y, z]`, for exact comparisons.
     pub fn to_bits(self) -> [u32; 4] {
         self.to_array().map(f32::to_bits)
     }
@@ -367,13 +385,17 @@ impl DivAssign<f32> for Quaternion {
 /// OctoMap's `Pose6D`: float translation and float quaternion.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Pose6D {
+    /// Translation in metres (`Pose6D::trans`).
     pub translation: Point3,
+    /// Orientation (`Pose6D::rot`).
     pub rotation: Quaternion,
 }
 
 impl Pose6D {
+    /// Zero translation and the identity rotation.
     pub const IDENTITY: Self = Self { translation: Point3::new(0.0, 0.0, 0.0), rotation: Quaternion::IDENTITY };
 
+    /// A pose from a translation and a rotation (the quaternion is used as given).
     pub const fn new(translation: Point3, rotation: Quaternion) -> Self {
         Self { translation, rotation }
     }
@@ -383,22 +405,27 @@ impl Pose6D {
         Self::new(Point3::new(x, y, z), Quaternion::from_euler(roll, pitch, yaw))
     }
 
+    /// The translation, OctoMap's `Pose6D::trans`.
     pub fn trans(&self) -> Point3 {
         self.translation
     }
 
+    /// The rotation, OctoMap's `Pose6D::rot`.
     pub fn rot(&self) -> Quaternion {
         self.rotation
     }
 
+    /// Roll (rotation about x) in radians from [`Quaternion::to_euler`], OctoMap's `Pose6D::roll`.
     pub fn roll(&self) -> f64 {
         self.rotation.to_euler().x as f64
     }
 
+    /// Pitch (rotation about y) in radians from [`Quaternion::to_euler`], OctoMap's `Pose6D::pitch`.
     pub fn pitch(&self) -> f64 {
         self.rotation.to_euler().y as f64
     }
 
+    /// Yaw (rotation about z) in radians from [`Quaternion::to_euler`], OctoMap's `Pose6D::yaw`.
     pub fn yaw(&self) -> f64 {
         self.rotation.to_euler().z as f64
     }
@@ -454,34 +481,42 @@ impl MulAssign for Pose6D {
 /// OctoMap's `Pointcloud`: a plain vector of float points.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PointCloud {
+    /// The points, in insertion order.
     pub points: Vec<Point3>,
 }
 
 impl PointCloud {
+    /// An empty cloud.
     pub fn new() -> Self {
         Self::default()
     }
 
+    /// An empty cloud with room for `n` points.
     pub fn with_capacity(n: usize) -> Self {
         Self { points: Vec::with_capacity(n) }
     }
 
+    /// Number of points (`Pointcloud::size`).
     pub fn len(&self) -> usize {
         self.points.len()
     }
 
+    /// True when the cloud holds no point.
     pub fn is_empty(&self) -> bool {
         self.points.is_empty()
     }
 
+    /// Appends a point (`Pointcloud::push_back`).
     pub fn push(&mut self, p: Point3) {
         self.points.push(p);
     }
 
+    /// Iterates over the points in order.
     pub fn iter(&self) -> std::slice::Iter<'_, Point3> {
         self.points.iter()
     }
 
+    /// The points as a slice.
     pub fn as_slice(&self) -> &[Point3] {
         &self.points
     }

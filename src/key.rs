@@ -18,6 +18,7 @@ pub const KEY_CENTER: u32 = 32768;
 pub struct Key(pub [u16; 3]);
 
 impl Key {
+    /// A key from its x, y and z indices.
     pub const fn new(x: u16, y: u16, z: u16) -> Self {
         Key([x, y, z])
     }
@@ -68,12 +69,26 @@ impl fmt::Display for Key {
 /// Why a coordinate has no key.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
 pub enum KeyError {
+    /// The coordinate is NaN or infinite.
     #[error("coordinate {value} is not finite")]
-    NotFinite { value: f64 },
+    NotFinite {
+        /// The offending coordinate, metres.
+        value: f64,
+    },
+    /// The coordinate lies beyond the map's extent on its axis.
     #[error("coordinate {value} lies outside the map (half extent {half_extent} m)")]
-    OutOfRange { value: f64, half_extent: f64 },
+    OutOfRange {
+        /// The offending coordinate, metres.
+        value: f64,
+        /// Half the root node's edge length, metres: the map spans `-half_extent..half_extent` on each axis.
+        half_extent: f64,
+    },
+    /// A requested depth is greater than [`TREE_DEPTH`].
     #[error("depth {depth} exceeds the tree depth 16")]
-    BadDepth { depth: u8 },
+    BadDepth {
+        /// The requested depth.
+        depth: u8,
+    },
 }
 
 /// `(int) floor(x)` as compiled for x86-64: `cvttsd2si` yields `i32::MIN`
@@ -113,6 +128,7 @@ impl KeySpace {
         KeySpace { resolution, resolution_factor: 1.0 / resolution, node_sizes }
     }
 
+    /// Voxel edge length at the finest depth, metres.
     pub fn resolution(&self) -> f64 {
         self.resolution
     }

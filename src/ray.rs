@@ -409,6 +409,7 @@ impl RayFan {
         Ok(RayFan { origin, origin_key, origin_code, to_border, resolution: keys.resolution() })
     }
 
+    /// The key of the voxel containing the fan's origin.
     pub fn origin_key(&self) -> Key {
         self.origin_key
     }
@@ -490,16 +491,29 @@ impl Iterator for RayKeys {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum CastOutcome {
     /// An occupied voxel was reached (OctoMap returns `true`).
-    Occupied { end: Point3 },
+    Occupied {
+        /// Centre of the occupied voxel.
+        end: Point3,
+    },
     /// The next voxel lies beyond the maximum range.
-    MaxRange { end: Point3 },
+    MaxRange {
+        /// Centre of the first voxel whose centre lies beyond the maximum range.
+        end: Point3,
+    },
     /// An unknown voxel was met and unknown space was not to be ignored.
-    Unknown { end: Point3 },
+    Unknown {
+        /// Centre of the unknown voxel.
+        end: Point3,
+    },
     /// The ray reached the edge of the map.
-    LeftMap { end: Point3 },
+    LeftMap {
+        /// Centre of the last voxel inside the map.
+        end: Point3,
+    },
 }
 
 impl CastOutcome {
+    /// The end point of any outcome, the voxel centre OctoMap writes to `end`.
     pub fn end(&self) -> Point3 {
         match *self {
             CastOutcome::Occupied { end }
@@ -519,8 +533,10 @@ impl CastOutcome {
 /// `end` untouched).
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
 pub enum CastError {
+    /// The origin has no key (not finite or outside the map).
     #[error("ray origin: {0}")]
     Origin(#[from] KeyError),
+    /// The direction does not move along any axis (the zero vector).
     #[error("ray direction is the zero vector")]
     ZeroDirection,
     /// The map holds hit counts (`CountingOcTree`), not occupancy.

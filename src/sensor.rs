@@ -13,23 +13,42 @@ pub fn probability(logodds: f64) -> f64 {
 /// Why a sensor model was refused.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
 pub enum SensorError {
+    /// A value is not strictly between 0 and 1 (or is NaN).
     #[error("{name} = {value} is not a probability strictly between 0 and 1")]
-    NotAProbability { name: &'static str, value: f64 },
+    NotAProbability {
+        /// Which value: `prob_hit`, `prob_miss`, `clamping_min`, `clamping_max` or `occupancy_threshold`.
+        name: &'static str,
+        /// The value given.
+        value: f64,
+    },
+    /// The hit probability (the value given) is below 0.5.
     #[error("prob_hit = {0} must be at least 0.5 (a hit must not lower occupancy)")]
     HitBelowHalf(f64),
+    /// The miss probability (the value given) is above 0.5.
     #[error("prob_miss = {0} must be at most 0.5 (a miss must not raise occupancy)")]
     MissAboveHalf(f64),
+    /// The lower clamping bound is not below the upper one.
     #[error("clamping min {min} must be below clamping max {max}")]
-    ClampingOrder { min: f64, max: f64 },
+    ClampingOrder {
+        /// The lower clamping probability given.
+        min: f64,
+        /// The upper clamping probability given.
+        max: f64,
+    },
 }
 
 /// Probabilities describing a sensor, as a user states them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SensorProbabilities {
+    /// Probability a hit (a ray's end point) assigns to its voxel, OctoMap's `prob_hit`.
     pub hit: f64,
+    /// Probability a miss (a voxel a ray passes through) assigns, OctoMap's `prob_miss`.
     pub miss: f64,
+    /// Lower bound occupancy is clamped to, OctoMap's `clamping_thres_min`.
     pub clamping_min: f64,
+    /// Upper bound occupancy is clamped to, OctoMap's `clamping_thres_max`.
     pub clamping_max: f64,
+    /// Occupancy at or above which a voxel counts as occupied, OctoMap's `occupancy_thres`.
     pub occupancy_threshold: f64,
 }
 
@@ -43,10 +62,15 @@ impl Default for SensorProbabilities {
 /// The log-odds values a tree works with (all `f32`, as OctoMap stores them).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SensorModel {
+    /// Log-odds added for a hit, OctoMap's `prob_hit_log`.
     pub hit: f32,
+    /// Log-odds added for a miss (negative), OctoMap's `prob_miss_log`.
     pub miss: f32,
+    /// Lower clamping bound in log-odds, OctoMap's `clamping_thres_min`.
     pub clamping_min: f32,
+    /// Upper clamping bound in log-odds, OctoMap's `clamping_thres_max`.
     pub clamping_max: f32,
+    /// Occupancy threshold in log-odds, OctoMap's `occ_prob_thres_log`.
     pub occupancy_threshold: f32,
 }
 
@@ -123,6 +147,7 @@ impl SensorModel {
         }
     }
 
+    /// `isNodeOccupied`: the log-odds value is at or above the occupancy threshold.
     #[inline(always)]
     pub fn is_occupied(&self, value: f32) -> bool {
         value >= self.occupancy_threshold

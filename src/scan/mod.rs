@@ -369,7 +369,9 @@ pub enum OutOfMap {
 /// An axis-aligned box limiting which voxels a scan updates.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct UpdateBox {
+    /// Lower corner, metres (inclusive).
     pub min: Point3,
+    /// Upper corner, metres (inclusive).
     pub max: Point3,
     min_key: Key,
     max_key: Key,
@@ -409,6 +411,7 @@ pub struct ScanOptions {
     pub inner: InnerNodes,
     /// Only update voxels inside this box (OctoMap 1.10 semantics).
     pub bbx: Option<UpdateBox>,
+    /// What to do with end points outside the map.
     pub out_of_map: OutOfMap,
     /// Threads for ray casting; `None` uses rayon's global pool.
     pub threads: Option<usize>,
@@ -417,22 +420,50 @@ pub struct ScanOptions {
 /// What a scan integration did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ScanReport {
+    /// Points given, before any was dropped.
     pub points: usize,
     /// Points with a NaN or infinite coordinate; always skipped.
     pub non_finite: usize,
     /// Points outside the map skipped under [`OutOfMap::Skip`].
     pub out_of_map: usize,
+    /// Miss updates applied: distinct voxels for a batched scan, every
+    /// update for [`OccupancyTree::insert_point_cloud_rays`].
     pub free_updates: usize,
+    /// Hit updates applied, counted like `free_updates`.
     pub occupied_updates: usize,
 }
 
 /// Why a scan was refused; nothing was applied.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
 pub enum ScanError {
+    /// The sensor origin is not finite (an origin outside the map is
+    /// accepted, as in OctoMap).
     #[error("sensor origin ({x}, {y}, {z}): {source}")]
-    Origin { x: f32, y: f32, z: f32, source: KeyError },
+    Origin {
+        /// Origin x, metres.
+        x: f32,
+        /// Origin y, metres.
+        y: f32,
+        /// Origin z, metres.
+        z: f32,
+        /// Why the origin has no key.
+        source: KeyError,
+    },
+    /// An end point lies outside the map under [`OutOfMap::Error`].
     #[error("point {index} ({x}, {y}, {z}) lies outside the map: {source}")]
-    PointOutOfMap { index: usize, x: f32, y: f32, z: f32, source: KeyError },
+    PointOutOfMap {
+        /// Index of the point in the input slice.
+        index: usize,
+        /// Point x, metres.
+        x: f32,
+        /// Point y, metres.
+        y: f32,
+        /// Point z, metres.
+        z: f32,
+        /// Why the point has no key.
+        source: KeyError,
+    },
+    /// The ray-casting thread pool could not be started (the message says so).
     #[error("thread pool: {0}")]
     ThreadPool(&'static str),
 }
@@ -441,7 +472,9 @@ pub enum ScanError {
 /// sorted and free of repeats, the two disjoint.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct ScanUpdate {
+    /// Morton codes of the voxels to update as free (misses).
     pub free: Vec<u64>,
+    /// Morton codes of the voxels to update as occupied (hits).
     pub occupied: Vec<u64>,
 }
 
@@ -467,10 +500,12 @@ impl ScanUpdate {
         (set(&self.free), set(&self.occupied))
     }
 
+    /// Number of voxels to update, free and occupied together.
     pub fn len(&self) -> usize {
         self.free.len() + self.occupied.len()
     }
 
+    /// True when the scan updates no voxel.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

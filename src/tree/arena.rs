@@ -309,8 +309,11 @@ impl NodeStore for NodeArena {
 /// Arena statistics: slots in use and held, and the bytes really reserved.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ArenaUsage {
+    /// Slots holding a node.
     pub live_slots: usize,
+    /// Slots left free (by pruning or moves) and awaiting reuse or compaction.
     pub free_slots: usize,
+    /// Bytes reserved by the arena's arrays and free lists (capacity, not length).
     pub bytes_reserved: usize,
 }
 

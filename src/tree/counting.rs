@@ -7,6 +7,8 @@ use super::{NodeId, ROOT};
 use crate::geometry::Point3;
 use crate::key::{Key, KeyError, KeySpace, TREE_DEPTH};
 
+/// OctoMap's `CountingOcTree`: each node counts the updates whose path
+/// went through it.
 #[derive(Clone, Debug)]
 pub struct CountingTree {
     keys: KeySpace,
@@ -15,6 +17,7 @@ pub struct CountingTree {
 }
 
 impl CountingTree {
+    /// An empty tree; `resolution` is the voxel edge length in metres.
     pub fn new(resolution: f64) -> Result<Self, super::TreeError> {
         if !(resolution.is_finite() && resolution > 0.0) {
             return Err(super::TreeError::BadResolution(resolution));
@@ -29,10 +32,12 @@ impl CountingTree {
         Ok(t)
     }
 
+    /// Voxel edge length at the finest depth, metres.
     pub fn resolution(&self) -> f64 {
         self.keys.resolution()
     }
 
+    /// The tree's coordinate/key arithmetic.
     pub fn key_space(&self) -> &KeySpace {
         &self.keys
     }

@@ -8,7 +8,9 @@ use crate::key::{Key, KeySpace, KEY_CENTER, TREE_DEPTH};
 /// An inclusive box of keys, as OctoMap's bounding-box iterator takes it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct KeyBox {
+    /// Lowest key on each axis (inclusive).
     pub min: Key,
+    /// Highest key on each axis (inclusive).
     pub max: Key,
 }
 

@@ -54,6 +54,7 @@ pub enum InnerNodes {
 /// Why a tree could not be made.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
 pub enum TreeError {
+    /// The resolution (the value given, metres) is zero, negative, NaN or infinite.
     #[error("resolution {0} m is not a positive finite number")]
     BadResolution(f64),
 }
@@ -61,8 +62,11 @@ pub enum TreeError {
 /// A node found by a search.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Found {
+    /// The node's occupancy, log-odds.
     pub value: f32,
+    /// Depth of the node found (0 = root, 16 = finest).
     pub depth: u8,
+    /// True when the node has no children.
     pub is_leaf: bool,
     /// Colour (`r | g << 8 | b << 16`) or time stamp, by the tree's
     /// [`NodeKind`]; 0 for plain trees.
@@ -72,10 +76,12 @@ pub struct Found {
 /// An RGB colour packed as `r | g << 8 | b << 16`; white means unset.
 pub const WHITE: u32 = 0x00ff_ffff;
 
+/// Packs `[r, g, b]` as `r | g << 8 | b << 16`.
 pub fn pack_rgb(rgb: [u8; 3]) -> u32 {
     u32::from(rgb[0]) | (u32::from(rgb[1]) << 8) | (u32::from(rgb[2]) << 16)
 }
 
+/// Unpacks `r | g << 8 | b << 16` to `[r, g, b]` (bits above 24 ignored).
 pub fn unpack_rgb(c: u32) -> [u8; 3] {
     [c as u8, (c >> 8) as u8, (c >> 16) as u8]
 }
@@ -91,6 +97,8 @@ pub enum Clock {
 }
 
 impl Clock {
+    /// The current time in seconds: the fixed value, or the system time
+    /// truncated to `u32` (0 if the system clock is before the epoch).
     pub fn now(self) -> u32 {
         match self {
             Clock::Fixed(t) => t,
@@ -111,11 +119,14 @@ pub(crate) struct Rules {
 /// Metric bounds of the known space.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Bounds {
+    /// Lower corner `[x, y, z]`, metres.
     pub min: [f64; 3],
+    /// Upper corner `[x, y, z]`, metres.
     pub max: [f64; 3],
 }
 
 impl Bounds {
+    /// Extent per axis, `max - min`, metres.
     pub fn size(&self) -> [f64; 3] {
         [self.max[0] - self.min[0], self.max[1] - self.min[1], self.max[2] - self.min[2]]
     }
@@ -176,6 +187,8 @@ impl OccupancyTree {
         Self::with_sensor(resolution, SensorModel::default())
     }
 
+    /// An empty plain tree with the given sensor model; `resolution` is
+    /// the voxel edge length in metres.
     pub fn with_sensor(resolution: f64, sensor: SensorModel) -> Result<Self, TreeError> {
         Self::with_kind(resolution, sensor, NodeKind::Plain)
     }
@@ -199,6 +212,7 @@ impl OccupancyTree {
         })
     }
 
+    /// What the tree's nodes carry besides occupancy.
     pub fn kind(&self) -> NodeKind {
         self.kind
     }
@@ -218,22 +232,27 @@ impl OccupancyTree {
         NodeArena::with_root_and_extras(value, default_extra(kind))
     }
 
+    /// Voxel edge length at the finest depth, metres.
     pub fn resolution(&self) -> f64 {
         self.keys.resolution()
     }
 
+    /// The tree's coordinate/key arithmetic.
     pub fn key_space(&self) -> &KeySpace {
         &self.keys
     }
 
+    /// The sensor model updates use.
     pub fn sensor(&self) -> &SensorModel {
         &self.sensor
     }
 
+    /// Replaces the sensor model; values already in the tree are left as they are.
     pub fn set_sensor(&mut self, sensor: SensorModel) {
         self.sensor = sensor;
     }
 
+    /// True when the tree has no node at all (not even a root).
     pub fn is_empty(&self) -> bool {
         self.arena.is_none()
     }
@@ -959,6 +978,8 @@ impl OccupancyTree {
         self.arena.as_ref().map(|a| a.value(ROOT))
     }
 
+    /// Whether a log-odds value counts as occupied under this tree's
+    /// sensor model (`isNodeOccupied`).
     pub fn is_occupied(&self, value: f32) -> bool {
         self.sensor.is_occupied(value)
     }
@@ -1098,6 +1119,7 @@ impl OccupancyTree {
         v
     }
 
+    /// Forgets the changed keys recorded so far (`resetChangeDetection`).
     pub fn reset_change_detection(&mut self) {
         if let Some(c) = self.changes.as_mut() {
             c.clear();
@@ -1291,11 +1313,13 @@ impl<'a> NodeRef<'a> {
         self.arena.mask(self.id)
     }
 
+    /// True when the node has at least one child.
     #[inline]
     pub fn has_children(&self) -> bool {
         self.arena.has_children(self.id)
     }
 
+    /// Child `pos` (0..8, x = 1, y = 2, z = 4), if it exists.
     #[inline]
     pub fn child(&self, pos: usize) -> Option<NodeRef<'a>> {
         self.arena.child(self.id, pos).map(|id| NodeRef { arena: self.arena, id })
@@ -1333,10 +1357,12 @@ pub struct PreorderBuilder {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
 #[error("node {index} in pre-order lies below depth 16")]
 pub struct TooDeep {
+    /// The `index` given with the offending node.
     pub index: u64,
 }
 
 impl PreorderBuilder {
+    /// A builder for a plain tree.
     pub fn new() -> Self {
         Self::with_kind(NodeKind::Plain)
     }
