@@ -1,0 +1,465 @@
+//! Ray casting of one scan into its free and occupied voxel sets, on one
+//! thread or split over a rayon pool.
+
+use super::block_set::BlockSet;
+use super::key_set::KeySet;
+use super::{OutOfMap, ScanError, ScanOptions, ScanReport};
+use crate::geometry::Point3;
+use crate::key::{Key, KeySpace};
+use crate::morton::MortonCode;
+use crate::ray::{FanRay, RayFan, RayKeys};
+use rayon::prelude::*;
+
+/// What one worker collects: the free and the occupied voxels.
+#[derive(Default)]
+pub(super) struct Casting {
+    free: BlockSet,
+    occupied: BlockSet,
+}
+
+impl Casting {
+    /// `computeUpdate`'s work for one end point. `fan` holds the rays'
+    /// common origin; `None` when it lies outside the map (no rays then).
+    #[inline]
+    fn cast(&mut self, keys: &KeySpace, fan: Option<&RayFan>, p: Point3, origin: Point3, opts: &ScanOptions) {
+        let (within, end) = cut_to_range(p, origin, opts);
+        let Some(bbx) = opts.bbx else {
+            let Some(end_code) = self.end_voxel(keys, end, within) else { return };
+            if let Some(fan) = fan {
+                fan.for_each_code(end, end_code, |c| self.free.insert(c));
+            }
+            return;
+        };
+        if within && bbx.contains_point(p) {
+            if let Ok(k) = keys.key(p) {
+                self.occupied.insert(MortonCode::encode(k).0);
+            }
+        }
+        if let Ok(ray) = RayKeys::new(keys, origin, end) {
+            for k in ray.take_while(|&k| bbx.contains_key(k)) {
+                self.free.insert(MortonCode::encode(k).0);
+            }
+        }
+    }
+
+    /// [`Self::cast`] for every point. The steps of one ray form a chain
+    /// of dependent operations, so several rays are walked at once and
+    /// their chains overlap: eight or sixteen in vector lanes where the
+    /// processor has AVX-512 (`ray::wide`), else two.
+    fn cast_all(
+        &mut self,
+        keys: &KeySpace,
+        fan: Option<&RayFan>,
+        points: &[Point3],
+        origin: Point3,
+        opts: &ScanOptions,
+    ) {
+        let Some(fan) = fan.filter(|_| opts.bbx.is_none()) else {
+            for &p in points {
+                self.cast(keys, fan, p, origin, opts);
+            }
+            return;
+        };
+        #[cfg(target_arch = "x86_64")]
+        if crate::ray::wide::available() {
+            // SAFETY: the processor has AVX-512F and BMI2
+            unsafe { self.cast_all_wide(keys, fan, points, opts) };
+            return;
+        }
+        self.cast_all_pairs(keys, fan, points, origin, opts);
+    }
+
+    /// [`Self::cast_all`]'s walk on processors without AVX-512: rays walked
+    /// two at a time, so that their two chains overlap.
+    fn cast_all_pairs(&mut self, keys: &KeySpace, fan: &RayFan, points: &[Point3], origin: Point3, opts: &ScanOptions) {
+        let mut points = points.iter();
+        let mut ready = RayQueue::default();
+        // the two walks' changing state apart from their constants, so that
+        // it stays in registers
+        let (mut a, mut a_steps) = self.next_ray(fan, keys, &mut points, &mut ready, origin, opts).split();
+        let (mut b, mut b_steps) = self.next_ray(fan, keys, &mut points, &mut ready, origin, opts).split();
+        loop {
+            let (ca, cb) = (a.next_code(&a_steps), b.next_code(&b_steps));
+            match ca {
+                Some(c) => self.free.insert(c),
+                None => (a, a_steps) = self.next_ray(fan, keys, &mut points, &mut ready, origin, opts).split(),
+            }
+            match cb {
+                Some(c) => self.free.insert(c),
+                None => {
+                    (b, b_steps) = self.next_ray(fan, keys, &mut points, &mut ready, origin, opts).split();
+                    if ca.is_none() && points.len() == 0 && ready.is_empty() {
+                        break;
+                    }
+                }
+            }
+        }
+        // the last rays
+        while let Some(c) = a.next_code(&a_steps) {
+            self.free.insert(c);
+        }
+        while let Some(c) = b.next_code(&b_steps) {
+            self.free.insert(c);
+        }
+    }
+
+    /// [`Self::cast_all`] in the lanes of AVX-512 registers (`ray::wide`):
+    /// the rays are set up a chunk at a time, eight at once, each chunk
+    /// walked sixteen rays at once while the lanes still hold the previous
+    /// chunk's last rays. BMI2 gives the set insertion its one-instruction
+    /// variable shift (`shlx`); every AVX-512 processor has it.
+    ///
+    /// # Safety
+    /// The processor must support AVX-512F and BMI2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,bmi2")]
+    unsafe fn cast_all_wide(&mut self, keys: &KeySpace, fan: &RayFan, points: &[Point3], opts: &ScanOptions) {
+        use crate::ray::wide::{set_up, walk, LaneRays, Lanes};
+        let mut rays = LaneRays::default();
+        let mut lanes = Lanes::default();
+        let mut any = false;
+        let mut chunks = points.chunks(LaneRays::CAPACITY).peekable();
+        while let Some(chunk) = chunks.next() {
+            rays.clear();
+            set_up(&mut rays, fan, keys, chunk, opts.max_range.unwrap_or(-1.0), |c| self.occupied.insert(c));
+            any |= rays.len() > 0;
+            rays.pad();
+            let last = chunks.peek().is_none();
+            let free = &mut self.free;
+            walk(&mut lanes, &rays, fan.origin_code(), last, |codes| free.insert_all(codes));
+        }
+        if any {
+            self.free.insert(fan.origin_code());
+        }
+    }
+
+    /// The next ray to walk, from `ready`, which is refilled from `points`
+    /// when empty; a finished ray when both have run out.
+    #[inline(always)]
+    fn next_ray(
+        &mut self,
+        fan: &RayFan,
+        keys: &KeySpace,
+        points: &mut std::slice::Iter<Point3>,
+        ready: &mut RayQueue,
+        origin: Point3,
+        opts: &ScanOptions,
+    ) -> FanRay {
+        if ready.is_empty() {
+            self.set_up_rays(fan, keys, points, ready, origin, opts);
+        }
+        ready.pop().unwrap_or_else(FanRay::finished)
+    }
+
+    /// [`Self::cast`]'s work except the walk (the end point, the origin
+    /// voxel, the ray's set-up) for the next [`RayQueue::CAPACITY`] points,
+    /// their non-empty rays into `ready`. In a batch, the set-ups' chains
+    /// of square root and divisions overlap; one at a time, as each walk
+    /// ended, they were a fifth of the insertion of a small map.
+    #[inline(never)]
+    fn set_up_rays(
+        &mut self,
+        fan: &RayFan,
+        keys: &KeySpace,
+        points: &mut std::slice::Iter<Point3>,
+        ready: &mut RayQueue,
+        origin: Point3,
+        opts: &ScanOptions,
+    ) {
+        for &p in points.take(RayQueue::CAPACITY) {
+            let (within, end) = cut_to_range(p, origin, opts);
+            let Some(end_code) = self.end_voxel(keys, end, within) else { continue };
+            if let Some(ray) = fan.ray(end, end_code) {
+                ready.push(ray);
+            }
+        }
+        if !ready.is_empty() {
+            self.free.insert(fan.origin_code());
+        }
+    }
+
+    /// The Morton code of the ray end's voxel, marked occupied when the
+    /// end is the point itself (`within` range); `None` outside the map.
+    #[inline(always)]
+    fn end_voxel(&mut self, keys: &KeySpace, end: Point3, within: bool) -> Option<u64> {
+        let end_code = MortonCode::encode(keys.key(end).ok()?).0;
+        if within {
+            self.occupied.insert(end_code);
+        }
+        Some(end_code)
+    }
+
+    /// Both sets as sorted lists; the free one keeps the occupied voxels
+    /// (another worker's may have them too).
+    fn finish(&self) -> (Vec<u64>, Vec<u64>) {
+        (self.free.sorted_codes(None), self.occupied.sorted_codes(None))
+    }
+
+    /// The scan's update, when this worker cast all of it.
+    fn into_update(self) -> ScanUpdate {
+        ScanUpdate { free: self.free.sorted_codes(Some(&self.occupied)), occupied: self.occupied.sorted_codes(None) }
+    }
+}
+
+/// [`crate::ray::cut_to_range`] with the scan's maximum range.
+#[inline(always)]
+fn cut_to_range(p: Point3, origin: Point3, opts: &ScanOptions) -> (bool, Point3) {
+    crate::ray::cut_to_range(p, origin, opts.max_range.unwrap_or(-1.0))
+}
+
+/// Rays set up and waiting for a walk (a stack: the order of the walks
+/// does not matter, each voxel only joins a set).
+#[derive(Default)]
+struct RayQueue {
+    rays: [Option<FanRay>; RayQueue::CAPACITY],
+    len: usize,
+}
+
+impl RayQueue {
+    const CAPACITY: usize = 16;
+
+    fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    #[inline(always)]
+    fn push(&mut self, ray: FanRay) {
+        self.rays[self.len] = Some(ray);
+        self.len += 1;
+    }
+
+    #[inline(always)]
+    fn pop(&mut self) -> Option<FanRay> {
+        self.len = self.len.checked_sub(1)?;
+        self.rays[self.len].take()
+    }
+}
+
+/// Drops repeats from the sorted `codes`, and every code of the sorted
+/// `except`, in one pass: each code is written, and the end of the kept
+/// part only moves past it when it is kept, so repeats, which come at
+/// random, cost no mispredicted branch.
+fn dedup_except(codes: &mut Vec<u64>, except: &[u64]) {
+    let (mut kept, mut j) = (0, 0);
+    let mut prev = u64::MAX; // no code: codes have 48 bits
+    for i in 0..codes.len() {
+        let c = codes[i];
+        while j < except.len() && except[j] < c {
+            j += 1;
+        }
+        let drop = (c == prev) | (j < except.len() && except[j] == c);
+        codes[kept] = c;
+        kept += usize::from(!drop);
+        prev = c;
+    }
+    codes.truncate(kept);
+}
+
+/// The union of sorted, repeat-free lists, sorted and repeat-free.
+fn merge_sorted(mut lists: Vec<Vec<u64>>) -> Vec<u64> {
+    lists.retain(|l| !l.is_empty());
+    while lists.len() > 1 {
+        // merge pairwise, shortest lists first
+        lists.sort_unstable_by_key(|l| std::cmp::Reverse(l.len()));
+        let (a, b) = (lists.pop().expect("two lists"), lists.pop().expect("two lists"));
+        let mut out = Vec::with_capacity(a.len() + b.len());
+        let (mut i, mut j) = (0, 0);
+        while i < a.len() && j < b.len() {
+            let (x, y) = (a[i], b[j]);
+            out.push(x.min(y));
+            i += usize::from(x <= y);
+            j += usize::from(y <= x);
+        }
+        out.extend_from_slice(&a[i..]);
+        out.extend_from_slice(&b[j..]);
+        lists.push(out);
+    }
+    lists.pop().unwrap_or_default()
+}
+
+/// Thread pools by size, built once: a pool per scan would cost more than
+/// casting a small scan's rays.
+pub(super) fn thread_pool(threads: usize) -> Result<std::sync::Arc<rayon::ThreadPool>, ScanError> {
+    use std::sync::{Arc, Mutex};
+    static POOLS: Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>> = Mutex::new(Vec::new());
+    let mut pools = POOLS.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, p)) = pools.iter().find(|(n, _)| *n == threads) {
+        return Ok(p.clone());
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|_| ScanError::ThreadPool("could not start ray-casting threads"))?;
+    let pool = Arc::new(pool);
+    pools.push((threads, pool.clone()));
+    Ok(pool)
+}
+
+/// [`crate::OccupancyTree::compute_update`] for a map with key space `keys`: the
+/// update depends on nothing else of the tree.
+pub fn compute_update(
+    keys: &KeySpace,
+    points: &[Point3],
+    origin: Point3,
+    opts: &ScanOptions,
+) -> Result<(ScanUpdate, ScanReport), ScanError> {
+    let mut report = ScanReport { points: points.len(), ..Default::default() };
+    let origin_key = keys.key(origin);
+    if let Err(source) = origin_key {
+        // OctoMap casts no ray then, but still marks in-map end points
+        // occupied; only a non-finite origin is refused outright.
+        if !origin.is_finite() {
+            return Err(ScanError::Origin { x: origin.x, y: origin.y, z: origin.z, source });
+        }
+    }
+    // only OctoMap's policy lets points without a key through to the
+    // casting (which skips them); the input is used as it is when
+    // nothing is to be dropped or changed
+    let clean = opts.out_of_map == OutOfMap::OctoMap && !opts.discretize && points.iter().all(|p| p.is_finite());
+    let mut cleaned: Vec<Point3> = Vec::new();
+    if !clean {
+        cleaned.reserve(points.len());
+        for (index, &p) in points.iter().enumerate() {
+            if !p.is_finite() {
+                report.non_finite += 1;
+                continue;
+            }
+            if opts.out_of_map != OutOfMap::OctoMap {
+                if let Err(source) = keys.key(p) {
+                    if opts.out_of_map == OutOfMap::Error {
+                        return Err(ScanError::PointOutOfMap { index, x: p.x, y: p.y, z: p.z, source });
+                    }
+                    report.out_of_map += 1;
+                    continue;
+                }
+            }
+            cleaned.push(p);
+        }
+    }
+    if opts.discretize {
+        let mut seen = KeySet::default();
+        cleaned.retain(|&p| seen.insert(MortonCode::encode(keys.key_unchecked(p))));
+        cleaned.iter_mut().for_each(|p| *p = keys.key_to_point(keys.key_unchecked(*p)));
+    }
+    let points = if clean { points } else { &cleaned[..] };
+
+    let fan = RayFan::new(keys, origin).ok();
+    let run = || cast_scan(keys, points, fan.as_ref(), origin, opts);
+    let update = match opts.threads {
+        Some(1) => cast_serial(keys, points, fan.as_ref(), origin, opts),
+        None => run(),
+        Some(n) => thread_pool(n)?.install(run),
+    };
+    Ok((update, report))
+}
+
+fn cast_serial(
+    keys: &KeySpace,
+    points: &[Point3],
+    fan: Option<&RayFan>,
+    origin: Point3,
+    opts: &ScanOptions,
+) -> ScanUpdate {
+    let mut c = Casting::default();
+    c.cast_all(keys, fan, points, origin, opts);
+    c.into_update()
+}
+
+fn cast_scan(
+    keys: &KeySpace,
+    points: &[Point3],
+    fan: Option<&RayFan>,
+    origin: Point3,
+    opts: &ScanOptions,
+) -> ScanUpdate {
+    let threads = rayon::current_num_threads();
+    if threads == 1 {
+        return cast_serial(keys, points, fan, origin, opts);
+    }
+    let chunk = points.len().div_ceil(2 * threads).max(512);
+    let parts: Vec<(Vec<u64>, Vec<u64>)> = points
+        .par_chunks(chunk)
+        .fold(Casting::default, |mut acc, chunk| {
+            acc.cast_all(keys, fan, chunk, origin, opts);
+            acc
+        })
+        .map(|c| c.finish())
+        .collect();
+    let (free, occupied): (Vec<_>, Vec<_>) = parts.into_iter().unzip();
+    let (mut free, occupied) = rayon::join(|| merge_sorted(free), || merge_sorted(occupied));
+    dedup_except(&mut free, &occupied);
+    ScanUpdate { free, occupied }
+}
+
+/// The free and occupied voxels of one scan as Morton codes, each list
+/// sorted and free of repeats, the two disjoint.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ScanUpdate {
+    /// Morton codes of the voxels to update as free (misses).
+    pub free: Vec<u64>,
+    /// Morton codes of the voxels to update as occupied (hits).
+    pub occupied: Vec<u64>,
+}
+
+impl ScanUpdate {
+    /// The update from casting output (Morton codes in any order, repeats
+    /// allowed), through the block sets a scan's casting fills.
+    pub fn from_codes(free: &[u64], occupied: &[u64]) -> Self {
+        let mut c = Casting::default();
+        free.iter().for_each(|&f| c.free.insert(f));
+        occupied.iter().for_each(|&o| c.occupied.insert(o));
+        c.into_update()
+    }
+
+    /// The lists as keys, in Morton order.
+    pub fn sorted(&self) -> (Vec<Key>, Vec<Key>) {
+        let keys = |codes: &[u64]| codes.iter().map(|&c| MortonCode(c).decode()).collect();
+        (keys(&self.free), keys(&self.occupied))
+    }
+
+    /// The lists as OctoMap's hash-based key sets.
+    pub fn key_sets(&self) -> (KeySet, KeySet) {
+        let set = |codes: &[u64]| codes.iter().map(|&c| MortonCode(c)).collect();
+        (set(&self.free), set(&self.occupied))
+    }
+
+    /// Number of voxels to update, free and occupied together.
+    pub fn len(&self) -> usize {
+        self.free.len() + self.occupied.len()
+    }
+
+    /// True when the scan updates no voxel.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The two walks (eight or sixteen rays in AVX-512 lanes, and two
+    /// rays interleaved, which processors without AVX-512 take) give the
+    /// same sets, with and without a maximum range.
+    #[test]
+    fn vector_and_pairwise_walks_give_the_same_update() {
+        #[cfg(target_arch = "x86_64")]
+        if crate::ray::wide::available() {
+            for (res, max_range) in [(0.05, None), (0.2, None), (0.1, Some(2.5)), (0.02, Some(4.0))] {
+                let keys = KeySpace::new(res);
+                for (points, origin) in super::super::tests::sample_scans().into_iter().take(2) {
+                    let fan = RayFan::new(&keys, origin).ok();
+                    let opts = ScanOptions { max_range, ..Default::default() };
+                    let (mut wide, mut pairs) = (Casting::default(), Casting::default());
+                    wide.cast_all(&keys, fan.as_ref(), &points, origin, &opts);
+                    pairs.cast_all_pairs(&keys, fan.as_ref().unwrap(), &points, origin, &opts);
+                    let (wide, pairs) = (wide.into_update(), pairs.into_update());
+                    assert!(wide.free.len() > 1000, "{res} m: {} free voxels", wide.free.len());
+                    assert!(wide == pairs, "{res} m, max range {max_range:?}");
+                }
+            }
+            return;
+        }
+        eprintln!("skipped: no AVX-512F (only the pairwise walk runs here)");
+    }
+}
