@@ -394,8 +394,9 @@ impl NodeArena {
         Self::with_root_and_extras(value, None)
     }
 
-    /// Like [`Self::with_root`], with a per-node `u32` extra when
-    /// `default_extra` is given (new nodes start with it).
+    /// An arena holding only a root (id 0) with the given value, with a
+    /// per-node `u32` extra when `default_extra` is given (new nodes start
+    /// with it).
     pub fn with_root_and_extras(value: f32, default_extra: Option<u32>) -> Self {
         let mut a = NodeArena { default_extra, ..Default::default() };
         a.push_run(1);
