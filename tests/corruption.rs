@@ -23,6 +23,7 @@
 #![allow(unexpected_cfgs)]
 
 mod common;
+use common::Rng;
 
 #[allow(dead_code)]
 #[path = "../fuzz/fuzz_targets/bt.rs"]
@@ -115,31 +116,6 @@ fn largest_allocation<T>(f: impl FnOnce() -> T) -> (T, usize) {
     LARGEST.with(|c| c.set(0));
     let out = f();
     (out, LARGEST.with(|c| c.get()))
-}
-
-// ---------------------------------------------------------------------------
-// Deterministic randomness (splitmix64).
-
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        if n == 0 {
-            0
-        } else {
-            (self.next() % n as u64) as usize
-        }
-    }
-    fn byte(&mut self) -> u8 {
-        self.next() as u8
-    }
 }
 
 // ---------------------------------------------------------------------------

@@ -3,8 +3,7 @@
 //! through the same calls. The coloured scans are those of
 //! `tests/differential_color.rs` at the repository root.
 //!
-//! Knobs: `OCTOLINEAR_DIFF_SEED` (base seed), `OCTOLINEAR_DIFF_VERBOSE=1`
-//! (keep OctoMap's stderr chatter).
+//! Knob: `OCTOLINEAR_DIFF_SEED` (base seed).
 
 use octolinear::geometry::graph2tree_transform;
 use octolinear::{Point3, PointCloud, Pose6D};
@@ -12,69 +11,12 @@ use octolinear_oracle::{require_or_skip, ColorOp, OracleColorTree};
 use octolinear_sim::SplitMix64;
 use std::process::Command;
 
-fn quiet_octomap() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        if std::env::var_os("OCTOLINEAR_DIFF_VERBOSE").is_some() {
-            return;
-        }
-        #[cfg(unix)]
-        {
-            use std::os::fd::AsRawFd;
-            extern "C" {
-                fn dup2(oldfd: i32, newfd: i32) -> i32;
-            }
-            if let Ok(null) = std::fs::OpenOptions::new().write(true).open("/dev/null") {
-                // SAFETY: both descriptors are open; dup2 only replaces fd 2.
-                unsafe { dup2(null.as_raw_fd(), 2) };
-            }
-        }
-    });
-}
+#[path = "../../tests/common/mod.rs"]
+mod common;
+use common::colored_scan;
 
 fn base_seed() -> u64 {
     std::env::var("OCTOLINEAR_DIFF_SEED").ok().and_then(|s| s.parse().ok()).unwrap_or(0x00c0_10c0_ffee)
-}
-
-/// A coloured scan: a wall, a floor and scattered points around `origin`,
-/// many of them sharing voxels (so colours are blended) and whole blocks of
-/// equal occupancy (so pruning merges coloured voxels). Colours come in
-/// bands with a little noise; some are pure white (OctoMap's "unset").
-fn colored_scan(rng: &mut SplitMix64, res: f64, origin: [f32; 3], n: usize) -> (Vec<[f32; 3]>, Vec<[u8; 3]>) {
-    let wall = rng.range(1.0, 6.0);
-    let floor = -rng.range(0.5, 2.0);
-    let snap = rng.below(2) == 0;
-    let palette: Vec<[u8; 3]> = (0..6).map(|_| [0, 1, 2].map(|_| rng.below(256) as u8)).collect();
-    let (mut pts, mut cols) = (Vec::with_capacity(n), Vec::with_capacity(n));
-    for _ in 0..n {
-        let u = rng.range(-3.0, 3.0);
-        let v = rng.range(-1.5, 1.5);
-        let mut p = match rng.below(10) {
-            0..=4 => [wall, u, v + floor.abs() * 0.5],
-            5..=7 => [rng.range(0.3, wall), u, floor],
-            _ => {
-                let d = rng.range(0.2, 9.0);
-                let (a, b) = (rng.range(-3.2, 3.2), rng.range(-1.2, 1.2));
-                [d * a.cos() * b.cos(), d * a.sin() * b.cos(), d * b.sin()]
-            }
-        };
-        if snap {
-            // voxel centres plus a small offset: many points per voxel
-            for c in &mut p {
-                *c = ((*c / res).floor() + 0.5 + rng.range(-0.3, 0.3)) * res;
-            }
-        }
-        let band = ((u * 2.0).floor() as i64).rem_euclid(palette.len() as i64) as usize;
-        let base = palette[band];
-        let rgb = if rng.below(25) == 0 {
-            [255, 255, 255]
-        } else {
-            base.map(|c| (i32::from(c) + rng.below(9) as i32 - 4).clamp(0, 255) as u8)
-        };
-        pts.push([p[0] as f32 + origin[0], p[1] as f32 + origin[1], p[2] as f32 + origin[2]]);
-        cols.push(rgb);
-    }
-    (pts, cols)
 }
 
 fn p3(p: [f32; 3]) -> Point3 {
@@ -129,7 +71,6 @@ fn cli_color_build_matches_octomap() {
     if !require_or_skip("cli_color_build_matches_octomap") {
         return;
     }
-    quiet_octomap();
     let dir = tempfile::tempdir().unwrap();
     let mut rng = SplitMix64(base_seed() ^ 0xc11);
     let res = 0.05;

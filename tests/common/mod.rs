@@ -376,3 +376,77 @@ pub fn lzf_compress(input: &[u8]) -> Vec<u8> {
     flush(&mut out, &mut lit);
     out
 }
+
+/// Deterministic randomness for the mutation tests (splitmix64).
+pub struct Rng(pub u64);
+
+impl Rng {
+    /// The next 64 random bits.
+    pub fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform-ish in `0..n`; 0 when `n` is 0.
+    pub fn below(&mut self, n: usize) -> usize {
+        if n == 0 {
+            0
+        } else {
+            (self.next() % n as u64) as usize
+        }
+    }
+
+    /// A random byte.
+    pub fn byte(&mut self) -> u8 {
+        self.next() as u8
+    }
+}
+
+/// A coloured scan: a wall, a floor and scattered points around `origin`,
+/// many of them sharing voxels (so colours are blended) and whole blocks of
+/// equal occupancy (so pruning merges coloured voxels). Colours come in
+/// bands with a little noise; some are pure white (OctoMap's "unset").
+pub fn colored_scan(
+    rng: &mut octolinear_sim::SplitMix64,
+    res: f64,
+    origin: [f32; 3],
+    n: usize,
+) -> (Vec<[f32; 3]>, Vec<[u8; 3]>) {
+    let wall = rng.range(1.0, 6.0);
+    let floor = -rng.range(0.5, 2.0);
+    let snap = rng.below(2) == 0;
+    let palette: Vec<[u8; 3]> = (0..6).map(|_| [0, 1, 2].map(|_| rng.below(256) as u8)).collect();
+    let (mut pts, mut cols) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    for _ in 0..n {
+        let u = rng.range(-3.0, 3.0);
+        let v = rng.range(-1.5, 1.5);
+        let mut p = match rng.below(10) {
+            0..=4 => [wall, u, v + floor.abs() * 0.5],
+            5..=7 => [rng.range(0.3, wall), u, floor],
+            _ => {
+                let d = rng.range(0.2, 9.0);
+                let (a, b) = (rng.range(-3.2, 3.2), rng.range(-1.2, 1.2));
+                [d * a.cos() * b.cos(), d * a.sin() * b.cos(), d * b.sin()]
+            }
+        };
+        if snap {
+            // voxel centres plus a small offset: many points per voxel
+            for c in &mut p {
+                *c = ((*c / res).floor() + 0.5 + rng.range(-0.3, 0.3)) * res;
+            }
+        }
+        let band = ((u * 2.0).floor() as i64).rem_euclid(palette.len() as i64) as usize;
+        let base = palette[band];
+        let rgb = if rng.below(25) == 0 {
+            [255, 255, 255]
+        } else {
+            base.map(|c| (i32::from(c) + rng.below(9) as i32 - 4).clamp(0, 255) as u8)
+        };
+        pts.push([p[0] as f32 + origin[0], p[1] as f32 + origin[1], p[2] as f32 + origin[2]]);
+        cols.push(rgb);
+    }
+    (pts, cols)
+}
