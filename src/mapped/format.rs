@@ -387,12 +387,10 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Meta, OlmError> {
     if header_len as usize != HEADER_LEN {
         return Err(bad("header_len", header_len));
     }
-    let kind = match u8_at(field::TREE_KIND) {
-        0 => TreeKind::OcTree,
-        1 => TreeKind::ColorOcTree,
-        2 => TreeKind::OcTreeStamped,
-        3 => TreeKind::CountingOcTree,
-        k => return Err(bad("tree_kind", k)),
+    let code = u8_at(field::TREE_KIND);
+    let kinds = [TreeKind::OcTree, TreeKind::ColorOcTree, TreeKind::OcTreeStamped, TreeKind::CountingOcTree];
+    let Some(kind) = kinds.into_iter().find(|&k| tree_kind_code(k) == code) else {
+        return Err(bad("tree_kind", code));
     };
     let variant = match u8_at(field::VARIANT) {
         0 => Variant::Full,
