@@ -46,14 +46,15 @@ pub fn octomap_version() -> Option<&'static str> {
     }
 }
 
-/// Environment variable that lets a test run pass on a machine without
-/// OctoMap: set to `1`, the tests skip the comparisons that need it (saying
-/// so); unset, those tests fail, so that no run claims a proof it did not make.
-pub const SKIP_ENV: &str = "OCTOLINEAR_SKIP_ORACLE";
+/// Environment variable that CI services set (`CI=true`). Where it is set
+/// (to anything but empty, `0` or `false`), a test that needs OctoMap fails
+/// when OctoMap is missing instead of skipping, so that no CI run claims a
+/// comparison it did not make.
+pub const CI_ENV: &str = "CI";
 
 /// For tests: `true` if the oracle can be used. Without OctoMap the test
-/// fails, or with `OCTOLINEAR_SKIP_ORACLE=1` reports a skip and gets `false`
-/// (see [`skip_without_octomap`]).
+/// reports a skip and gets `false`, or fails under CI (see
+/// [`skip_without_octomap`]).
 #[track_caller]
 pub fn require_or_skip(test_name: &str) -> bool {
     if available() {
@@ -64,17 +65,19 @@ pub fn require_or_skip(test_name: &str) -> bool {
 }
 
 /// For a test (or part of one) that needs a piece of OctoMap which is
-/// `missing` (the library, or a tool of `octomap-tools`): panics with what is
-/// missing, unless `OCTOLINEAR_SKIP_ORACLE=1` allows the skip. An allowed skip
-/// writes one line, `<test_name>: skipped (...): <missing>`, straight to the
-/// process's stderr, past the test harness's capture, so that a plain
-/// `cargo test` shows every skip among the results.
+/// `missing` (the library, or a tool of `octomap-tools`): reports a skip, or
+/// panics with what is missing where the `CI` environment variable is set.
+///
+/// A skip writes one line, `<test_name>: SKIPPED ...`, straight to the
+/// process's stderr: the test harness captures `println!` and `eprintln!`
+/// of passing tests and would show it only on failure, but not what is
+/// written to the stderr handle itself, so a plain `cargo test` shows
+/// every skip among the results.
 #[track_caller]
 pub fn skip_without_octomap(test_name: &str, missing: &str) {
     use std::io::Write as _;
-    match skip_decision(test_name, missing, std::env::var(SKIP_ENV).ok().as_deref()) {
+    match skip_decision(test_name, missing, std::env::var(CI_ENV).ok().as_deref()) {
         SkipDecision::Skip(line) => {
-            // Not eprintln!: the harness would capture it and show it only on failure.
             let _ = std::io::stderr().write_all(format!("{line}\n").as_bytes());
         }
         SkipDecision::Fail(msg) => panic!("{msg}"),
@@ -87,13 +90,15 @@ enum SkipDecision {
     Fail(String),
 }
 
-fn skip_decision(test_name: &str, missing: &str, skip_env: Option<&str>) -> SkipDecision {
-    if skip_env == Some("1") {
-        SkipDecision::Skip(format!("{test_name}: skipped ({SKIP_ENV}=1): {missing}"))
-    } else {
-        SkipDecision::Fail(format!(
-            "{test_name}: needs OctoMap, but {missing}; set {SKIP_ENV}=1 to skip what needs OctoMap"
-        ))
+/// What a test does when OctoMap is `missing`, given the value of `CI`.
+fn skip_decision(test_name: &str, missing: &str, ci: Option<&str>) -> SkipDecision {
+    match ci.map(str::trim) {
+        Some(ci) if !ci.is_empty() && ci != "0" && !ci.eq_ignore_ascii_case("false") => SkipDecision::Fail(format!(
+            "{test_name}: needs OctoMap, but {missing}; {CI_ENV}={ci} requires every comparison with OctoMap to run"
+        )),
+        _ => SkipDecision::Skip(format!(
+            "{test_name}: SKIPPED, needs OctoMap, but {missing} (with {CI_ENV}=true this fails)"
+        )),
     }
 }
 
@@ -1538,17 +1543,20 @@ mod tests {
     use super::*;
 
     #[test]
-    fn skip_needs_the_environment_variable() {
+    fn a_missing_octomap_is_a_skip_outside_ci_and_a_failure_in_it() {
         let missing = "graph2tree is not installed (apt-get install -y octomap-tools)";
-        assert_eq!(
-            skip_decision("t", missing, Some("1")),
-            SkipDecision::Skip(format!("t: skipped (OCTOLINEAR_SKIP_ORACLE=1): {missing}"))
-        );
-        for env in [None, Some("0"), Some(""), Some("true")] {
+        for ci in [None, Some(""), Some("0"), Some("false"), Some("FALSE"), Some(" ")] {
             assert_eq!(
-                skip_decision("t", missing, env),
+                skip_decision("t", missing, ci),
+                SkipDecision::Skip(format!("t: SKIPPED, needs OctoMap, but {missing} (with CI=true this fails)")),
+                "CI={ci:?}"
+            );
+        }
+        for ci in ["true", "1", "yes", "TRUE"] {
+            assert_eq!(
+                skip_decision("t", missing, Some(ci)),
                 SkipDecision::Fail(format!(
-                    "t: needs OctoMap, but {missing}; set OCTOLINEAR_SKIP_ORACLE=1 to skip what needs OctoMap"
+                    "t: needs OctoMap, but {missing}; CI={ci} requires every comparison with OctoMap to run"
                 ))
             );
         }

@@ -24,8 +24,8 @@ struct Golden {
     manifest: Value,
 }
 
-/// The golden vectors, or `None` when the oracle is unavailable and
-/// `OCTOLINEAR_SKIP_ORACLE=1` lets the test skip.
+/// The golden vectors, or `None` when the oracle is unavailable and the
+/// test skips (see `octolinear_oracle::skip_without_octomap`).
 fn golden(test_name: &str) -> Option<Golden> {
     if !require_or_skip(test_name) {
         return None;
