@@ -25,12 +25,13 @@ struct Golden {
 }
 
 /// The golden vectors, or `None` when the oracle is unavailable and the
-/// test skips (see `octolinear_oracle::skip_without_octomap`).
+/// test skips (see `octolinear_oracle::skip_without_octomap`). Missing
+/// vectors fail the test either way.
 fn golden(test_name: &str) -> Option<Golden> {
+    let dir = golden_dir();
     if !require_or_skip(test_name) {
         return None;
     }
-    let dir = golden_dir();
     let text = std::fs::read_to_string(dir.join("manifest.json")).expect("manifest.json reads");
     Some(Golden { dir, manifest: serde_json::from_str(&text).expect("manifest.json parses") })
 }
