@@ -10,9 +10,10 @@
 //! comment), which the drone flies in straight segments. Without arguments
 //! the map is the bundled `samples/indoor.bt` (a corridor with rooms) and
 //! the path `samples/drone_path.xyz`, whose last segment turns into a wall.
-//! The margin (default 0.3 m) is the drone's radius plus the distance it
-//! must keep. With `--unknown-is-obstacle`, space the map has never
-//! observed counts as an obstacle too, as a cautious planner treats it.
+//! The margin (default 0.3 m, at most 2 m) is the drone's radius plus the
+//! distance it must keep. With `--unknown-is-obstacle`, space the map has
+//! never observed counts as an obstacle too, as a cautious planner treats
+//! it.
 //!
 //! For each segment, the voxels it crosses are taken in order (the map's
 //! `ray_keys`, the voxel walk OctoMap's `computeRayKeys` makes); around each
@@ -48,8 +49,8 @@ fn main() -> Result<(), Error> {
             "--margin" => {
                 let value = args.next().ok_or("--margin needs a value in metres")?;
                 margin = value.parse().map_err(|e| format!("--margin {value}: {e}"))?;
-                if !(0.0..=100.0).contains(&margin) {
-                    return Err(format!("--margin {value}: must lie between 0 and 100 m").into());
+                if !(0.0..=2.0).contains(&margin) {
+                    return Err(format!("--margin {value}: must lie between 0 and 2 m").into());
                 }
             }
             "--unknown-is-obstacle" => unknown_is_obstacle = true,
