@@ -199,11 +199,12 @@ pub fn occupancy_impl<'py, M: queries::Queries>(
     let depth = queries::max_depth(depth)?;
     let pts = PointsArg::extract(points, "points")?;
     let view = pts.view();
-    let result = py.detach(|| queries::on_pool(|| queries::occupancy(map, &view.points(), depth)))?;
+    let result = py.detach(|| queries::on_pool(|| queries::occupancy(map, &view.points(), depth, queries::Keys::Checked)))?;
     Ok(queries::occupancy_arrays(py, result))
 }
 
-/// The shared body of `getLabels`: -1 unknown, 0 free, 1 occupied, int32.
+/// The shared body of `getLabels`: -1 unknown, 0 free, 1 occupied, int32;
+/// keys by `coordToKey` as octomap-python's.
 pub fn labels_impl<'py, M: queries::Queries>(
     py: Python<'py>,
     map: &M,
@@ -211,7 +212,7 @@ pub fn labels_impl<'py, M: queries::Queries>(
 ) -> PyResult<Bound<'py, PyArray1<i32>>> {
     let pts = PointsArg::extract(points, "points")?;
     let view = pts.view();
-    let (state, _) = py.detach(|| queries::on_pool(|| queries::occupancy(map, &view.points(), 0)))?;
+    let (state, _) = py.detach(|| queries::on_pool(|| queries::occupancy(map, &view.points(), 0, queries::Keys::Wrapping)))?;
     Ok(state.into_iter().map(i32::from).collect::<Vec<_>>().into_pyarray(py))
 }
 
@@ -391,23 +392,42 @@ impl OcTree {
     }
 
     /// Occupancy label of each point of an `(N, 3)` array: -1 unknown (no
-    /// node, or outside the map), 0 free, 1 occupied; int32, as
-    /// octomap-python. One call, without the GIL.
+    /// node), 0 free, 1 occupied; int32. As octomap-python's, the key of a
+    /// point outside the map wraps around (OctoMap's unchecked
+    /// `coordToKey`); points with NaN or infinite coordinates (undefined
+    /// there) are -1. One call, without the GIL; `occupancy()` gives -1
+    /// outside the map instead.
     fn getLabels<'py>(&self, py: Python<'py>, points: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<i32>>> {
         labels_impl(py, &self.tree, points)
     }
 
-    /// Centres of the occupied and of the free leaves, `(occupied, empty)`,
-    /// each `(N, 3)` float64 (float32 values), in iteration order. Empty
-    /// results have shape `(0, 3)` (octomap-python's: `(0,)`).
+    /// Centres of the occupied and of the free voxels, `(occupied, empty)`,
+    /// each `(N, 3)` float64, leaf by leaf in iteration order; a leaf
+    /// coarser than the resolution gives every voxel centre inside it (x,
+    /// then y, then z ascending), computed in octomap-python's arithmetic.
     fn extractPointCloud<'py>(&self, py: Python<'py>) -> PyResult<(queries::Points<'py>, queries::Points<'py>)> {
         let tree = &self.tree;
         let (occ, free) = py.detach(|| {
+            // octomap-python holds the resolution in a C float
+            let res = f64::from(tree.resolution() as f32);
             let (mut occ, mut free) = (Vec::new(), Vec::new());
             for n in tree.leaves(0) {
                 let c = n.center_point();
                 let out = if tree.is_occupied(n.value) { &mut occ } else { &mut free };
-                out.extend([f64::from(c.x), f64::from(c.y), f64::from(c.z)]);
+                let dim = (n.size() / res).round_ties_even().max(1.0) as usize;
+                let shift = (dim as f64 / 2.0 - 0.5) * res;
+                let corner = [c.x, c.y, c.z].map(|v| f64::from(v) - shift);
+                for i in 0..dim {
+                    for j in 0..dim {
+                        for k in 0..dim {
+                            out.extend([
+                                corner[0] + i as f64 * res,
+                                corner[1] + j as f64 * res,
+                                corner[2] + k as f64 * res,
+                            ]);
+                        }
+                    }
+                }
             }
             (occ, free)
         });

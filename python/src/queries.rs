@@ -116,10 +116,21 @@ pub const OCCUPIED: i8 = 1;
 /// stay busy, small enough to share the work between threads.
 const CHUNK: usize = 1 << 14;
 
+/// How a point becomes a key in [`occupancy`].
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub enum Keys {
+    /// `coordToKeyChecked`: a point outside the map is unknown.
+    Checked,
+    /// `coordToKey`, as octomap-python's `getLabels` calls it: a finite
+    /// point outside the map wraps around to a key inside; a non-finite
+    /// one is unknown.
+    Wrapping,
+}
+
 /// State ([`UNKNOWN`], [`FREE`], [`OCCUPIED`]) and log-odds (NaN where
 /// unknown) of the node holding each point, searched down to `depth` (0:
 /// the finest).
-pub fn occupancy<M: Queries>(map: &M, points: &[Point3], depth: u8) -> (Vec<i8>, Vec<f32>) {
+pub fn occupancy<M: Queries>(map: &M, points: &[Point3], depth: u8, how: Keys) -> (Vec<i8>, Vec<f32>) {
     let mut state = vec![UNKNOWN; points.len()];
     let mut log_odds = vec![f32::NAN; points.len()];
     let one_chunk = |((pts, st), lo): ((&[Point3], &mut [i8]), &mut [f32])| {
@@ -127,7 +138,11 @@ pub fn occupancy<M: Queries>(map: &M, points: &[Point3], depth: u8) -> (Vec<i8>,
         let mut found_keys = Vec::with_capacity(pts.len());
         let mut at = Vec::with_capacity(pts.len());
         for (i, p) in pts.iter().enumerate() {
-            if let Ok(k) = keys.key(*p) {
+            let key = match how {
+                Keys::Checked => keys.key(*p).ok(),
+                Keys::Wrapping => p.is_finite().then(|| keys.key_unchecked(*p)),
+            };
+            if let Some(k) = key {
                 found_keys.push(k);
                 at.push(i);
             }
