@@ -27,7 +27,9 @@ pub enum PointsArg<'py> {
 pub enum PointsView<'a> {
     /// A C-contiguous `float32` array, seen as points in place.
     Points(&'a [Point3]),
-    /// Any other array: read element by element.
+    /// A C-contiguous `float64` array, `[x0, y0, z0, x1, ...]`.
+    F64Flat(&'a [f64]),
+    /// Any other `float64` array: read element by element.
     F64(numpy::ndarray::ArrayView2<'a, f64>),
     /// A non-contiguous `float32` array.
     F32(numpy::ndarray::ArrayView2<'a, f32>),
@@ -75,7 +77,10 @@ impl<'py> PointsArg<'py> {
     /// The data, for use without the GIL.
     pub fn view(&self) -> PointsView<'_> {
         match self {
-            PointsArg::F64(a) => PointsView::F64(a.as_array()),
+            PointsArg::F64(a) => match a.as_slice() {
+                Ok(flat) => PointsView::F64Flat(flat),
+                Err(_) => PointsView::F64(a.as_array()),
+            },
             PointsArg::F32(a) => match a.as_slice() {
                 Ok(flat) => PointsView::Points(as_points(flat)),
                 Err(_) => PointsView::F32(a.as_array()),
@@ -85,15 +90,35 @@ impl<'py> PointsArg<'py> {
 }
 
 impl PointsView<'_> {
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        match self {
+            PointsView::Points(p) => p.len(),
+            PointsView::F64Flat(f) => f.len() / 3,
+            PointsView::F64(a) => a.nrows(),
+            PointsView::F32(a) => a.nrows(),
+        }
+    }
+
     /// The points as the library takes them, borrowed when they already
     /// are in that form.
     pub fn points(&self) -> Cow<'_, [Point3]> {
+        self.range(0..self.len())
+    }
+
+    /// The points of rows `rows`, borrowed when they already are points.
+    pub fn range(&self, rows: std::ops::Range<usize>) -> Cow<'_, [Point3]> {
+        let narrow = |r: numpy::ndarray::ArrayView1<'_, f64>| Point3::new(r[0] as f32, r[1] as f32, r[2] as f32);
         match self {
-            PointsView::Points(p) => Cow::Borrowed(p),
-            PointsView::F64(a) => {
-                Cow::Owned(a.rows().into_iter().map(|r| Point3::new(r[0] as f32, r[1] as f32, r[2] as f32)).collect())
-            }
-            PointsView::F32(a) => Cow::Owned(a.rows().into_iter().map(|r| Point3::new(r[0], r[1], r[2])).collect()),
+            PointsView::Points(p) => Cow::Borrowed(&p[rows]),
+            PointsView::F64Flat(f) => Cow::Owned(
+                f[3 * rows.start..3 * rows.end]
+                    .chunks_exact(3)
+                    .map(|c| Point3::new(c[0] as f32, c[1] as f32, c[2] as f32))
+                    .collect(),
+            ),
+            PointsView::F64(a) => Cow::Owned(rows.map(|i| narrow(a.row(i))).collect()),
+            PointsView::F32(a) => Cow::Owned(rows.map(|i| Point3::new(a[[i, 0]], a[[i, 1]], a[[i, 2]])).collect()),
         }
     }
 }

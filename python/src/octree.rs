@@ -199,8 +199,7 @@ pub fn occupancy_impl<'py, M: queries::Queries>(
     let depth = queries::max_depth(depth)?;
     let pts = PointsArg::extract(points, "points")?;
     let view = pts.view();
-    let result =
-        py.detach(|| queries::on_pool(|| queries::occupancy(map, &view.points(), depth, queries::Keys::Checked)))?;
+    let result = py.detach(|| queries::on_pool(|| queries::occupancy(map, &view, depth, queries::Keys::Checked)))?;
     Ok(queries::occupancy_arrays(py, result))
 }
 
@@ -213,8 +212,7 @@ pub fn labels_impl<'py, M: queries::Queries>(
 ) -> PyResult<Bound<'py, PyArray1<i32>>> {
     let pts = PointsArg::extract(points, "points")?;
     let view = pts.view();
-    let (state, _) =
-        py.detach(|| queries::on_pool(|| queries::occupancy(map, &view.points(), 0, queries::Keys::Wrapping)))?;
+    let (state, _) = py.detach(|| queries::on_pool(|| queries::occupancy(map, &view, 0, queries::Keys::Wrapping)))?;
     Ok(state.into_iter().map(i32::from).collect::<Vec<_>>().into_pyarray(py))
 }
 

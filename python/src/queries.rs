@@ -2,6 +2,7 @@
 //! occupancy of many points, many rays, leaves as a structured array. They
 //! run without the GIL, on the threads `set_num_threads` chose.
 
+use crate::convert::PointsView;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use octolinear::mapped::MapView;
 use octolinear::{CastError, CastOptions, CastOutcome, Found, Key, KeyBox, KeySpace, NodeItem, OccupancyTree, Point3};
@@ -129,11 +130,14 @@ pub enum Keys {
 
 /// State ([`UNKNOWN`], [`FREE`], [`OCCUPIED`]) and log-odds (NaN where
 /// unknown) of the node holding each point, searched down to `depth` (0:
-/// the finest).
-pub fn occupancy<M: Queries>(map: &M, points: &[Point3], depth: u8, how: Keys) -> (Vec<i8>, Vec<f32>) {
-    let mut state = vec![UNKNOWN; points.len()];
-    let mut log_odds = vec![f32::NAN; points.len()];
-    let one_chunk = |((pts, st), lo): ((&[Point3], &mut [i8]), &mut [f32])| {
+/// the finest). Chunks of points are converted and searched in parallel.
+pub fn occupancy<M: Queries>(map: &M, points: &PointsView<'_>, depth: u8, how: Keys) -> (Vec<i8>, Vec<f32>) {
+    let n = points.len();
+    let mut state = vec![UNKNOWN; n];
+    let mut log_odds = vec![f32::NAN; n];
+    let one_chunk = |(chunk, (st, lo)): (usize, (&mut [i8], &mut [f32]))| {
+        let start = chunk * CHUNK;
+        let pts = points.range(start..start + st.len());
         let keys = map.key_space();
         let mut found_keys = Vec::with_capacity(pts.len());
         let mut at = Vec::with_capacity(pts.len());
@@ -144,26 +148,22 @@ pub fn occupancy<M: Queries>(map: &M, points: &[Point3], depth: u8, how: Keys) -
             };
             if let Some(k) = key {
                 found_keys.push(k);
-                at.push(i);
+                at.push(i as u32);
             }
         }
         let mut out = Vec::with_capacity(found_keys.len());
         map.search_many(&found_keys, depth, &mut out);
         for (i, f) in at.into_iter().zip(out) {
             if let Some(f) = f {
-                st[i] = if map.occupied(f.value) { OCCUPIED } else { FREE };
-                lo[i] = f.value;
+                st[i as usize] = if map.occupied(f.value) { OCCUPIED } else { FREE };
+                lo[i as usize] = f.value;
             }
         }
     };
-    if points.len() <= CHUNK {
-        one_chunk(((points, &mut state), &mut log_odds));
+    if n <= CHUNK {
+        one_chunk((0, (&mut state[..], &mut log_odds[..])));
     } else {
-        points
-            .par_chunks(CHUNK)
-            .zip(state.par_chunks_mut(CHUNK))
-            .zip(log_odds.par_chunks_mut(CHUNK))
-            .for_each(one_chunk);
+        state.par_chunks_mut(CHUNK).zip(log_odds.par_chunks_mut(CHUNK)).enumerate().for_each(one_chunk);
     }
     (state, log_odds)
 }
