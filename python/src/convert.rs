@@ -77,13 +77,14 @@ impl<'py> PointsArg<'py> {
     /// The data, for use without the GIL.
     pub fn view(&self) -> PointsView<'_> {
         match self {
+            // `as_slice` also takes Fortran order, which is not `[x0, y0, z0, ...]`
             PointsArg::F64(a) => match a.as_slice() {
-                Ok(flat) => PointsView::F64Flat(flat),
-                Err(_) => PointsView::F64(a.as_array()),
+                Ok(flat) if a.is_c_contiguous() => PointsView::F64Flat(flat),
+                _ => PointsView::F64(a.as_array()),
             },
             PointsArg::F32(a) => match a.as_slice() {
-                Ok(flat) => PointsView::Points(as_points(flat)),
-                Err(_) => PointsView::F32(a.as_array()),
+                Ok(flat) if a.is_c_contiguous() => PointsView::Points(as_points(flat)),
+                _ => PointsView::F32(a.as_array()),
             },
         }
     }

@@ -47,14 +47,21 @@ def test_lazy_eval_then_update_inner_occupancy(rng):
 def test_float32_and_fortran_order_input_match_float64(rng):
     points, origin = random_scan(rng, 2000)
     theirs, _ = tree_pair(0.1, [(points, origin)])
-    for variant in (points.astype(np.float32), np.asfortranarray(points), points[::1].copy()[:, [0, 1, 2]]):
+    variants = (
+        points.astype(np.float32),
+        np.asfortranarray(points),
+        np.asfortranarray(points.astype(np.float32)),
+        points[:, [0, 1, 2]],
+    )
+    for variant in variants:
         ours = octolinear.OcTree(0.1)
         ours.insertPointCloud(variant, origin.astype(np.float32))
         assert ours.write() == theirs.write()
-    strided = np.repeat(points, 2, axis=0)[::2]
-    ours = octolinear.OcTree(0.1)
-    ours.insertPointCloud(strided, list(origin))
-    assert ours.write() == theirs.write()
+    for strided in (np.repeat(points, 2, axis=0)[::2], np.repeat(points.astype(np.float32), 2, axis=0)[::2]):
+        ours = octolinear.OcTree(0.1)
+        ours.insertPointCloud(strided, list(origin))
+        assert ours.write() == theirs.write()
+        assert np.array_equal(ours.getLabels(strided), theirs.getLabels(points))
 
 
 def test_get_labels_and_search(small_pair, rng):
