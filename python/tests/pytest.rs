@@ -46,6 +46,34 @@ fn venv(python: &Path, dir: &Path) -> PathBuf {
     bin
 }
 
+/// Splits at whitespace outside single or double quotes, as a shell
+/// would for simple arguments (`-k "not wheel"`).
+fn split_args(s: &str) -> Vec<String> {
+    let (mut args, mut cur, mut quote, mut any) = (Vec::new(), String::new(), None, false);
+    for c in s.chars() {
+        match (quote, c) {
+            (None, '"' | '\'') => (quote, any) = (Some(c), true),
+            (Some(q), c) if c == q => quote = None,
+            (None, c) if c.is_whitespace() => {
+                if any {
+                    args.push(std::mem::take(&mut cur));
+                }
+                any = false;
+            }
+            (_, c) => (cur, any) = (cur + &c.to_string(), true),
+        }
+    }
+    if any {
+        args.push(cur);
+    }
+    args
+}
+
+#[test]
+fn arguments_split_like_a_shell() {
+    assert_eq!(split_args(r#" -k "not wheel"  -x '' -q"#), ["-k", "not wheel", "-x", "", "-q"]);
+}
+
 #[test]
 fn pytest_suite_passes() {
     let Some(python) = python3() else {
@@ -77,12 +105,12 @@ fn pytest_suite_passes() {
             .arg(&wheel),
         "install the wheel",
     );
-    let extra = std::env::var("OCTOLINEAR_PYTEST_ARGS").unwrap_or_default();
+    let extra = split_args(&std::env::var("OCTOLINEAR_PYTEST_ARGS").unwrap_or_default());
     run(
         Command::new(bin.join("pytest"))
             .current_dir(crate_dir)
             .args(["-q", "-p", "no:cacheprovider"])
-            .args(extra.split_whitespace())
+            .args(extra)
             .env("OCTOLINEAR_WHEEL", &wheel)
             .env("PYTHONDONTWRITEBYTECODE", "1"),
         "pytest",
