@@ -132,7 +132,8 @@ impl CountingOcTree {
 
     /// The count of the node at a key or point (`None` if there is none).
     #[pyo3(signature = (value, depth=0))]
-    fn search(&self, value: &Bound<'_, PyAny>, depth: u8) -> PyResult<Option<u32>> {
+    fn search(&self, value: &Bound<'_, PyAny>, depth: u32) -> PyResult<Option<u32>> {
+        let depth = crate::queries::max_depth(Some(depth))?;
         Ok(key_or_point(self.tree.key_space(), value)?.and_then(|k| self.tree.count(k, depth)))
     }
 

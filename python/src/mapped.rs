@@ -6,7 +6,6 @@ use crate::octree::{cast_ray_into, cast_rays_impl, labels_impl, occupancy_impl, 
 use crate::queries;
 use numpy::PyArray1;
 use octolinear::mapped::{MapView, MappedMap};
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -46,7 +45,8 @@ impl MappedOcTree {
     /// The node at a key or point, down to `depth` (0: finest); a null
     /// node if there is none.
     #[pyo3(signature = (value, depth=0))]
-    fn search(&self, value: &Bound<'_, PyAny>, depth: u8) -> PyResult<OcTreeNode> {
+    fn search(&self, value: &Bound<'_, PyAny>, depth: u32) -> PyResult<OcTreeNode> {
+        let depth = queries::max_depth(Some(depth))?;
         let view = self.view();
         let key = match value.cast::<OcTreeKey>() {
             Ok(k) => Some(k.borrow().key()),
@@ -150,10 +150,7 @@ impl MappedOcTree {
 
     /// Loads the map into memory as an `OcTree` (verifying it).
     fn to_tree<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let t = py.detach(|| self.map.to_tree()).map_err(|e| match e {
-            octolinear::OlmError::Io(_) => convert::olm_error(&self.path, e),
-            other => PyValueError::new_err(format!("{}: {other}", self.path.display())),
-        })?;
+        let t = py.detach(|| self.map.to_tree()).map_err(|e| convert::olm_error(&self.path, e))?;
         tree_object(py, t)
     }
 
