@@ -179,8 +179,10 @@ pub fn build<'py>(
             "max_range must be a positive finite number of metres, got {r} (None for no limit)"
         )));
     }
-    if threads == Some(0) {
-        return Err(PyValueError::new_err("threads must be at least 1"));
+    match threads {
+        Some(0) => return Err(PyValueError::new_err("threads must be at least 1")),
+        Some(n) => crate::queries::check_threads(n)?,
+        None => {}
     }
     let sensor = sensor_model(sensor, clamping)?;
     let mut tree = OccupancyTree::with_sensor(resolution, sensor).map_err(|e| PyValueError::new_err(e.to_string()))?;

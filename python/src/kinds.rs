@@ -10,7 +10,6 @@ use octolinear::formats::ot;
 use octolinear::{CountingTree, Key, NodeKind};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::PyBytes;
 
 /// The key of a key-or-point argument, `None` outside the map.
 fn key_or_point(keys: &octolinear::KeySpace, value: &Bound<'_, PyAny>) -> PyResult<Option<Key>> {
@@ -158,19 +157,6 @@ impl CountingOcTree {
     /// Writes the `.ot` map to `filename` (returns `True`) or returns its bytes.
     #[pyo3(signature = (filename=None))]
     fn write<'py>(&self, py: Python<'py>, filename: Option<&Bound<'py, PyAny>>) -> PyResult<Bound<'py, PyAny>> {
-        let tree = &self.tree;
-        match filename {
-            None => {
-                let mut out = Vec::new();
-                py.detach(|| ot::write_counting(tree, &mut out))
-                    .map_err(|e| pyo3::exceptions::PyOSError::new_err(e.to_string()))?;
-                Ok(PyBytes::new(py, &out).into_any())
-            }
-            Some(f) => {
-                let path = convert::path(f)?;
-                py.detach(|| ot::write_counting_file(tree, &path)).map_err(|e| convert::io_error(&path, &e))?;
-                Ok(pyo3::types::PyBool::new(py, true).to_owned().into_any())
-            }
-        }
+        crate::octree::write_to(py, filename, &self.tree, |t, w| ot::write_counting(t, w))
     }
 }

@@ -26,11 +26,13 @@ pyo3::create_exception!(
 );
 
 /// Sets the number of threads insertion and the array queries use (`0`:
-/// the default, `RAYON_NUM_THREADS` or one per core). The result of every
-/// call is the same for any thread count.
+/// the default, `RAYON_NUM_THREADS` or one per core; at most 1024). The
+/// result of every call is the same for any thread count.
 #[pyfunction]
-fn set_num_threads(n: usize) {
+fn set_num_threads(n: usize) -> PyResult<()> {
+    queries::check_threads(n)?;
     queries::set_threads(n);
+    Ok(())
 }
 
 /// The number of threads insertion and the array queries use.

@@ -114,11 +114,11 @@ pub fn read_ot(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<ot::AnyTree> 
 
 /// Writes with `write` into a file (atomically) or, without a file name,
 /// into `bytes`; `True` for a file as octomap-python returns.
-fn write_to<'py>(
+pub fn write_to<'py, T: Sync>(
     py: Python<'py>,
     filename: Option<&Bound<'py, PyAny>>,
-    tree: &OccupancyTree,
-    write: fn(&OccupancyTree, &mut dyn std::io::Write) -> std::io::Result<()>,
+    tree: &T,
+    write: fn(&T, &mut dyn std::io::Write) -> std::io::Result<()>,
 ) -> PyResult<Bound<'py, PyAny>> {
     match filename {
         None => {

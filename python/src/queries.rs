@@ -17,6 +17,18 @@ use std::sync::{Arc, Mutex};
 /// (`RAYON_NUM_THREADS`, else one per core).
 static THREADS: AtomicUsize = AtomicUsize::new(0);
 
+/// Most threads a call may ask for: more only share the cores, each with
+/// its stack.
+pub const MAX_THREADS: usize = 1024;
+
+/// Refuses a thread count above [`MAX_THREADS`].
+pub fn check_threads(n: usize) -> PyResult<()> {
+    if n > MAX_THREADS {
+        return Err(PyValueError::new_err(format!("{n} threads: at most {MAX_THREADS}")));
+    }
+    Ok(())
+}
+
 /// Sets the thread count of insertion and array queries (0: the default).
 pub fn set_threads(n: usize) {
     THREADS.store(n, Ordering::Relaxed);

@@ -101,6 +101,10 @@ def test_bad_arguments(tree):
         octolinear.build(SAMPLE_GRAPH, max_range=-2.0)
     with pytest.raises(ValueError, match="MissAboveHalf|miss|0.5"):
         octolinear.build(SAMPLE_GRAPH, sensor=(0.7, 0.9))
+    with pytest.raises(ValueError, match="at most 1024"):
+        octolinear.set_num_threads(5000)
+    with pytest.raises(ValueError, match="at least 1"):
+        octolinear.build(SAMPLE_GRAPH, threads=0)
     tree.setBBXMin(np.array([-1e9, 0, 0]))
     tree.useBBXLimit(True)
     with pytest.raises(ValueError, match="bounding box"):
