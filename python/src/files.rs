@@ -21,12 +21,19 @@ enum MapFormat {
     Olm,
 }
 
+/// The format a map file's extension names, if it names one.
+fn by_extension(path: &Path) -> Option<MapFormat> {
+    match path.extension()?.to_str()?.to_ascii_lowercase().as_str() {
+        "bt" => Some(MapFormat::Bt),
+        "ot" => Some(MapFormat::Ot),
+        "olm" => Some(MapFormat::Olm),
+        _ => None,
+    }
+}
+
 fn map_format(path: &Path) -> PyResult<MapFormat> {
-    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
-        Some("bt") => return Ok(MapFormat::Bt),
-        Some("ot") => return Ok(MapFormat::Ot),
-        Some("olm") => return Ok(MapFormat::Olm),
-        _ => {}
+    if let Some(format) = by_extension(path) {
+        return Ok(format);
     }
     let mut head = [0u8; 32];
     let n = {
@@ -78,17 +85,9 @@ pub fn read<'py>(py: Python<'py>, path: &Bound<'py, PyAny>) -> PyResult<Bound<'p
 /// Writes `tree` to `path` as `.bt` (maximum likelihood), `.ot` or `.olm`
 /// by extension, atomically, without the GIL.
 pub fn save(py: Python<'_>, tree: &OccupancyTree, path: &Path) -> PyResult<()> {
-    let format = match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
-        Some("bt") => MapFormat::Bt,
-        Some("ot") => MapFormat::Ot,
-        Some("olm") => MapFormat::Olm,
-        _ => {
-            return Err(PyValueError::new_err(format!(
-                "{}: give the map file a .bt, .ot or .olm extension",
-                path.display()
-            )))
-        }
-    };
+    let format = by_extension(path).ok_or_else(|| {
+        PyValueError::new_err(format!("{}: give the map file a .bt, .ot or .olm extension", path.display()))
+    })?;
     py.detach(|| match format {
         MapFormat::Bt => bt::write_file(tree, path),
         MapFormat::Ot => ot::write_file(tree, path),

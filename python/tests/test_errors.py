@@ -167,7 +167,7 @@ def corruptions(data, rng):
 def test_corrupt_files_raise_and_never_crash(tree, tmp_path, rng, suffix):
     path = tmp_path / ("good" + suffix)
     if suffix == ".graph":
-        path.write_bytes(SAMPLE_GRAPH.read_bytes()[:200000])
+        path.write_bytes(SAMPLE_GRAPH.read_bytes())
     else:
         tree.save(path)
     data = path.read_bytes()
@@ -183,7 +183,7 @@ def test_corrupt_files_raise_and_never_crash(tree, tmp_path, rng, suffix):
             else:
                 octolinear.read(bad)
         except (ValueError, OSError) as e:
-            assert str(bad) in str(e) or "bad" in str(e), str(e)
+            assert str(bad) in str(e), str(e)
             refused += 1
     assert refused > 20
     with pytest.raises(ValueError, match=r"byte|offset|ends"):
