@@ -226,6 +226,28 @@ def test_insertion_releases_the_gil(rng):
     assert elapsed > 0.02 and during > 1000, (elapsed, during)
 
 
+def test_a_tree_busy_in_another_thread_refuses_calls(rng):
+    points, origin = random_scan(rng, 100000, spread=6.0)
+    tree = octolinear.OcTree(0.1)
+    worker = threading.Thread(target=tree.insertPointCloud, args=(points, origin))
+    worker.start()
+    try:
+        refused = 0
+        while worker.is_alive():
+            try:
+                tree.size()
+            except RuntimeError as e:
+                assert "borrowed" in str(e)
+                refused += 1
+            time.sleep(0.001)
+    finally:
+        worker.join()
+    assert refused > 0
+    reference = octolinear.OcTree(0.1)
+    reference.insertPointCloud(points, origin)
+    assert tree.write() == reference.write()
+
+
 def test_insertion_is_the_same_on_one_and_two_threads(rng):
     scans = [random_scan(rng, 20000) for _ in range(2)]
     outputs = []
