@@ -556,6 +556,37 @@ impl OcTree {
         self.tree.resolution()
     }
 
+    /// Changes the resolution, keeping every node: the map scales (OctoMap's
+    /// `setResolution`). Costs a copy of the tree.
+    fn setResolution(&mut self, py: Python<'_>, r: f64) -> PyResult<()> {
+        OccupancyTree::new(r).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let tree = &self.tree;
+        let rescaled = py.detach(|| -> Result<ot::AnyTree, String> {
+            // the tree as an .ot whose header names the new resolution in full
+            let mut data = Vec::new();
+            ot::write(tree, &mut data).map_err(|e| e.to_string())?;
+            let end = data.windows(6).position(|w| w == b"\ndata\n").ok_or("no data line")?;
+            let header = std::str::from_utf8(&data[..end]).map_err(|e| e.to_string())?;
+            let mut out: Vec<u8> = header
+                .lines()
+                .map(|l| if l.starts_with("res ") { format!("res {r:?}\n") } else { format!("{l}\n") })
+                .collect::<String>()
+                .into_bytes();
+            out.extend_from_slice(&data[end + 1..]);
+            ot::read(&out[..]).map_err(|e| e.to_string())
+        });
+        match rescaled {
+            Ok(ot::AnyTree::Occupancy(t)) => {
+                self.replace(t);
+                Ok(())
+            }
+            Ok(ot::AnyTree::Counting(_)) => Err(pyo3::exceptions::PyRuntimeError::new_err(
+                "setResolution: the rescaled copy is not an occupancy tree",
+            )),
+            Err(e) => Err(pyo3::exceptions::PyRuntimeError::new_err(format!("setResolution: {e}"))),
+        }
+    }
+
     /// Levels below the root: 16.
     fn getTreeDepth(&self) -> u32 {
         16

@@ -302,6 +302,21 @@ def test_write_binary_converts_the_tree_like_octomap(small_pair):
     assert ours.size() == theirs.size()
 
 
+@pytest.mark.parametrize("resolution", [0.2, 0.0537, 1.0 / 3.0])
+def test_set_resolution_scales_the_map(small_pair, rng, resolution):
+    theirs_src, ours_src = small_pair
+    theirs, ours = octomap.OcTree.read(theirs_src.write()), octolinear.OcTree.read(ours_src.write())
+    theirs.setResolution(resolution)
+    ours.setResolution(resolution)
+    assert ours.getResolution() == theirs.getResolution() == resolution
+    queries = rng.uniform(-8, 8, (3000, 3))
+    assert np.array_equal(ours.getLabels(queries), theirs.getLabels(queries))
+    assert np.array_equal(ours.getMetricMax(), theirs.getMetricMax())
+    assert_same_files(theirs, ours)
+    with pytest.raises(ValueError, match="resolution"):
+        ours.setResolution(0.0)
+
+
 def test_root_and_clear(small_pair):
     theirs_src, ours_src = small_pair
     theirs, ours = octomap.OcTree.read(theirs_src.write()), octolinear.OcTree.read(ours_src.write())
