@@ -2,6 +2,9 @@
 open_mapped, read_graph, build, read_points) and threading, checked
 against the drop-in methods, octomap-python and each other."""
 
+import os
+import shutil
+import subprocess
 import threading
 import time
 
@@ -175,6 +178,28 @@ def test_build_options_match_octomap(options, tmp_path):
     built = octolinear.build(SAMPLE_GRAPH, output=out, **options)
     assert built.write() == theirs.write()
     assert out.read_bytes() == theirs.writeBinary()
+
+
+@pytest.mark.parametrize(
+    "flags, options",
+    [
+        ([], dict()),
+        (["-res", "0.2", "-m", "4"], dict(resolution=0.2, max_range=4.0)),
+        (["-discretize", "-n", "3"], dict(discretize=True, scans=3)),
+    ],
+)
+def test_build_writes_what_graph2tree_writes(tmp_path, flags, options):
+    graph2tree = shutil.which("graph2tree")
+    if graph2tree is None:
+        # as the Rust tests: OctoMap's tools are required unless skipping is asked for
+        if os.environ.get("OCTOLINEAR_SKIP_ORACLE") == "1":
+            pytest.skip("graph2tree (octomap-tools) is not installed")
+        pytest.fail("graph2tree (octomap-tools) is not installed; OCTOLINEAR_SKIP_ORACLE=1 skips this test")
+    theirs = tmp_path / "graph2tree.bt"
+    subprocess.run([graph2tree, "-i", str(SAMPLE_GRAPH), "-o", str(theirs)] + flags, check=True, capture_output=True)
+    ours = tmp_path / "ours.bt"
+    octolinear.build(SAMPLE_GRAPH, output=ours, **options)
+    assert ours.read_bytes() == theirs.read_bytes()
 
 
 def test_read_points_reads_every_format(tmp_path, rng):
