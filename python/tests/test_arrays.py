@@ -191,10 +191,10 @@ def test_build_options_match_octomap(options, tmp_path):
 def test_build_writes_what_graph2tree_writes(tmp_path, flags, options):
     graph2tree = shutil.which("graph2tree")
     if graph2tree is None:
-        # as the Rust tests: OctoMap's tools are required unless skipping is asked for
-        if os.environ.get("OCTOLINEAR_SKIP_ORACLE") == "1":
-            pytest.skip("graph2tree (octomap-tools) is not installed")
-        pytest.fail("graph2tree (octomap-tools) is not installed; OCTOLINEAR_SKIP_ORACLE=1 skips this test")
+        # as the Rust tests: skipped where OctoMap's tools are missing, failed under CI
+        if os.environ.get("CI", "").lower() not in ("", "0", "false"):
+            pytest.fail("graph2tree (octomap-tools) is not installed, and CI is set")
+        pytest.skip("graph2tree (octomap-tools) is not installed")
     theirs = tmp_path / "graph2tree.bt"
     subprocess.run([graph2tree, "-i", str(SAMPLE_GRAPH), "-o", str(theirs)] + flags, check=True, capture_output=True)
     ours = tmp_path / "ours.bt"
