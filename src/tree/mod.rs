@@ -27,7 +27,7 @@ mod update;
 
 pub use arena::ArenaUsage;
 pub(crate) use arena::LabelFill;
-pub(crate) use arena::{in_leaf_pool, leaf_index, prefetch_lines, Parts, WHOLE_PREFETCH_BYTES};
+pub(crate) use arena::{leaf_index, prefetch_lines, Parts, WHOLE_PREFETCH_BYTES};
 pub(crate) use arena::{NodeArena, NodeId};
 use batch::Batch;
 pub use counting::CountingTree;
@@ -38,7 +38,7 @@ pub use kind::{NodeKind, TreeKind};
 use level_index::LevelSlot;
 #[cfg(test)]
 pub(crate) use parallel::MIN_CODES as PARALLEL_MIN_CODES;
-pub use preorder::{NodeRef, PreorderBuilder, TooDeep};
+pub use preorder::{ChildGroup, NodeRef, PreorderBuilder, PreorderNode, PreorderVisitor, TooDeep};
 use search::descend_to;
 pub(crate) use search::search_target;
 pub(crate) use search_index::LevelTables;
