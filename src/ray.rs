@@ -10,7 +10,7 @@ use crate::geometry::Point3;
 use crate::key::{Key, KeyError, KeySpace};
 use crate::morton::MortonCode;
 use crate::sensor::SensorModel;
-use crate::tree::{Found, OccupancyTree};
+use crate::tree::{ArenaPath, Found, OccupancyTree, PathSearch};
 use std::hint::select_unpredictable;
 
 #[cfg(target_arch = "x86_64")]
@@ -561,7 +561,7 @@ impl OccupancyTree {
 
     /// Follows a ray until it meets an occupied voxel, as OctoMap's `castRay`.
     pub fn cast_ray(&self, origin: Point3, direction: Point3, opts: CastOptions) -> Result<CastOutcome, CastError> {
-        let mut path = crate::tree::PathSearch::new(self);
+        let mut path = PathSearch::new(ArenaPath::new(self));
         cast_ray_with(self.key_space(), self.sensor(), |c| path.search(c), origin, direction, opts)
     }
 

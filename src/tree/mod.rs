@@ -31,7 +31,7 @@ pub(crate) use arena::{leaf_index, prefetch_lines, Parts, WHOLE_PREFETCH_BYTES};
 pub(crate) use arena::{NodeArena, NodeId};
 use batch::Batch;
 pub use counting::CountingTree;
-pub(crate) use cursor::{LastAnswer, PathSearch};
+pub(crate) use cursor::{ArenaPath, PathNodes, PathSearch};
 pub(crate) use extras::default_extra;
 pub use iter::{KeyBox, NodeItem, NodeIter};
 pub use kind::{NodeKind, TreeKind};
