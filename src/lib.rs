@@ -17,11 +17,14 @@
 //! # Ok(()) }
 //! ```
 
-#![warn(missing_docs)]
+#![deny(missing_docs)]
 
 pub mod collection;
 pub mod formats;
 pub mod geometry;
+#[cfg(feature = "internals")]
+#[doc(hidden)]
+pub mod internals;
 pub mod key;
 mod keyorder;
 pub mod mapped;

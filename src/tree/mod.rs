@@ -188,7 +188,7 @@ pub struct OccupancyTree {
 /// of the slots free.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Compaction {
-    /// After a batch update ([`OccupancyTree::update_batch`], so after each
+    /// After a batch update (`OccupancyTree::update_batch`, so after each
     /// scan of `insert_point_cloud`) that leaves more than an eighth of the
     /// slots free. Each compaction follows at least that many frees, so its
     /// cost is bounded by a few slot moves per update.
