@@ -253,7 +253,7 @@ impl CastOutcome {
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
 pub enum CastError {
     /// The origin has no key (not finite or outside the map).
-    #[error("ray origin: {0}")]
+    #[error("ray origin refused")]
     Origin(#[from] KeyError),
     /// The direction does not move along any axis (the zero vector).
     #[error("ray direction is the zero vector")]

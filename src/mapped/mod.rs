@@ -104,7 +104,7 @@ use std::path::Path;
 #[derive(Debug, thiserror::Error)]
 pub enum OlmError {
     /// Opening, mapping or reading the file failed.
-    #[error("I/O error: {0}")]
+    #[error("I/O error")]
     Io(#[from] io::Error),
     /// The first eight bytes are not [`MAGIC`].
     #[error("not an .olm file (magic bytes differ)")]
