@@ -295,7 +295,7 @@ impl OccupancyTree {
 mod tests {
     use super::*;
     use crate::sensor::SensorModel;
-    use crate::tree::NodeKind;
+    use crate::tree::{Clock, NodeKind};
 
     fn scan() -> Vec<Point3> {
         vec![
@@ -442,7 +442,13 @@ mod tests {
         // colour trees must keep OctoMap's key order: colours blended in
         // after each scan make that order visible in the next one
         for kind in [NodeKind::Plain, NodeKind::Color, NodeKind::Stamped] {
-            let new_tree = || OccupancyTree::with_kind(0.1, SensorModel::default(), kind).unwrap();
+            // a fixed clock: the system's may tick between the two builds,
+            // and stamps decide what prunes
+            let new_tree = || {
+                let mut t = OccupancyTree::with_kind(0.1, SensorModel::default(), kind).unwrap();
+                t.set_clock(Clock::Fixed(7));
+                t
+            };
             let paint = |t: &mut OccupancyTree, scan: usize| {
                 if kind == NodeKind::Color {
                     for (i, p) in scans[scan].0.iter().enumerate() {
