@@ -16,12 +16,20 @@
 //! bt::write(&tree, &mut file)?; // the bytes OctoMap's writeBinary writes
 //! # Ok(()) }
 //! ```
+//!
+//! Errors say what failed and where (file, line, byte offset, value). An
+//! error caused by another one (an I/O error, a key outside the map) gives
+//! it as [`std::error::Error::source`] and does not repeat it in its own
+//! message: print the chain for the whole story (anyhow's `{:#}` does).
 
-#![warn(missing_docs)]
+#![deny(missing_docs)]
 
 pub mod collection;
 pub mod formats;
 pub mod geometry;
+#[cfg(feature = "internals")]
+#[doc(hidden)]
+pub mod internals;
 pub mod key;
 mod keyorder;
 pub mod mapped;

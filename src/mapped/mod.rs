@@ -90,7 +90,9 @@ use crate::geometry::Point3;
 use crate::key::{Key, KeyError, KeySpace, TREE_DEPTH};
 use crate::ray::{CastError, CastOptions, CastOutcome};
 use crate::sensor::SensorModel;
-use crate::tree::{CountingTree, Found, KeyBox, LevelTables, NodeItem, OccupancyTree, PreorderBuilder, Trunks};
+use crate::tree::{
+    CountingTree, Found, KeyBox, LevelTables, NodeItem, OccupancyTree, PathSearch, PreorderBuilder, Trunks,
+};
 use format::Meta;
 use nav::{with_nav, AnyNav, Extras, MlNav, Nav, Node, PtrNav, RankNav};
 use query::RawIter;
@@ -102,7 +104,7 @@ use std::path::Path;
 #[derive(Debug, thiserror::Error)]
 pub enum OlmError {
     /// Opening, mapping or reading the file failed.
-    #[error("I/O error: {0}")]
+    #[error("I/O error")]
     Io(#[from] io::Error),
     /// The first eight bytes are not [`MAGIC`].
     #[error("not an .olm file (magic bytes differ)")]
@@ -540,7 +542,7 @@ impl<'a> MapView<'a> {
     #[cfg(test)]
     pub(crate) fn path_search_all(&self, codes: &[u64]) -> Vec<Option<Found>> {
         with_nav!(self.nav, |nav| {
-            let mut path = query::PathSearch::new(nav);
+            let mut path = PathSearch::new(query::MappedPath(nav));
             codes.iter().map(|&c| path.search(c)).collect()
         })
     }
@@ -553,7 +555,7 @@ impl<'a> MapView<'a> {
         }
         let (keys, sensor) = (&self.meta.keys, &self.meta.header.sensor);
         with_nav!(self.nav, |nav| {
-            let mut path = query::PathSearch::new(nav);
+            let mut path = PathSearch::new(query::MappedPath(nav));
             crate::ray::cast_ray_with(keys, sensor, |c| path.search(c), origin, direction, opts)
         })
     }

@@ -7,7 +7,7 @@
 //! every code: an aligned block of 512 voxels is a range of 512 Morton
 //! codes, so its bits, read in order, are its codes in order.
 
-use super::KeyHasher;
+use super::key_set::KeyHasher;
 use hashbrown::HashMap;
 use std::hash::BuildHasherDefault;
 

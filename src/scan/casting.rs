@@ -297,7 +297,7 @@ pub(super) fn thread_pool(threads: usize) -> Result<std::sync::Arc<rayon::Thread
 
 /// [`crate::OccupancyTree::compute_update`] for a map with key space `keys`: the
 /// update depends on nothing else of the tree.
-pub fn compute_update(
+pub(crate) fn compute_update(
     keys: &KeySpace,
     points: &[Point3],
     origin: Point3,
@@ -415,12 +415,6 @@ impl ScanUpdate {
     pub fn sorted(&self) -> (Vec<Key>, Vec<Key>) {
         let keys = |codes: &[u64]| codes.iter().map(|&c| MortonCode(c).decode()).collect();
         (keys(&self.free), keys(&self.occupied))
-    }
-
-    /// The lists as OctoMap's hash-based key sets.
-    pub fn key_sets(&self) -> (KeySet, KeySet) {
-        let set = |codes: &[u64]| codes.iter().map(|&c| MortonCode(c)).collect();
-        (set(&self.free), set(&self.occupied))
     }
 
     /// Number of voxels to update, free and occupied together.

@@ -118,7 +118,8 @@ impl OccupancyTree {
     /// pruned once, after its whole subtree. This is equivalent because each
     /// voxel appears once, so leaf values do not depend on the order, and a
     /// node's final pruning only depends on its children's final state.
-    pub fn update_batch(&mut self, codes: &[u64], delta: f32, inner: InnerNodes) {
+    #[cfg(any(test, feature = "internals"))]
+    pub(crate) fn update_batch(&mut self, codes: &[u64], delta: f32, inner: InnerNodes) {
         self.update_batch_split(codes, delta, inner, 1, &|| {});
     }
 
@@ -126,7 +127,8 @@ impl OccupancyTree {
     /// current rayon pool, split in `2 * workers` parts, when the batch has
     /// 262,144 codes or more and no changes are being recorded. The tree is
     /// the one [`Self::update_batch`] gives.
-    pub fn update_batch_shared(&mut self, codes: &[u64], delta: f32, inner: InnerNodes, workers: usize) {
+    #[cfg(any(test, feature = "internals"))]
+    pub(crate) fn update_batch_shared(&mut self, codes: &[u64], delta: f32, inner: InnerNodes, workers: usize) {
         self.update_batch_split(codes, delta, inner, workers, &|| {});
     }
 

@@ -17,6 +17,10 @@ pub(crate) struct Parts<'a> {
 }
 
 impl Parts<'_> {
+    /// The arrays of no node.
+    pub const EMPTY: Self =
+        Parts { values: &[], masks: &[], first_child: &[], extras: &[], leaf_values: &[], leaf_extras: &[] };
+
     /// The value of any node.
     #[inline(always)]
     pub fn value(&self, n: NodeId) -> f32 {
