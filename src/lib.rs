@@ -29,6 +29,7 @@ pub mod morton;
 pub mod ray;
 pub mod scan;
 pub mod sensor;
+pub mod tiles;
 pub mod tree;
 
 pub use collection::{MapCollection, MapNode};
