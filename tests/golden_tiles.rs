@@ -87,13 +87,19 @@ fn check_queries(f: &mut Failures, g: &Golden, case: &Value, set: &TileSet, merg
     }
 }
 
+/// A directory for the tile files: in memory where Linux offers it
+/// (thousands of small files per case, and a `syncfs` per tile set).
+fn scratch_dir() -> tempfile::TempDir {
+    tempfile::Builder::new().tempdir_in("/dev/shm").or_else(|_| tempfile::tempdir()).unwrap()
+}
+
 fn run_case(g: &Golden, case: &Value) -> Vec<String> {
     let mut f = Failures::default();
     let id = case["id"].as_str().unwrap();
     let Some(scans) = case_scans(g, case) else {
         return vec![format!("{id}: no plain-text scans")];
     };
-    let dir = tempfile::tempdir().unwrap();
+    let dir = scratch_dir();
     let runs = DEPTHS.map(|d| (d, false)).into_iter().chain(CAPPED_DEPTHS.map(|d| (d, true)));
     for (depth, capped) in runs {
         let spill = capped.then(|| dir.path().join(format!("spill{depth}")));

@@ -146,7 +146,7 @@ impl TiledMap {
         };
         let entry = match saved {
             Some(entry) => *entry,
-            None => write_tile(tree, id, &b.path(id), false)?,
+            None => write_tile(tree, id, &b.path(id))?,
         };
         b.uncount(tile.last_use, prefix, *bytes);
         tile.state = TileState::Spilled(entry);

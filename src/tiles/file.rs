@@ -23,21 +23,14 @@ pub enum TileCheck {
     Full,
 }
 
-/// Writes `tree` (tile `id` alone) as `.olm` to `path` and describes it.
-/// `durable`: through the atomic, synced write path (a tile set's files);
-/// otherwise a temporary file renamed into place without a sync (spilled
-/// tiles of a build, which a crash discards anyway).
-pub(crate) fn write_tile(tree: &OccupancyTree, id: TileId, path: &Path, durable: bool) -> Result<TileEntry, TileError> {
+/// Writes `tree` (tile `id` alone) as `.olm` to `path`, atomically but
+/// without a sync (see [`crate::formats::atomic::sync_filesystem`], which a
+/// tile set's writer calls once before its manifest), and describes it.
+pub(crate) fn write_tile(tree: &OccupancyTree, id: TileId, path: &Path) -> Result<TileEntry, TileError> {
     let bytes = mapped::to_bytes(tree, WriteOptions::default()).map_err(|e| TileError::io(path, e))?;
     let entry = describe(id, &bytes).map_err(|reason| TileError::damaged(id, path, reason))?;
-    if durable {
-        crate::formats::write_atomically(path, |w| w.write_all(&bytes)).map_err(|e| TileError::io(path, e))?;
-    } else {
-        let temp = path.with_extension("olm.tmp");
-        std::fs::write(&temp, &bytes)
-            .and_then(|()| std::fs::rename(&temp, path))
-            .map_err(|e| TileError::io(path, e))?;
-    }
+    crate::formats::atomic::write_atomically_batched(path, |w| w.write_all(&bytes))
+        .map_err(|e| TileError::io(path, e))?;
     Ok(entry)
 }
 

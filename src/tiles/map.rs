@@ -580,9 +580,10 @@ impl TiledMap {
     }
 
     /// Writes the map as a tile set in `dir` (created if needed): each
-    /// tile's file, then the manifest (or, for a task, its part file),
-    /// each atomically. Files of tiles the map does not hold are left
-    /// alone. Returns the manifest written.
+    /// tile's file atomically, then, once the filesystem has them on disk,
+    /// the manifest (or, for a task, its part file), atomically and
+    /// synced. Files of tiles the map does not hold are left alone.
+    /// Returns the manifest written.
     pub fn flush(&mut self, dir: &Path) -> Result<Manifest, TileError> {
         if self.stale {
             return Err(TileError::StaleInnerNodes);
@@ -594,26 +595,20 @@ impl TiledMap {
             let id = TileId::from_prefix(self.depth, prefix);
             let path = dir.join(id.file_name());
             let entry = match &tile.state {
-                TileState::Live { tree, saved: Some(entry), .. } if spill_dir_is_dir => {
-                    debug_assert!(tree.size() as u64 == entry.nodes);
-                    sync(&path)?;
-                    *entry
-                }
-                TileState::Live { tree, .. } => write_tile(tree, id, &path, true)?,
-                TileState::Spilled(entry) if spill_dir_is_dir => {
-                    sync(&path)?;
-                    *entry
-                }
+                TileState::Live { saved: Some(entry), .. } | TileState::Spilled(entry) if spill_dir_is_dir => *entry,
+                TileState::Live { tree, .. } => write_tile(tree, id, &path)?,
                 TileState::Spilled(entry) => {
                     let from = self.budget_ref()?.path(entry.id);
                     let bytes = std::fs::read(&from).map_err(|e| TileError::io(&from, e))?;
-                    crate::formats::write_atomically(&path, |w| std::io::Write::write_all(w, &bytes))
+                    crate::formats::atomic::write_atomically_batched(&path, |w| std::io::Write::write_all(w, &bytes))
                         .map_err(|e| TileError::io(&path, e))?;
                     *entry
                 }
             };
             entries.push(entry);
         }
+        // every tile on disk before the manifest that lists them
+        crate::formats::atomic::sync_filesystem(dir).map_err(|e| TileError::io(dir, e))?;
         let manifest = Manifest {
             resolution: self.keys.resolution(),
             depth: self.depth,
@@ -636,11 +631,6 @@ fn push_tile(builder: &mut PreorderBuilder, tree: &OccupancyTree, id: TileId, ki
     let root = tree.root().ok_or(TileError::Internal("a tile tree without nodes"))?;
     let node = tile_root_node(root, id).map_err(|_| TileError::Internal("a tile tree of the wrong shape"))?;
     push_subtree(builder, node, kind)
-}
-
-/// Syncs a file written earlier to disk.
-fn sync(path: &Path) -> Result<(), TileError> {
-    std::fs::File::open(path).and_then(|f| f.sync_all()).map_err(|e| TileError::io(path, e))
 }
 
 /// A rayon pool of `n` threads.
