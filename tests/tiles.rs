@@ -4,6 +4,9 @@
 //! tile or the manifest line, never a panic (and the manifest's fuzz
 //! target holds on every damaged manifest).
 
+// the fuzz target below tests `cfg(fuzzing)`, which cargo-fuzz sets
+#![allow(unexpected_cfgs)]
+
 use octolinear::formats::ot;
 use octolinear::tiles::{MemoryBudget, TileCheck, TileError, TileSet, TiledMap};
 use octolinear::{CastOptions, Clock, InnerNodes, NodeKind, OccupancyTree, Point3, ScanOptions, SensorModel};
