@@ -2,12 +2,15 @@
 //! parameters must give the same trees, files, statistics and query answers.
 
 mod common;
+#[path = "common/scans.rs"]
+mod scans;
 
 use common::*;
 use octolinear::formats::{bt, ot};
 use octolinear::ray::CastError;
 use octolinear::{CastOptions, InnerNodes, OccupancyTree, Point3, ScanOptions, UpdateBox};
 use rayon::prelude::*;
+use scans::case_scans;
 use serde_json::Value;
 use std::fmt::Write as _;
 

@@ -7,12 +7,15 @@
 //! from it answer as the merged map.
 
 mod common;
+#[path = "common/scans.rs"]
+mod scans;
 
 use common::*;
 use octolinear::formats::{bt, ot};
 use octolinear::tiles::{MemoryBudget, TileSet, TiledMap};
 use octolinear::{CastOptions, InnerNodes, NodeKind, OccupancyTree, Point3, ScanOptions, UpdateBox};
 use rayon::prelude::*;
+use scans::{case_scans, Scan};
 use serde_json::Value;
 
 /// The depths every case is built at.

@@ -2116,10 +2116,13 @@ fn tile_sets_built_in_parts_combine_to_the_plain_build() {
 #[test]
 fn memory_capped_builds_equal_uncapped_builds() {
     let f = Fixture::new();
-    for (flags, name) in [(&["--res", "0.1"][..], "a"), (&["--res", "0.05", "--simple", "--threads", "1"][..], "s")] {
+    let simple = &["--res", "0.05", "--simple", "--threads", "1"][..];
+    let runs =
+        [(&["--res", "0.1"][..], "a", &[("4K", "9"), ("1", "12"), ("64M", "3")][..]), (simple, "s", &[("1", "11")])];
+    for (flags, name, caps) in runs {
         let want_ot = tiled_build_bytes(&f, f.p(&format!("{name}-plain.ot")), flags);
         let want_bt = tiled_build_bytes(&f, f.p(&format!("{name}-plain.bt")), flags);
-        for (cap, depth) in [("4K", "9"), ("1", "12"), ("64M", "3")] {
+        for &(cap, depth) in caps {
             let capped = [flags, &["--memory-cap", cap, "--tile-depth", depth]].concat();
             assert!(tiled_build_bytes(&f, f.p(&format!("{name}{cap}.ot")), &capped) == want_ot, "{name} {cap}");
             assert!(tiled_build_bytes(&f, f.p(&format!("{name}{cap}.bt")), &capped) == want_bt, "{name} {cap}");

@@ -299,8 +299,9 @@ impl TiledMap {
                 self.update_key(k, true, inner)?;
                 report.occupied_updates += 1;
             }
-            self.enforce_budget()?;
         }
+        // once per scan: the rays of a scan cross the same tiles again and again
+        self.enforce_budget()?;
         Ok(report)
     }
 
