@@ -98,7 +98,7 @@ impl TiledMap {
                 if let Some(b) = &mut self.budget {
                     b.uncount(tile.last_use, prefix, bytes);
                 }
-                Ok((tree, saved))
+                Ok((*tree, saved))
             }
             TileState::Spilled(entry) => match self.budget_ref().and_then(|b| b.load(&entry)) {
                 Ok(mut tree) => {
@@ -119,6 +119,7 @@ impl TiledMap {
         if let Some(b) = &mut self.budget {
             b.count_live(self.uses, prefix, bytes);
         }
+        let tree = Box::new(tree);
         self.tiles.insert(prefix, Tile { state: TileState::Live { tree, bytes, saved }, last_use: self.uses });
     }
 

@@ -149,7 +149,7 @@ impl Manifest {
             line: last_line,
             reason: format!("expected `crc32 XXXXXXXX`, found `{}`", clip(crc_text)),
         })?;
-        let computed = crc32fast::hash(text[..body_end].as_bytes());
+        let computed = crc32fast::hash(&text.as_bytes()[..body_end]);
         if stored != computed {
             return Err(ManifestError {
                 line: last_line,

@@ -71,7 +71,7 @@ pub(super) struct Tile {
 pub(super) enum TileState {
     /// In memory; `saved` describes its spilled file when that file holds
     /// this very tree (read back and not changed since).
-    Live { tree: OccupancyTree, bytes: usize, saved: Option<TileEntry> },
+    Live { tree: Box<OccupancyTree>, bytes: usize, saved: Option<TileEntry> },
     /// In the budget's directory only.
     Spilled(TileEntry),
 }
