@@ -37,6 +37,7 @@ pub mod morton;
 pub mod ray;
 pub mod scan;
 pub mod sensor;
+pub mod tiles;
 pub mod tree;
 
 pub use collection::{MapCollection, MapNode};

@@ -15,6 +15,7 @@ mod points;
 mod raycast;
 mod render;
 mod simulate;
+mod tiles;
 
 use clap::{Parser, Subcommand};
 
@@ -44,6 +45,7 @@ enum Command {
     Raycast(raycast::Args),
     Render(render::Args),
     Mesh(mesh::Args),
+    Tiles(tiles::Args),
 }
 
 /// Restores the default SIGPIPE action so that `octolinear ... | head`
@@ -116,6 +118,7 @@ fn run() -> i32 {
         Command::Raycast(a) => raycast::run(a),
         Command::Render(a) => render::run(a),
         Command::Mesh(a) => mesh::run(a),
+        Command::Tiles(a) => tiles::run(a),
     };
     match result {
         Ok(()) => 0,

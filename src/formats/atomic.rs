@@ -57,8 +57,58 @@ use std::path::{Path, PathBuf};
 /// See the [module documentation](self) for permissions, links and
 /// temporary files left by killed processes.
 pub fn write_atomically(path: &Path, write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>) -> io::Result<()> {
+    write_atomically_with(path, true, write)
+}
+
+/// [`write_atomically`] for one of many files written into one directory
+/// together (a tile set's tiles): without the search for stale temporary
+/// files of the name, which lists the directory, and without the sync,
+/// which the writer does once for all of them ([`sync_filesystem`])
+/// before anything refers to them.
+pub(crate) fn write_atomically_batched(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>,
+) -> io::Result<()> {
+    write_atomically_with(path, false, write)
+}
+
+/// Writes to disk everything written so far to the filesystem holding
+/// `dir` (`syncfs`; elsewhere than on Linux, `sync`).
+pub(crate) fn sync_filesystem(dir: &Path) -> io::Result<()> {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        let d = File::open(dir)?;
+        // SAFETY: syncfs on a descriptor this function owns and keeps open
+        // for the call.
+        if unsafe { libc::syncfs(d.as_raw_fd()) } != 0 {
+            return Err(io::Error::last_os_error());
+        }
+        Ok(())
+    }
+    #[cfg(all(unix, not(target_os = "linux")))]
+    {
+        let _ = dir;
+        // SAFETY: sync takes no arguments and cannot fail.
+        unsafe { libc::sync() };
+        Ok(())
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = dir;
+        Ok(())
+    }
+}
+
+/// [`write_atomically`], with (`alone`) or without the search for stale
+/// temporary files and the sync.
+fn write_atomically_with(
+    path: &Path,
+    alone: bool,
+    write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>,
+) -> io::Result<()> {
     let target = final_target(path)?;
-    let written = replace(&target, write);
+    let written = replace(&target, alone, write);
     if target == path {
         written
     } else {
@@ -66,7 +116,7 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&mut BufWriter<&File>) -
     }
 }
 
-fn replace(target: &Path, write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>) -> io::Result<()> {
+fn replace(target: &Path, alone: bool, write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>) -> io::Result<()> {
     let name = target
         .file_name()
         .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, format!("{} names no file", target.display())))?;
@@ -81,12 +131,16 @@ fn replace(target: &Path, write: impl FnOnce(&mut BufWriter<&File>) -> io::Resul
         Err(e) => return Err(e),
     };
     #[cfg(unix)]
-    remove_stale_temps(dir, name);
+    if alone {
+        remove_stale_temps(dir, name);
+    }
     let mut temp = create_temp(dir, name, existing.as_ref())?;
     let mut w = BufWriter::with_capacity(1 << 16, &temp.file);
     write(&mut w)?;
     w.into_inner().map_err(io::IntoInnerError::into_error)?;
-    temp.file.sync_all()?;
+    if alone {
+        temp.file.sync_all()?;
+    }
     fs::rename(&temp.path, target)?;
     temp.renamed = true;
     Ok(())
