@@ -18,7 +18,10 @@
 //! ```
 
 #![warn(missing_docs)]
+#![deny(unsafe_code)]
 
+#[allow(unsafe_code)]
+mod arch;
 pub mod collection;
 pub mod formats;
 pub mod geometry;

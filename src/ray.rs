@@ -13,9 +13,6 @@ use crate::sensor::SensorModel;
 use crate::tree::{Found, OccupancyTree};
 use std::hint::select_unpredictable;
 
-#[cfg(target_arch = "x86_64")]
-pub(crate) mod wide;
-
 /// `origin + direction * (float) range`, in float.
 #[inline(always)]
 pub(crate) fn point_along(origin: Point3, direction: Point3, range: f64) -> Point3 {
@@ -180,7 +177,7 @@ fn walk_codes(
 }
 
 /// The dilated bits of each axis in a Morton code.
-const AXIS_MASKS: [u64; 3] = [0x2492_4924_9249, 0x2492_4924_9249 << 1, 0x2492_4924_9249 << 2];
+pub(crate) const AXIS_MASKS: [u64; 3] = [0x2492_4924_9249, 0x2492_4924_9249 << 1, 0x2492_4924_9249 << 2];
 
 /// Per-axis values in the order of the slots [`StepClock::step`] returns
 /// (z, x, y, and z again): its compare masks' sign bits are the slot, with
@@ -200,14 +197,14 @@ const AXIS_MASK_SLOTS: [u64; 4] = slots(AXIS_MASKS);
 /// registers.
 #[derive(Clone, Copy)]
 pub struct FanRay {
-    code: u64,
-    end_code: u64,
-    length: f64,
+    pub(crate) code: u64,
+    pub(crate) end_code: u64,
+    pub(crate) length: f64,
     // plain doubles: a ray set up out of line is returned through memory,
     // and at this size the copy is a few moves instead of a `memcpy` call
-    t_max: [f64; 3],
-    t_delta: [f64; 3],
-    steps: AxisSteps,
+    pub(crate) t_max: [f64; 3],
+    pub(crate) t_delta: [f64; 3],
+    pub(crate) steps: AxisSteps,
 }
 
 /// What changes along a [`FanRay`].
@@ -224,7 +221,7 @@ pub struct WalkState {
 #[derive(Clone, Copy)]
 pub struct AxisSteps {
     fill: [u64; 4],
-    add: [u64; 4],
+    pub(crate) add: [u64; 4],
 }
 
 impl FanRay {
@@ -285,65 +282,8 @@ impl WalkState {
     }
 }
 
-/// The DDA's three `t_max` and their increments. `step` advances
-/// the smallest (`min_axis`: ties go to the higher axis) and returns its
-/// axis's slot (x 1, y 2, z 0; see `slots`). The choice is made with
-/// compare masks, not branches: the axis changes irregularly along a ray,
-/// and a mispredicted branch would cost more than the whole step.
-/// Adding a masked-out increment adds +0.0, which leaves a `t_max`
-/// unchanged (none is NaN; a -0.0 would become +0.0, which compares the
-/// same).
 #[cfg(target_arch = "x86_64")]
-#[derive(Clone, Copy)]
-pub struct StepClock {
-    t: [std::arch::x86_64::__m128d; 3],
-    dt: [std::arch::x86_64::__m128d; 3],
-}
-
-#[cfg(target_arch = "x86_64")]
-impl StepClock {
-    #[inline(always)]
-    fn new(t: [f64; 3], dt: [f64; 3]) -> Self {
-        use std::arch::x86_64::_mm_set_sd;
-        // SAFETY: SSE2 is part of the x86-64 baseline (these intrinsics
-        // are only `unsafe` for their `target_feature` attribute), and no
-        // memory is accessed.
-        unsafe {
-            StepClock {
-                t: [_mm_set_sd(t[0]), _mm_set_sd(t[1]), _mm_set_sd(t[2])],
-                dt: [_mm_set_sd(dt[0]), _mm_set_sd(dt[1]), _mm_set_sd(dt[2])],
-            }
-        }
-    }
-
-    #[inline(always)]
-    fn step(&mut self) -> usize {
-        use std::arch::x86_64::*;
-        // SAFETY: as in `new`: baseline SSE2, registers only.
-        unsafe {
-            let [t0, t1, t2] = self.t;
-            let lt01 = _mm_cmplt_sd(t0, t1);
-            let s0 = _mm_and_pd(lt01, _mm_cmplt_sd(t0, t2));
-            let s1 = _mm_andnot_pd(lt01, _mm_cmplt_sd(t1, t2));
-            self.t = [
-                _mm_add_sd(t0, _mm_and_pd(s0, self.dt[0])),
-                _mm_add_sd(t1, _mm_and_pd(s1, self.dt[1])),
-                // z steps when neither x nor y does
-                _mm_add_sd(t2, _mm_andnot_pd(_mm_or_pd(s0, s1), self.dt[2])),
-            ];
-            // the sign bits of (s0, s1): the slot
-            _mm_movemask_pd(_mm_unpacklo_pd(s0, s1)) as usize
-        }
-    }
-
-    /// `min(min(t_max[0], t_max[1]), t_max[2])`.
-    #[inline(always)]
-    fn min(&self) -> f64 {
-        use std::arch::x86_64::*;
-        // SAFETY: as in `new`: baseline SSE2, registers only.
-        unsafe { _mm_cvtsd_f64(_mm_min_sd(_mm_min_sd(self.t[0], self.t[1]), self.t[2])) }
-    }
-}
+pub use crate::arch::sse2::StepClock;
 
 /// Portable [`StepClock`]: the same choice on booleans.
 #[cfg(not(target_arch = "x86_64"))]
@@ -384,12 +324,12 @@ impl StepClock {
 /// that each ray of a scan only pays for its own direction.
 #[derive(Clone, Debug)]
 pub struct RayFan {
-    origin: Point3,
+    pub(crate) origin: Point3,
     origin_key: Key,
-    origin_code: u64,
+    pub(crate) origin_code: u64,
     /// Per axis, `border - origin` for a negative (0) and a positive (1) step.
-    to_border: [[f64; 2]; 3],
-    resolution: f64,
+    pub(crate) to_border: [[f64; 2]; 3],
+    pub(crate) resolution: f64,
 }
 
 impl RayFan {
