@@ -23,7 +23,10 @@
 //! message: print the chain for the whole story (anyhow's `{:#}` does).
 
 #![deny(missing_docs)]
+#![deny(unsafe_code)]
 
+#[allow(unsafe_code)]
+mod arch;
 pub mod collection;
 pub mod formats;
 pub mod geometry;

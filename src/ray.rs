@@ -13,8 +13,6 @@ use crate::sensor::SensorModel;
 use crate::tree::{ArenaPath, Found, OccupancyTree, PathSearch};
 
 pub(crate) mod fan;
-#[cfg(target_arch = "x86_64")]
-pub(crate) mod wide;
 
 use fan::{slots, AxisSteps, StepClock, AXIS_MASK_SLOTS};
 pub(crate) use fan::{FanRay, RayFan, AXIS_MASKS};

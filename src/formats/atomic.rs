@@ -24,8 +24,12 @@
 //!   [`remove_temp_files_on_signals`] at start (the `octolinear` tool does),
 //!   or [`remove_temp_files`] from a handler of its own.
 
+// the module's system calls, its only `unsafe`
 #[cfg(unix)]
+#[allow(unsafe_code)]
 mod signals;
+#[cfg(unix)]
+use signals::process_runs;
 #[cfg(unix)]
 pub use signals::{remove_temp_files, remove_temp_files_on_signals};
 
@@ -75,23 +79,9 @@ pub(crate) fn write_atomically_batched(
 /// Writes to disk everything written so far to the filesystem holding
 /// `dir` (`syncfs`; elsewhere than on Linux, `sync`).
 pub(crate) fn sync_filesystem(dir: &Path) -> io::Result<()> {
-    #[cfg(target_os = "linux")]
+    #[cfg(unix)]
     {
-        use std::os::fd::AsRawFd;
-        let d = File::open(dir)?;
-        // SAFETY: syncfs on a descriptor this function owns and keeps open
-        // for the call.
-        if unsafe { libc::syncfs(d.as_raw_fd()) } != 0 {
-            return Err(io::Error::last_os_error());
-        }
-        Ok(())
-    }
-    #[cfg(all(unix, not(target_os = "linux")))]
-    {
-        let _ = dir;
-        // SAFETY: sync takes no arguments and cannot fail.
-        unsafe { libc::sync() };
-        Ok(())
+        signals::sync_filesystem(dir)
     }
     #[cfg(not(unix))]
     {
@@ -279,16 +269,6 @@ fn temp_pid(name: &OsStr, file: &OsStr) -> Option<libc::pid_t> {
     (pid > 0).then_some(pid)
 }
 
-/// Whether process `pid` exists (also one of another user, which the
-/// probe may not signal).
-#[cfg(unix)]
-fn process_runs(pid: libc::pid_t) -> bool {
-    // SAFETY: signal 0 only checks that the process exists; `pid` is
-    // positive, so it names one process, never a process group.
-    let probed = unsafe { libc::kill(pid, 0) };
-    probed == 0 || io::Error::last_os_error().raw_os_error() != Some(libc::ESRCH)
-}
-
 #[cfg(all(test, unix))]
 mod tests {
     use super::*;
@@ -383,17 +363,16 @@ mod tests {
             assert_eq!(fs::read_to_string(&out).unwrap(), "new");
             fs::remove_file(&out).unwrap();
         }
-        // root gives the new file the old one's owner and group
-        // SAFETY: geteuid has no preconditions.
-        if unsafe { libc::geteuid() } == 0 {
+        // a process that may give files away (root) gives the new file the
+        // old one's owner and group
+        write_text(&out, "old").unwrap();
+        if std::os::unix::fs::chown(&out, Some(12345), Some(23456)).is_ok() {
             use std::os::unix::fs::MetadataExt;
-            write_text(&out, "old").unwrap();
-            std::os::unix::fs::chown(&out, Some(12345), Some(23456)).unwrap();
             write_text(&out, "new").unwrap();
             let m = fs::metadata(&out).unwrap();
             assert_eq!((m.uid(), m.gid()), (12345, 23456));
-            fs::remove_file(&out).unwrap();
         }
+        fs::remove_file(&out).unwrap();
         let created = dir.path().join("created.txt");
         File::create(&created).unwrap();
         write_text(&out, "new").unwrap();

@@ -70,6 +70,8 @@
 //! the reader, which then answers as from a damaged file (above).
 
 pub mod format;
+#[allow(unsafe_code)]
+mod mapping;
 mod nav;
 mod query;
 mod search_blocks;
@@ -269,7 +271,7 @@ impl MappedMap<memmap2::Mmap> {
     /// see the module docs for what an unverified map can answer, and
     /// [`Self::verify`].
     ///
-    /// This is the only `unsafe` in the module. Assumption: the file is
+    /// The mapping is the only `unsafe` in the module. Assumption: the file is
     /// not truncated or modified in place while mapped. Writers in this
     /// crate never modify a file in place (they write a temporary file and
     /// rename it over the old one, so a mapping keeps the old contents).
@@ -280,11 +282,7 @@ impl MappedMap<memmap2::Mmap> {
     /// answers.
     pub fn open(path: &Path) -> Result<Self, OlmError> {
         let file = std::fs::File::open(path)?;
-        // SAFETY: memmap2 requires that the mapped file is not modified or
-        // truncated for the lifetime of the map; see the assumption above.
-        // The map is read-only and only ever read through `&[u8]`.
-        let map = unsafe { memmap2::Mmap::map(&file)? };
-        Self::new(map)
+        Self::new(mapping::map_read_only(&file)?)
     }
 }
 

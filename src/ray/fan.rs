@@ -15,12 +15,12 @@ pub(crate) const AXIS_MASKS: [u64; 3] = [0x2492_4924_9249, 0x2492_4924_9249 << 1
 /// Per-axis values in the order of the slots [`StepClock::step`] returns
 /// (z, x, y, and z again): its compare masks' sign bits are the slot, with
 /// no instruction to turn them into an axis.
-pub(super) const fn slots(per_axis: [u64; 3]) -> [u64; 4] {
+pub(crate) const fn slots(per_axis: [u64; 3]) -> [u64; 4] {
     [per_axis[2], per_axis[0], per_axis[1], per_axis[2]]
 }
 
 /// [`AXIS_MASKS`] by slot.
-pub(super) const AXIS_MASK_SLOTS: [u64; 4] = slots(AXIS_MASKS);
+pub(crate) const AXIS_MASK_SLOTS: [u64; 4] = slots(AXIS_MASKS);
 
 /// One ray of `computeRayKeys` walked step by step on Morton codes (see
 /// `walk_codes`), from [`RayFan::ray`]: lets a caller interleave rays,
@@ -30,36 +30,36 @@ pub(super) const AXIS_MASK_SLOTS: [u64; 4] = slots(AXIS_MASKS);
 /// registers.
 #[derive(Clone, Copy)]
 pub struct FanRay {
-    pub(super) code: u64,
-    pub(super) end_code: u64,
-    pub(super) length: f64,
+    pub(crate) code: u64,
+    pub(crate) end_code: u64,
+    pub(crate) length: f64,
     // plain doubles: a ray set up out of line is returned through memory,
     // and at this size the copy is a few moves instead of a `memcpy` call
-    pub(super) t_max: [f64; 3],
-    pub(super) t_delta: [f64; 3],
-    pub(super) steps: AxisSteps,
+    pub(crate) t_max: [f64; 3],
+    pub(crate) t_delta: [f64; 3],
+    pub(crate) steps: AxisSteps,
 }
 
 /// What changes along a [`FanRay`].
 #[derive(Clone, Copy)]
 pub struct WalkState {
-    pub(super) code: u64,
-    pub(super) end_code: u64,
-    pub(super) length: f64,
-    pub(super) clock: StepClock,
+    pub(crate) code: u64,
+    pub(crate) end_code: u64,
+    pub(crate) length: f64,
+    pub(crate) clock: StepClock,
 }
 
 /// Per axis (by `StepClock::step`'s slot), what a step adds to a Morton
 /// code: `((code & mask | fill) + add) & mask` are the axis's new bits.
 #[derive(Clone, Copy)]
 pub struct AxisSteps {
-    pub(super) fill: [u64; 4],
-    pub(super) add: [u64; 4],
+    pub(crate) fill: [u64; 4],
+    pub(crate) add: [u64; 4],
 }
 
 impl FanRay {
     #[inline(always)]
-    pub(super) fn new(
+    pub(crate) fn new(
         start: u64,
         step: [i32; 3],
         t_max: [f64; 3],
@@ -86,7 +86,7 @@ impl FanRay {
 impl AxisSteps {
     /// The constants for a ray stepping by `step` (-1, 0 or +1) per axis.
     #[inline(always)]
-    pub(super) fn new(step: [i32; 3]) -> Self {
+    pub(crate) fn new(step: [i32; 3]) -> Self {
         let mut fill = [0u64; 3];
         let mut add = [0u64; 3];
         for i in 0..3 {
@@ -99,7 +99,7 @@ impl AxisSteps {
 
     /// `code` moved one voxel along the axis of `slot`.
     #[inline(always)]
-    pub(super) fn apply(&self, code: u64, slot: usize) -> u64 {
+    pub(crate) fn apply(&self, code: u64, slot: usize) -> u64 {
         let slot = slot & 3;
         let m = AXIS_MASK_SLOTS[slot];
         ((((code & m) | self.fill[slot]).wrapping_add(self.add[slot])) & m) | (code & !m)
@@ -122,65 +122,8 @@ impl WalkState {
     }
 }
 
-/// The DDA's three `t_max` and their increments. `step` advances
-/// the smallest (`min_axis`: ties go to the higher axis) and returns its
-/// axis's slot (x 1, y 2, z 0; see `slots`). The choice is made with
-/// compare masks, not branches: the axis changes irregularly along a ray,
-/// and a mispredicted branch would cost more than the whole step.
-/// Adding a masked-out increment adds +0.0, which leaves a `t_max`
-/// unchanged (none is NaN; a -0.0 would become +0.0, which compares the
-/// same).
 #[cfg(target_arch = "x86_64")]
-#[derive(Clone, Copy)]
-pub struct StepClock {
-    t: [std::arch::x86_64::__m128d; 3],
-    dt: [std::arch::x86_64::__m128d; 3],
-}
-
-#[cfg(target_arch = "x86_64")]
-impl StepClock {
-    #[inline(always)]
-    pub(super) fn new(t: [f64; 3], dt: [f64; 3]) -> Self {
-        use std::arch::x86_64::_mm_set_sd;
-        // SAFETY: SSE2 is part of the x86-64 baseline (these intrinsics
-        // are only `unsafe` for their `target_feature` attribute), and no
-        // memory is accessed.
-        unsafe {
-            StepClock {
-                t: [_mm_set_sd(t[0]), _mm_set_sd(t[1]), _mm_set_sd(t[2])],
-                dt: [_mm_set_sd(dt[0]), _mm_set_sd(dt[1]), _mm_set_sd(dt[2])],
-            }
-        }
-    }
-
-    #[inline(always)]
-    pub(super) fn step(&mut self) -> usize {
-        use std::arch::x86_64::*;
-        // SAFETY: as in `new`: baseline SSE2, registers only.
-        unsafe {
-            let [t0, t1, t2] = self.t;
-            let lt01 = _mm_cmplt_sd(t0, t1);
-            let s0 = _mm_and_pd(lt01, _mm_cmplt_sd(t0, t2));
-            let s1 = _mm_andnot_pd(lt01, _mm_cmplt_sd(t1, t2));
-            self.t = [
-                _mm_add_sd(t0, _mm_and_pd(s0, self.dt[0])),
-                _mm_add_sd(t1, _mm_and_pd(s1, self.dt[1])),
-                // z steps when neither x nor y does
-                _mm_add_sd(t2, _mm_andnot_pd(_mm_or_pd(s0, s1), self.dt[2])),
-            ];
-            // the sign bits of (s0, s1): the slot
-            _mm_movemask_pd(_mm_unpacklo_pd(s0, s1)) as usize
-        }
-    }
-
-    /// `min(min(t_max[0], t_max[1]), t_max[2])`.
-    #[inline(always)]
-    pub(super) fn min(&self) -> f64 {
-        use std::arch::x86_64::*;
-        // SAFETY: as in `new`: baseline SSE2, registers only.
-        unsafe { _mm_cvtsd_f64(_mm_min_sd(_mm_min_sd(self.t[0], self.t[1]), self.t[2])) }
-    }
-}
+pub use crate::arch::sse2::StepClock;
 
 /// Portable [`StepClock`]: the same choice on booleans.
 #[cfg(not(target_arch = "x86_64"))]
@@ -193,12 +136,12 @@ pub struct StepClock {
 #[cfg(not(target_arch = "x86_64"))]
 impl StepClock {
     #[inline(always)]
-    pub(super) fn new(t: [f64; 3], dt: [f64; 3]) -> Self {
+    pub(crate) fn new(t: [f64; 3], dt: [f64; 3]) -> Self {
         StepClock { t, dt }
     }
 
     #[inline(always)]
-    pub(super) fn step(&mut self) -> usize {
+    pub(crate) fn step(&mut self) -> usize {
         let [t0, t1, t2] = self.t;
         let lt01 = t0 < t1;
         let s0 = lt01 & (t0 < t2);
@@ -211,7 +154,7 @@ impl StepClock {
     }
 
     #[inline(always)]
-    pub(super) fn min(&self) -> f64 {
+    pub(crate) fn min(&self) -> f64 {
         min(min(self.t[0], self.t[1]), self.t[2])
     }
 }
@@ -221,11 +164,11 @@ impl StepClock {
 /// that each ray of a scan only pays for its own direction.
 #[derive(Clone, Debug)]
 pub struct RayFan {
-    pub(super) origin: Point3,
-    pub(super) origin_code: u64,
+    pub(crate) origin: Point3,
+    pub(crate) origin_code: u64,
     /// Per axis, `border - origin` for a negative (0) and a positive (1) step.
-    pub(super) to_border: [[f64; 2]; 3],
-    pub(super) resolution: f64,
+    pub(crate) to_border: [[f64; 2]; 3],
+    pub(crate) resolution: f64,
 }
 
 impl RayFan {

@@ -87,6 +87,7 @@ impl BlockSet {
                 base = words.as_mut_ptr();
                 first
             };
+            debug_assert!(first + WORDS <= words.len() && base.cast_const() == words.as_ptr());
             // SAFETY: `first` is where a block's WORDS words start in
             // `words` (from the table, whose initial entries match no block,
             // or from `add_block`, which keeps the two in step), the offset

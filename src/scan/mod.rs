@@ -31,6 +31,8 @@ use crate::tree::{InnerNodes, OccupancyTree};
 use pipeline::{Job, Pipeline, StdMonitor};
 use std::sync::Mutex;
 
+// its insertion loop writes through a raw pointer
+#[allow(unsafe_code)]
 mod block_set;
 mod casting;
 pub(crate) mod key_set;

@@ -24,6 +24,8 @@
 //! add a `u32` *extra* per node in each pool; plain trees leave those arrays
 //! empty and pay nothing for them.
 
+#[allow(unsafe_code)]
+mod atomic_view;
 mod fill;
 mod free;
 mod parts;
