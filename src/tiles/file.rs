@@ -36,7 +36,7 @@ pub(crate) fn write_tile(tree: &OccupancyTree, id: TileId, path: &Path) -> Resul
 
 /// The manifest entry of tile `id` whose file holds `bytes` (header and
 /// structure checks only; the caller trusts or verified the nodes).
-pub(crate) fn describe(id: TileId, bytes: &[u8]) -> Result<TileEntry, String> {
+fn describe(id: TileId, bytes: &[u8]) -> Result<TileEntry, String> {
     let map = MappedMap::new(bytes).map_err(|e| e.to_string())?;
     let root = root_in_view(map.view(), id)?;
     Ok(TileEntry { id, nodes: map.header().node_count, bytes: bytes.len() as u64, crc32: crc32fast::hash(bytes), root })

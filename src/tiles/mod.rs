@@ -21,13 +21,16 @@
 //! when its eight children are leaves of one value (and one stamp): on the
 //! way back up from every update that changed something below it
 //! (`updateNodeRecurs`), and only then. So its upper levels are always
-//! what [`top`](self) derives from the tile roots. The one place where
+//! what `top.rs` derives from the tile roots. The one place where
 //! the single tree's upper levels act on a tile is expansion: an update
 //! reaching a pruned node above `D` expands it, and the children get the
 //! parent's value and stamp — which is what each tile root held when the
 //! parent was pruned (pruning needs them all equal), and still holds,
 //! since nothing below a pruned node changed since. A saturated update on
-//! the pruned node leaves it, and equally the tile root, alone.
+//! the pruned node leaves it, and equally the tile root, alone. Deferred
+//! (lazy) updates of plain trees prune nothing, so no tile root becomes a
+//! leaf through them, and `updateInnerOccupancy` afterwards sets every
+//! inner node to the maximum of its children: the derived levels again.
 //!
 //! Where this fails, tiles refuse: colour trees (colours blended in hash
 //! order across the scan, and re-expanded nodes take the average colour,
