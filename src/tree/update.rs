@@ -127,7 +127,6 @@ impl OccupancyTree {
     /// current rayon pool, split in `2 * workers` parts, when the batch has
     /// 262,144 codes or more and no changes are being recorded. The tree is
     /// the one [`Self::update_batch`] gives.
-    #[cfg(any(test, feature = "internals"))]
     pub(crate) fn update_batch_shared(&mut self, codes: &[u64], delta: f32, inner: InnerNodes, workers: usize) {
         self.update_batch_split(codes, delta, inner, workers, &|| {});
     }
