@@ -221,7 +221,7 @@ impl<'a> MlView<'a> {
         let a = self.arena;
         let mask = a.mask(n);
         let first = a.first_child[n as usize];
-        let group = first..first + mask.count_ones();
+        let group = first..first + crate::arch::count_ones(mask);
         // ask for the child groups of the inner children now, all at once,
         // rather than one after the other as the recursion reaches them
         if !in_leaf_pool(first) {
@@ -309,7 +309,7 @@ pub(crate) fn write_data(tree: &OccupancyTree, mut w: impl Write) -> io::Result<
 fn write_const_node(a: Parts<'_>, sensor: &SensorModel, n: NodeId, out: &mut Vec<u8>) {
     let mask = a.mask(n);
     let first = a.first_child[n as usize];
-    let group = first..first + mask.count_ones();
+    let group = first..first + crate::arch::count_ones(mask);
     let inner_group = !in_leaf_pool(first);
     // ask for the inner children's groups before the recursion needs them
     if inner_group {

@@ -271,7 +271,7 @@ impl<const P: usize, F: Fn(f32, u32) -> [u8; P], W: Write> NodeStream<'_, F, W> 
             return Ok(());
         }
         let first = a.first_child[n as usize];
-        let k = mask.count_ones() as usize;
+        let k = crate::arch::count_ones(mask) as usize;
         if in_leaf_pool(first) {
             // the voxels of a depth-15 node: leaves, values side by side
             let i = leaf_index(first);

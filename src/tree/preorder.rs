@@ -53,7 +53,7 @@ impl<'a> NodeRef<'a> {
     /// Number of existing children.
     #[inline]
     pub fn child_count(&self) -> u32 {
-        self.arena.mask(self.id).count_ones()
+        crate::arch::count_ones(self.arena.mask(self.id))
     }
 
     /// The `rank`-th existing child (0-based, in child order).
