@@ -463,7 +463,13 @@ mod tests {
         // colour trees must keep OctoMap's key order: colours blended in
         // after each scan make that order visible in the next one
         for kind in [NodeKind::Plain, NodeKind::Color, NodeKind::Stamped] {
-            let new_tree = || OccupancyTree::with_kind(0.1, SensorModel::default(), kind).unwrap();
+            // stamps from a fixed clock: the system's seconds may tick between
+            // the builds compared
+            let new_tree = || {
+                let mut t = OccupancyTree::with_kind(0.1, SensorModel::default(), kind).unwrap();
+                t.set_clock(crate::Clock::Fixed(1_700_000_000));
+                t
+            };
             let paint = |t: &mut OccupancyTree, scan: usize| {
                 if kind == NodeKind::Color {
                     for (i, p) in scans[scan].0.iter().enumerate() {
