@@ -568,9 +568,10 @@ fn walk(lanes: &mut Lanes, rays: &LaneRays, origin_code: u64, drain: bool, mut v
     // (`#[inline(never)]` did not keep it out)
     let fill_fn: Fill = std::hint::black_box(fill);
     loop {
-        // SAFETY: the processor has AVX-512F (this function runs only
-        // where its target feature is); `rays` is padded (asserted above),
-        // `next` starts at 0 and `fill` keeps it within `rays.len`
+        // SAFETY: the processor has AVX-512F and POPCNT (this function
+        // runs only where its target features are); `rays` is padded
+        // (asserted above), `next` starts at 0 and `fill` keeps it within
+        // `rays.len`
         let (filled, done) = unsafe { fill_fn(lanes, rays, &mut next, origin_code, drain, &mut buffer) };
         visit(&buffer[..filled]);
         if done {
@@ -588,8 +589,8 @@ type Fill = unsafe fn(&mut Lanes, &LaneRays, &mut usize, u64, bool, &mut [u64; B
 /// is lost, and the lanes' registers would be kept in memory all along.
 ///
 /// # Safety
-/// The processor must support AVX-512F, `rays` must be padded and `*next
-/// <= rays.len`.
+/// The processor must support AVX-512F and POPCNT, `rays` must be padded
+/// and `*next <= rays.len`.
 #[target_feature(enable = "avx512f,popcnt")]
 unsafe fn fill(
     lanes: &mut Lanes,
