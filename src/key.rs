@@ -170,12 +170,12 @@ impl KeySpace {
     #[inline(always)]
     pub fn coord_to_key(&self, coord: f64) -> Result<u16, KeyError> {
         // OctoMap's `(int) floor(x) + 32768` in range exactly when `floor(x)`
-        // is in [-32768, 32768) (NaN is not); `floor` is one `roundsd` on
-        // the crate's x86-64-v2 target
-        let floored = (self.resolution_factor * coord).floor();
+        // is in [-32768, 32768), that is when `x` is (integer bounds; NaN
+        // is not)
+        let scaled = self.resolution_factor * coord;
         let center = f64::from(KEY_CENTER);
-        if (-center..center).contains(&floored) {
-            Ok((floored as i32 + KEY_CENTER as i32) as u16)
+        if (-center..center).contains(&scaled) {
+            Ok((floor_to_int(scaled) + KEY_CENTER as i32) as u16)
         } else if !coord.is_finite() {
             Err(KeyError::NotFinite { value: coord })
         } else {
@@ -194,8 +194,8 @@ impl KeySpace {
     /// `coordToKeyChecked(point3d)`: the key of the voxel containing `p`.
     #[inline(always)]
     pub fn key(&self, p: Point3) -> Result<Key, KeyError> {
-        #[cfg(all(target_arch = "x86_64", target_feature = "sse4.1"))]
-        if let Some((k, _)) = crate::arch::sse41::key_and_octant(self.resolution_factor, p) {
+        #[cfg(target_arch = "x86_64")]
+        if let Some((k, _)) = crate::arch::key_and_octant(self.resolution_factor, p) {
             return Ok(k);
         }
         self.key_per_axis(p)
@@ -207,8 +207,8 @@ impl KeySpace {
     /// on their way out of the vector unit.
     #[inline(always)]
     pub fn key_and_octant(&self, p: Point3) -> Result<(Key, usize), KeyError> {
-        #[cfg(all(target_arch = "x86_64", target_feature = "sse4.1"))]
-        if let Some(k) = crate::arch::sse41::key_and_octant(self.resolution_factor, p) {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(k) = crate::arch::key_and_octant(self.resolution_factor, p) {
             return Ok(k);
         }
         let key = self.key_per_axis(p)?;
@@ -404,6 +404,36 @@ mod tests {
         assert_eq!(ks.coord_to_key(-3276.8), Ok(0));
         assert_eq!(ks.coord_to_key(0.0), Ok(32768));
         assert_eq!(ks.coord_to_key(-0.0), Ok(32768));
+    }
+
+    /// `coord_to_key` is OctoMap's `floor(resolution_factor * x) + 32768`,
+    /// in range exactly when that floor is in [-32768, 32768): at integer
+    /// products and one ulp either side, near zero and the map edges, and
+    /// for random coordinates.
+    #[test]
+    fn checked_keys_are_the_floor_of_the_product() {
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        for res in [0.01, 0.05, 0.1, 0.3, 1.0] {
+            let ks = KeySpace::new(res);
+            let mut coords: Vec<f64> = vec![0.0, -0.0, 1e-300, -1e-300, f64::from(f32::from_bits(1)), -1e-45];
+            for n in [0.0, 1.0, -1.0, 7.0, -7.0, 32767.0, -32768.0, 32768.0, -32769.0] {
+                let c = n * res;
+                coords.extend([c, c.next_up(), c.next_down()]);
+                let f = f64::from(c as f32);
+                coords.extend([f, f64::from((c as f32).next_up()), f64::from((c as f32).next_down())]);
+            }
+            for _ in 0..20_000 {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                coords.push(f64::from(f32::from_bits(s as u32)) % (ks.node_size(0) * 0.6));
+            }
+            for c in coords {
+                let floored = (ks.resolution_factor * c).floor();
+                let want = (-32768.0..32768.0).contains(&floored).then(|| (floored as i32 + 32768) as u16);
+                assert_eq!(ks.coord_to_key(c).ok(), want, "{c:e} at {res}");
+            }
+        }
     }
 
     /// The two-lane conversion gives the per-axis keys and errors for

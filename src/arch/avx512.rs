@@ -1,6 +1,6 @@
-//! AVX-512F (with BMI2), detected at run time: a scan's rays set up eight
-//! at a time and walked sixteen at a time, one per lane of AVX-512
-//! registers (two groups of eight lanes).
+//! AVX-512F (with BMI2 and POPCNT), detected at run time: a scan's rays
+//! set up eight at a time and walked sixteen at a time, one per lane of
+//! AVX-512 registers (two groups of eight lanes).
 //!
 //! A ray's steps form one chain of dependent operations (compare the three
 //! `t_max`, add the chosen increment, move the Morton code), so a scalar
@@ -16,7 +16,9 @@
 //!
 //! The functions with `#[target_feature(enable = "avx512f")]` call each
 //! other safely; the way in from other code is [`Avx512::cast_fan`], whose
-//! token proves the processor has the instructions.
+//! token proves the processor has the instructions. Those that call the
+//! set insertions (inlined into them) add BMI2, for its one-instruction
+//! variable shift `shlx`, and those that count lanes add POPCNT.
 
 use crate::geometry::Point3;
 use crate::key::KeySpace;
@@ -29,17 +31,17 @@ const LANES: usize = 8;
 /// Codes gathered before they are handed on.
 const BUFFER: usize = 512;
 
-/// Proof that the processor has AVX-512F and BMI2 (every AVX-512 processor
-/// has BMI2; the callers' set insertions, compiled into the walk, use its
-/// one-instruction variable shift `shlx`): only [`Avx512::detect`] makes
-/// one.
+/// Proof that the processor has AVX-512F, BMI2 and POPCNT (every AVX-512
+/// processor has the other two): only [`Avx512::detect`] makes one.
 #[derive(Clone, Copy)]
 pub(crate) struct Avx512(());
 
 impl Avx512 {
-    /// `Some` on a processor with AVX-512F and BMI2.
+    /// `Some` on a processor with AVX-512F, BMI2 and POPCNT.
     pub(crate) fn detect() -> Option<Self> {
-        let has = std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("bmi2");
+        let has = std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("bmi2")
+            && std::arch::is_x86_feature_detected!("popcnt");
         has.then_some(Avx512(()))
     }
 
@@ -62,14 +64,14 @@ impl Avx512 {
         occupied: impl FnMut(u64),
         free: impl FnMut(&[u64]),
     ) -> bool {
-        // SAFETY: an `Avx512` exists only on a processor with AVX-512F and
-        // BMI2.
+        // SAFETY: an `Avx512` exists only on a processor with AVX-512F,
+        // BMI2 and POPCNT.
         unsafe { cast_fan_lanes(fan, keys, points, max_range, occupied, free) }
     }
 }
 
 /// [`Avx512::cast_fan`].
-#[target_feature(enable = "avx512f,bmi2")]
+#[target_feature(enable = "avx512f,bmi2,popcnt")]
 fn cast_fan_lanes(
     fan: &RayFan,
     keys: &KeySpace,
@@ -195,7 +197,7 @@ fn sub(ray: &FanRay, axis: usize) -> u64 {
 /// at a time, with the scalar code's operations in the same precision and
 /// order (every one correctly rounded), so the rays are the same to the
 /// bit; the last `points.len() % 8` by the scalar code.
-#[target_feature(enable = "avx512f,bmi2")]
+#[target_feature(enable = "avx512f,bmi2,popcnt")]
 fn set_up(
     rays: &mut LaneRays,
     fan: &RayFan,
@@ -557,7 +559,7 @@ unsafe fn append(buffer: &mut [u64; BUFFER + LANES], filled: usize, code: __m512
 /// Returns once every ray of `rays` has entered a lane; with `drain`, once
 /// every lane's ray has ended. Rays still in the lanes stay in `lanes` for
 /// the next call.
-#[target_feature(enable = "avx512f,bmi2")]
+#[target_feature(enable = "avx512f,bmi2,popcnt")]
 fn walk(lanes: &mut Lanes, rays: &LaneRays, origin_code: u64, drain: bool, mut visit: impl FnMut(&[u64])) {
     assert!(rays.padded, "LaneRays::pad before walk");
     let mut buffer = [0u64; BUFFER + LANES];
@@ -566,9 +568,10 @@ fn walk(lanes: &mut Lanes, rays: &LaneRays, origin_code: u64, drain: bool, mut v
     // (`#[inline(never)]` did not keep it out)
     let fill_fn: Fill = std::hint::black_box(fill);
     loop {
-        // SAFETY: the processor has AVX-512F (this function runs only
-        // where its target feature is); `rays` is padded (asserted above),
-        // `next` starts at 0 and `fill` keeps it within `rays.len`
+        // SAFETY: the processor has AVX-512F and POPCNT (this function
+        // runs only where its target features are); `rays` is padded
+        // (asserted above), `next` starts at 0 and `fill` keeps it within
+        // `rays.len`
         let (filled, done) = unsafe { fill_fn(lanes, rays, &mut next, origin_code, drain, &mut buffer) };
         visit(&buffer[..filled]);
         if done {
@@ -586,9 +589,9 @@ type Fill = unsafe fn(&mut Lanes, &LaneRays, &mut usize, u64, bool, &mut [u64; B
 /// is lost, and the lanes' registers would be kept in memory all along.
 ///
 /// # Safety
-/// The processor must support AVX-512F, `rays` must be padded and `*next
-/// <= rays.len`.
-#[target_feature(enable = "avx512f")]
+/// The processor must support AVX-512F and POPCNT, `rays` must be padded
+/// and `*next <= rays.len`.
+#[target_feature(enable = "avx512f,popcnt")]
 unsafe fn fill(
     lanes: &mut Lanes,
     rays: &LaneRays,
@@ -748,7 +751,7 @@ mod tests {
                 let (want, want_occupied) = scalar_set_up(&fan, &keys, &pts, max_range);
                 let mut got = LaneRays::default();
                 let mut got_occupied = Vec::new();
-                // SAFETY: AVX-512F and BMI2 are available (checked above)
+                // SAFETY: AVX-512F, BMI2 and POPCNT are available (checked above)
                 unsafe { set_up(&mut got, &fan, &keys, &pts, max_range, |c| got_occupied.push(c)) };
                 assert_eq!(got_occupied, want_occupied, "res {res}");
                 let n = want.len();
@@ -793,7 +796,7 @@ mod tests {
             let mut rays = LaneRays::default();
             for &p in &pts {
                 rays.clear();
-                // SAFETY: AVX-512F and BMI2 are available (checked above)
+                // SAFETY: AVX-512F, BMI2 and POPCNT are available (checked above)
                 unsafe { set_up(&mut rays, &fan, &keys, &[p], -1.0, |_| {}) };
                 rays.pad();
                 let mut got = Vec::new();
@@ -807,7 +810,7 @@ mod tests {
             let chunks: Vec<&[Point3]> = pts.chunks(97).collect();
             for (i, chunk) in chunks.iter().enumerate() {
                 rays.clear();
-                // SAFETY: AVX-512F and BMI2 are available (checked above)
+                // SAFETY: AVX-512F, BMI2 and POPCNT are available (checked above)
                 unsafe { set_up(&mut rays, &fan, &keys, chunk, -1.0, |_| {}) };
                 rays.pad();
                 let last = i + 1 == chunks.len();

@@ -1,22 +1,16 @@
-//! SSE4.1, when the build enables it (`-C target-cpu=x86-64-v2` or
+//! SSE4.1, used when the build enables it (`-C target-cpu=x86-64-v2` or
 //! later): `roundpd`, a `floor` in one instruction.
 
 use crate::geometry::Point3;
 use crate::key::{Key, KEY_CENTER};
 use std::arch::x86_64::*;
 
-/// `KeySpace::key` for points inside the map, two axes per instruction:
-/// the same double products, `floor`s and range tests as
-/// `KeySpace::coord_to_key`, in half the instructions of three scalar
-/// passes (a point query's conversion is on its critical path).
-/// `None` when an axis is out of range or not finite. With the octant
-/// of `KeySpace::key_and_octant`: a key's top bit is set exactly when the
-/// product is at least zero (-0.0 included).
-#[inline(always)]
+/// [`super::sse2::key_and_octant`] with `roundpd` as the `floor`, the
+/// range tests on the floors.
+#[target_feature(enable = "sse4.1")]
+#[inline]
 pub(crate) fn key_and_octant(resolution_factor: f64, p: Point3) -> Option<(Key, usize)> {
-    // SAFETY: SSE2 and SSE4.1 are enabled for this build (this module's
-    // `cfg`); the intrinsics touch registers only.
-    let (ok, octant, xy, z) = unsafe {
+    let (ok, octant, xy, z) = {
         let factor = _mm_set1_pd(resolution_factor);
         let xy = _mm_mul_pd(factor, _mm_cvtps_pd(_mm_set_ps(0.0, 0.0, p.y, p.x)));
         // z in lane 0 alone (lane 1 converts 0.0, which is in range): a

@@ -655,7 +655,7 @@ impl<'a> MapSearchIndex<'a> {
                 // known only when all the children lie in the file
                 let first = nav
                     .first_child_index(node, mask)
-                    .filter(|&f| u64::from(f) + u64::from(mask.count_ones()) <= view.node_count())
+                    .filter(|&f| u64::from(f) + u64::from(crate::arch::count_ones(mask)) <= view.node_count())
                     .unwrap_or(0);
                 IndexEntry { node, mask, first }
             };
@@ -690,7 +690,7 @@ impl<'a> MapSearchIndex<'a> {
             Some((e, d)) if e.first != 0 && d < depth => {
                 let pos = (code >> (3 * (TREE_DEPTH - 1 - d))) & 7;
                 if e.mask & (1 << pos) != 0 {
-                    let c = e.first + (e.mask & nav::below(pos as usize)).count_ones();
+                    let c = e.first + crate::arch::count_ones(e.mask & nav::below(pos as usize));
                     (Some((Node { idx: c, label: 0 }, d + 1)), depth)
                 } else if e.mask == 0 {
                     (Some((e.node, d)), d)

@@ -107,7 +107,7 @@ impl BlockSet {
     pub fn sorted_codes(&self, except: Option<&BlockSet>) -> Vec<u64> {
         let mut blocks: Vec<(u64, u32)> = self.index.iter().map(|(&b, &first)| (b, first)).collect();
         blocks.sort_unstable_by_key(|&(b, _)| b);
-        let count = self.words.iter().map(|w| w.count_ones() as usize).sum();
+        let count = self.words.iter().map(|&w| crate::arch::count_ones(w) as usize).sum();
         let mut out = Vec::with_capacity(count);
         for (block, first) in blocks {
             let words = &self.words[first as usize..][..WORDS];

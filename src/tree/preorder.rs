@@ -72,7 +72,7 @@ impl<'a> NodeRef<'a> {
     /// Number of existing children.
     #[inline]
     pub fn child_count(&self) -> u32 {
-        self.arena.mask(self.id).count_ones()
+        crate::arch::count_ones(self.arena.mask(self.id))
     }
 
     /// The `rank`-th existing child (0-based, in child order).
@@ -202,7 +202,7 @@ fn visit_subtree<V: PreorderVisitor>(
     visitor: &mut V,
 ) -> ControlFlow<V::Break> {
     let first = p.first_child[n as usize];
-    let k = node.child_mask.count_ones() as usize;
+    let k = crate::arch::count_ones(node.child_mask) as usize;
     let depth = node.depth + 1;
     if in_leaf_pool(first) {
         // the voxels of a depth-15 node: leaves, values side by side

@@ -47,7 +47,7 @@ impl OccupancyTree {
     pub fn calc_num_nodes(&self) -> usize {
         fn count(a: &NodeArena, n: NodeId) -> usize {
             let first = a.first_child(n);
-            1 + (0..a.mask(n).count_ones()).map(|i| count(a, first + i)).sum::<usize>()
+            1 + (0..crate::arch::count_ones(a.mask(n))).map(|i| count(a, first + i)).sum::<usize>()
         }
         self.arena.as_ref().map_or(0, |a| count(a, ROOT))
     }
@@ -123,5 +123,5 @@ fn count_leaves(a: &NodeArena, n: NodeId) -> usize {
         return 1;
     }
     let first = a.first_child(n);
-    (0..a.mask(n).count_ones()).map(|i| count_leaves(a, first + i)).sum()
+    (0..crate::arch::count_ones(a.mask(n))).map(|i| count_leaves(a, first + i)).sum()
 }

@@ -186,7 +186,7 @@ impl OccupancyTree {
                 return;
             }
             let first = a.first_child(n);
-            for i in 0..a.mask(n).count_ones() {
+            for i in 0..crate::arch::count_ones(a.mask(n)) {
                 recurse(a, first + i, rules);
             }
             update_from_children(a, n, rules);

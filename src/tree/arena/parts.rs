@@ -57,7 +57,7 @@ impl Parts<'_> {
         if m & (1 << pos) == 0 {
             Err(m)
         } else {
-            Ok(self.first_child[n as usize] + (u32::from(m) & ((1 << pos) - 1)).count_ones())
+            Ok(self.first_child[n as usize] + crate::arch::count_ones(u32::from(m) & ((1 << pos) - 1)))
         }
     }
 
