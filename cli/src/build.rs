@@ -9,7 +9,7 @@ use octolinear::formats::{bt, ot, write_atomically};
 use octolinear::geometry::graph2tree_transform;
 use octolinear::scan::OutOfMap;
 use octolinear::sensor::{SensorModel, SensorProbabilities};
-use octolinear::tiles::{MemoryBudget, TaskPart, TiledMap};
+use octolinear::tiles::{Beyond, MemoryBudget, TaskPart, TiledMap, Window};
 use octolinear::{
     BoundsRule, InnerNodes, KeySpace, NodeKind, OccupancyTree, Point3, PointCloud, Pose6D, ScanOptions, ScanReport,
 };
@@ -127,7 +127,8 @@ pub struct Args {
     #[arg(long)]
     json: bool,
     /// Depth of the tiles' roots (1 to 15; a tile is res * 2^(16-D) metres
-    /// a side) for a tile set output or a --memory-cap build [default: 8].
+    /// a side) for a tile set output, a --memory-cap or a --forget-beyond
+    /// build [default: 8].
     #[arg(long, value_name = "D")]
     tile_depth: Option<u8>,
     /// Build only the tiles of task K of N (0 <= K < N) into a NAME.tiles
@@ -138,6 +139,12 @@ pub struct Args {
     /// are powers of 1024); the others wait on disk. The output is the same.
     #[arg(long, value_name = "SIZE")]
     memory_cap: Option<String>,
+    /// After each scan, forget the tiles lying wholly farther than METRES
+    /// from its origin (a map that moves with the robot). A departure from
+    /// OctoMap: the output is no longer OctoMap's map of the input, whose
+    /// far tiles become unknown space. Builds tiled (see --tile-depth).
+    #[arg(long, value_name = "METRES")]
+    forget_beyond: Option<f64>,
 }
 
 /// Tile depth of tiled builds without --tile-depth: tiles of 25.6 m at
@@ -149,11 +156,12 @@ struct Tiling {
     depth: u8,
     task: Option<TaskPart>,
     memory_cap: Option<usize>,
+    window: Option<Window>,
 }
 
 /// The tiling the flags ask for; `None` for a plain build.
 fn tiling(a: &Args, tile_output: bool) -> Result<Option<Tiling>> {
-    if !tile_output && a.tile_depth.is_none() && a.memory_cap.is_none() {
+    if !tile_output && a.tile_depth.is_none() && a.memory_cap.is_none() && a.forget_beyond.is_none() {
         if a.task.is_some() {
             bail!("--task builds part of a tile set: the output must be NAME.tiles");
         }
@@ -174,7 +182,14 @@ fn tiling(a: &Args, tile_output: bool) -> Result<Option<Tiling>> {
         bail!("--task builds part of a tile set: the output must be NAME.tiles");
     }
     let memory_cap = a.memory_cap.as_deref().map(tiles::size_arg).transpose()?;
-    Ok(Some(Tiling { depth, task, memory_cap }))
+    let window = match a.forget_beyond {
+        Some(r) if !(r.is_finite() && r >= 0.0) => {
+            bail!("--forget-beyond: expected a distance >= 0 in metres, got {r}")
+        }
+        Some(radius) => Some(Window { radius, beyond: Beyond::Drop }),
+        None => None,
+    };
+    Ok(Some(Tiling { depth, task, memory_cap, window }))
 }
 
 /// A temporary directory for the tiles a capped build writes out, removed
@@ -564,6 +579,7 @@ pub fn run(a: Args) -> Result<()> {
                 };
                 map.set_budget(MemoryBudget { bytes, dir })?;
             }
+            map.set_window(t.window)?;
             Some(map)
         }
         None => None,

@@ -2193,3 +2193,26 @@ fn tile_flags_that_cannot_apply_are_refused() {
     fail(&["tiles", "manifest", f.p("none.tiles")], "none.tiles");
     fail_usage(&["tiles", "merge", f.p("x.tiles")], "unrecognized subcommand");
 }
+
+#[test]
+fn forget_beyond_drops_far_tiles_and_a_wide_window_drops_nothing() {
+    let f = Fixture::new();
+    let plain = tiled_build_bytes(&f, f.p("plain.ot"), &["--res", "0.1"]);
+    // wider than the scene: the map is the plain one
+    let wide =
+        tiled_build_bytes(&f, f.p("wide.ot"), &["--res", "0.1", "--tile-depth", "11", "--forget-beyond", "1000"]);
+    assert!(wide == plain, "a window wider than the scene changed the map");
+    let narrow =
+        tiled_build_bytes(&f, f.p("narrow.ot"), &["--res", "0.1", "--tile-depth", "11", "--forget-beyond", "2"]);
+    assert!(narrow.len() < plain.len(), "{} bytes against {}", narrow.len(), plain.len());
+    // the same through a tile set and a memory cap
+    let set = f.p("narrow.tiles");
+    ok(&["build", f.p("s.graph"), "-o", set, "--res", "0.1", "--tile-depth", "11", "--forget-beyond", "2"]);
+    assert!(converted(&f, set, "narrow-set.ot") == narrow);
+    let capped = ["--res", "0.1", "--tile-depth", "11", "--forget-beyond", "2", "--memory-cap", "1"];
+    assert!(tiled_build_bytes(&f, f.p("narrow-capped.ot"), &capped) == narrow);
+    for bad in ["-1", "nan", "inf"] {
+        fail(&["build", f.p("s.graph"), "-o", f.p("x.ot"), "--forget-beyond", bad], "--forget-beyond");
+    }
+    assert!(!f.path("x.ot").exists());
+}

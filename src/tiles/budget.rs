@@ -50,7 +50,7 @@ impl Budget {
     }
 
     /// Stops counting a tile leaving memory.
-    fn uncount(&mut self, last_use: u64, prefix: u64, bytes: usize) {
+    pub(super) fn uncount(&mut self, last_use: u64, prefix: u64, bytes: usize) {
         self.live_bytes -= bytes;
         self.lru.remove(&(last_use, prefix));
     }
@@ -138,7 +138,7 @@ impl TiledMap {
 
     /// Writes tile `prefix`'s tree to the budget's directory (unless its
     /// file already holds it) and drops it from memory.
-    fn spill(&mut self, prefix: u64) -> Result<(), TileError> {
+    pub(super) fn spill(&mut self, prefix: u64) -> Result<(), TileError> {
         let id = TileId::from_prefix(self.depth, prefix);
         let b = self.budget.as_mut().ok_or(TileError::Internal("spilling without a budget"))?;
         let tile = self.tiles.get_mut(&prefix).ok_or(TileError::Internal("spilling a tile the map lacks"))?;

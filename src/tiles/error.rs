@@ -15,6 +15,9 @@ pub enum TileError {
     /// The tile depth is outside 1..=15.
     #[error("tile depth {0} is outside 1..=15")]
     BadDepth(u8),
+    /// A window's radius is not a finite number of metres ≥ 0.
+    #[error("window radius {0} m: expected a finite number >= 0")]
+    BadWindow(f64),
     /// The resolution is not a positive finite number.
     #[error(transparent)]
     Tree(#[from] TreeError),

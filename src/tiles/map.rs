@@ -4,6 +4,7 @@
 use super::budget::{Budget, MemoryBudget};
 use super::error::TileError;
 use super::file::write_tile;
+use super::forget::Window;
 use super::id::{code_shift, TileId, MAX_TILE_DEPTH};
 use super::manifest::{Manifest, TaskPart, TileEntry, MANIFEST_FILE};
 use super::top::{push_subtree, root_of, tile_root_node, Top, TopAnswer};
@@ -45,7 +46,7 @@ pub struct TiledMap {
     pub(super) sensor: SensorModel,
     pub(super) kind: NodeKind,
     pub(super) depth: u8,
-    clock: Clock,
+    pub(super) clock: Clock,
     /// By Morton prefix, so in tile order.
     pub(super) tiles: BTreeMap<u64, Tile>,
     /// The derived levels, built at the first query after a change.
@@ -57,6 +58,8 @@ pub struct TiledMap {
     pub(super) budget: Option<Budget>,
     /// Counts the groups of tiles updated, for the least recently used.
     pub(super) uses: u64,
+    /// What is forgotten after each scan (`forget.rs`).
+    pub(super) window: Option<Window>,
 }
 
 /// One tile's tree, in memory or spilled to the budget's directory.
@@ -123,6 +126,7 @@ impl TiledMap {
             task: None,
             budget: None,
             uses: 0,
+            window: None,
         })
     }
 
@@ -212,11 +216,13 @@ impl TiledMap {
     ) -> Result<ScanReport, TileError> {
         self.check_inner(opts.inner)?;
         let (update, report) = compute_update(&self.keys, points, origin, opts)?;
-        match opts.threads {
+        let report = match opts.threads {
             Some(1) => self.apply_update_on(&update, report, opts.inner, 1),
             None => self.apply_update_on(&update, report, opts.inner, rayon::current_num_threads()),
             Some(n) => pool(n)?.install(|| self.apply_update_on(&update, report, opts.inner, n)),
-        }
+        }?;
+        self.apply_window(origin)?;
+        Ok(report)
     }
 
     /// Integrates scans in order, as [`Self::insert_point_cloud`] on each,
@@ -249,19 +255,22 @@ impl TiledMap {
             let cast = |(points, origin): (P, Point3)| compute_update(&keys, points.as_ref(), origin, &cast_opts);
             let workers = rayon::current_num_threads();
             let Some((mut i, first)) = scans.next() else { return Ok(()) };
+            let mut origin = first.1;
             let mut current = cast(first);
             loop {
                 let next = scans.next();
                 let (applied, cast_next) = rayon::join(
                     || -> Result<ScanReport, TileError> {
                         let (update, report) = current?;
-                        map.apply_update_on(&update, report, opts.inner, workers)
+                        let report = map.apply_update_on(&update, report, opts.inner, workers)?;
+                        map.apply_window(origin)?;
+                        Ok(report)
                     },
-                    || next.map(|(j, scan)| (j, cast(scan))),
+                    || next.map(|(j, scan)| (j, scan.1, cast(scan))),
                 );
                 after_each(map, applied.map_err(|e| (i, e))?);
                 match cast_next {
-                    Some((j, c)) => (i, current) = (j, c),
+                    Some((j, o, c)) => (i, origin, current) = (j, o, c),
                     None => return Ok(()),
                 }
             }
@@ -302,6 +311,7 @@ impl TiledMap {
         }
         // once per scan: the rays of a scan cross the same tiles again and again
         self.enforce_budget()?;
+        self.apply_window(origin)?;
         Ok(report)
     }
 
@@ -345,7 +355,7 @@ impl TiledMap {
     }
 
     /// Forgets what a change makes stale.
-    fn changed(&mut self, inner: InnerNodes) {
+    pub(super) fn changed(&mut self, inner: InnerNodes) {
         self.top = OnceLock::new();
         self.stale |= inner == InnerNodes::Defer;
     }

@@ -47,6 +47,8 @@
 //! * `map`: [`TiledMap`], updates, queries, merge and [`TiledMap::flush`];
 //! * `budget`: [`MemoryBudget`], tiles spilled to disk and read back;
 //! * `file`: a tile's `.olm` file, written, described and checked;
+//! * `forget`: opt-in forgetting (a rolling [`Window`] of tiles, old voxels of
+//!   stamped maps), departures from OctoMap;
 //! * `manifest`: the tile set's manifest ([`Manifest`]), `formats/tiles.md`;
 //! * `set`: [`TileSet`], a tile set on disk, mapped tile by tile;
 //! * `query`: ray casting across tiles;
@@ -55,6 +57,7 @@
 mod budget;
 mod error;
 mod file;
+mod forget;
 mod id;
 mod manifest;
 mod map;
@@ -65,6 +68,7 @@ mod top;
 pub use budget::MemoryBudget;
 pub use error::TileError;
 pub use file::TileCheck;
+pub use forget::{Beyond, Window};
 pub use id::{TileId, MAX_TILE_DEPTH};
 pub use manifest::{task_of, Manifest, ManifestError, TaskPart, TileEntry, MAGIC, MANIFEST_FILE, VERSION};
 pub use map::{TiledMap, TiledStats};
