@@ -488,15 +488,22 @@ impl<'a> MapView<'a> {
     }
 
     /// [`Self::search`] for many keys at once, answers in `out` in the order
-    /// of `keys` (as [`OccupancyTree::search_many`]). It reads the node
-    /// arrays only: on a damaged file with a search-blocks section that was
-    /// not verified, its full-depth answers may differ from `search`'s.
+    /// of `keys` (as [`OccupancyTree::search_many`]: maps under 2^19 nodes
+    /// one key after another, larger ones in lockstep lanes). The lanes
+    /// read the node arrays only: on a damaged file with a search-blocks
+    /// section that was not verified, their full-depth answers may differ
+    /// from `search`'s.
     pub fn search_many(&self, keys: &[Key], depth: u8, out: &mut Vec<Option<Found>>) {
         let Some(trunks) = self.trunks() else {
             out.clear();
             out.resize(keys.len(), None);
             return;
         };
+        if self.node_count() < crate::tree::LOCKSTEP_MIN_NODES as u64 {
+            out.clear();
+            out.extend(keys.iter().map(|&k| self.search(k, depth)));
+            return;
+        }
         with_nav!(self.nav, |nav| query::search_many(nav, self.extras, trunks, keys, depth, out))
     }
 

@@ -670,6 +670,12 @@ mod tests {
         let mut many = Vec::new();
         tree.search_many(&keys, 0, &mut many);
         assert_eq!(many, want);
+        // above the voxels, the lanes walk the arena in lockstep
+        for depth in [15, 13, 9, 1] {
+            let want: Vec<_> = keys.iter().map(|&k| tree.search_arena(k, depth)).collect();
+            tree.search_many(&keys, depth, &mut many);
+            assert_eq!(many, want, "depth {depth}");
+        }
         let index = crate::SearchIndex::new(&tree);
         assert!(keys.iter().zip(&want).all(|(&k, w)| index.search(k, 0) == *w));
         assert!(want.iter().any(Option::is_none) && want.iter().any(Option::is_some));

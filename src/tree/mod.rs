@@ -19,6 +19,7 @@ mod parallel;
 mod preorder;
 mod rules;
 mod search;
+pub(crate) use search::LOCKSTEP_MIN_NODES;
 mod search_index;
 mod stats;
 mod structure;

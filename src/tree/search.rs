@@ -7,6 +7,11 @@ use crate::geometry::Point3;
 use crate::key::{adjust_key_to_depth, Key, KeyError, TREE_DEPTH};
 use crate::morton::MortonCode;
 
+/// Node count from which [`OccupancyTree::search_many`] (and the mapped
+/// view's) walks keys in lockstep lanes: smaller trees stay in the caches,
+/// where one search after another is faster (`occupancy_probe`).
+pub(crate) const LOCKSTEP_MIN_NODES: usize = level_index::LEVEL_INDEX_MIN_NODES;
+
 impl OccupancyTree {
     /// OctoMap's `search(key, depth)`: the node at `depth` (0 means 16)
     /// containing `key`, or the deepest existing leaf above it. `None`
@@ -123,10 +128,13 @@ impl OccupancyTree {
     }
 
     /// [`Self::search`] for many keys at once, answers in `out` (cleared
-    /// first) in the order of `keys`. Eight descents advance in lockstep, so
-    /// the cache misses of one overlap those of the others: for random
-    /// queries this is several times the throughput of one `search` after
-    /// another.
+    /// first) in the order of `keys`. On trees large enough to miss the
+    /// caches, eight descents advance in lockstep, so the cache misses of
+    /// one overlap those of the others. Smaller trees are searched one key
+    /// after another: their levels stay cached, and the processor overlaps
+    /// consecutive searches by itself with fewer instructions than the
+    /// lanes' bookkeeping (`occupancy_probe`: 21 against 33 ns a query on a
+    /// map of 97k nodes).
     pub fn search_many(&self, keys: &[Key], depth: u8, out: &mut Vec<Option<Found>>) {
         const LANES: usize = 8;
         out.clear();
@@ -134,6 +142,10 @@ impl OccupancyTree {
             out.resize(keys.len(), None);
             return;
         };
+        if self.size < LOCKSTEP_MIN_NODES {
+            out.extend(keys.iter().map(|&k| self.search(k, depth)));
+            return;
+        }
         let depth = if depth == 0 || depth > TREE_DEPTH { TREE_DEPTH } else { depth };
         let p = a.parts();
         if let Some(index) = self.levels.get(a, self.size).filter(|_| depth == TREE_DEPTH) {
