@@ -65,6 +65,17 @@ pub fn build(scans: &[Scan], res: f64, threads: Option<usize>) -> OccupancyTree 
     tree
 }
 
+/// [`build`], and the voxel updates it applied (free and occupied, summed
+/// over the scans).
+pub fn build_counting(scans: &[Scan], res: f64, threads: Option<usize>) -> (OccupancyTree, usize) {
+    let mut tree = OccupancyTree::new(res).expect("resolution");
+    let opts = scan_options(threads);
+    let scans = scans.iter().map(|(points, origin)| (points.as_slice(), *origin));
+    let mut updates = 0;
+    tree.insert_point_clouds(scans, &opts, |_, r| updates += r.free_updates + r.occupied_updates).expect("insert");
+    (tree, updates)
+}
+
 /// xorshift64*: a small deterministic generator for query inputs.
 pub struct Rng(pub u64);
 
