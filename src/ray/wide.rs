@@ -8,10 +8,19 @@
 //! [`WalkState::next_code`](super::WalkState::next_code)'s arithmetic on
 //! its own ray: the same double compares (ties to the higher axis), the
 //! same double additions and the same end tests, so each lane visits
-//! exactly the voxels of the scalar walk. A lane whose ray ends takes the
-//! next waiting ray in the same step, without a branch (an expanding load
-//! under the mask of ended lanes), and the codes of the lanes still going
-//! are packed into a buffer that is handed on in batches.
+//! exactly the voxels of the scalar walk.
+//!
+//! A group's lanes walk a packet: eight rays next to each other in the
+//! scan, started together from the origin and stepped in lockstep until the
+//! last of them ends; then the group takes the next eight. Every ray from
+//! the origin enters at its k-th step a voxel k steps (along the axes) from
+//! the origin's, so rays of one packet that enter the same voxel do so at
+//! the same step, and neighbouring rays of a scanning lidar run through the
+//! same voxels for most of their length: a lane's code is dropped when the
+//! lane below enters the same voxel. On a 64-beam lidar's scans indoors at
+//! 0.1 m that leaves 30% of the steps' codes for the scan's sets, for 6%
+//! more lane steps (lanes whose ray has ended wait for the packet's last).
+//! The codes kept are packed into a buffer that is handed on in batches.
 //!
 //! Only on x86-64 processors with AVX-512F, chosen at run time
 //! ([`available`]); the scalar walk remains for the others.
@@ -35,8 +44,8 @@ pub(crate) fn available() -> bool {
 
 /// Rays set up and waiting for a lane, as a structure of arrays with room
 /// for [`Self::CAPACITY`] rays and the [`LANES`] finished rays that
-/// [`walk`] needs after the last one (so that refills past the last ray
-/// read rays that end at once).
+/// [`walk`] reads after the last one (it loads a packet's eight rays at
+/// once; the lanes past the last ray are not alive).
 pub(crate) struct LaneRays {
     t: [Box<[f64]>; 3],
     dt: [Box<[f64]>; 3],
@@ -299,8 +308,8 @@ unsafe fn spread_bits(v: __m512i) -> __m512i {
 }
 
 /// The rays in the lanes between two calls of [`walk`]: two groups of
-/// [`LANES`], stepped alternately so that one group's chain of compares and
-/// additions overlaps the other's.
+/// [`LANES`], each walking a packet, stepped alternately so that one
+/// group's chain of compares and additions overlaps the other's.
 #[derive(Clone, Copy)]
 pub(crate) struct Lanes {
     groups: [Saved; 2],
@@ -315,10 +324,11 @@ struct Saved {
     code: [u64; LANES],
     end: [u64; LANES],
     length: [f64; LANES],
+    alive: __mmask8,
 }
 
 impl Default for Lanes {
-    /// Every lane holds [`FanRay::finished`].
+    /// Every lane holds [`FanRay::finished`], and no lane is alive.
     fn default() -> Self {
         let r = FanRay::finished();
         let saved = Saved {
@@ -328,6 +338,7 @@ impl Default for Lanes {
             code: [r.code; LANES],
             end: [r.end_code; LANES],
             length: [r.length; LANES],
+            alive: 0,
         };
         Lanes { groups: [saved; 2] }
     }
@@ -349,6 +360,8 @@ struct Group {
     code: __m512i,
     end: __m512i,
     length: __m512d,
+    /// The lanes whose ray has not ended.
+    alive: __mmask8,
 }
 
 impl Group {
@@ -370,6 +383,7 @@ impl Group {
             code: epi(&s.code),
             end: epi(&s.end),
             length: pd(&s.length),
+            alive: s.alive,
         }
     }
 
@@ -390,15 +404,17 @@ impl Group {
         epi(self.code, &mut s.code);
         epi(self.end, &mut s.end);
         pd(self.length, &mut s.length);
+        s.alive = self.alive;
     }
 
     /// One step of every lane (`WalkState::next_code`): the axis of the
-    /// smallest `t_max`, ties to the higher axis (`min_axis`). Returns the
-    /// lanes whose ray has ended: the new voxel is the end voxel, or every
+    /// smallest `t_max`, ties to the higher axis (`min_axis`). A lane's ray
+    /// ends (it leaves `alive`) when the new voxel is the end voxel, or every
     /// `t_max` lies beyond the ray's length (OctoMap's `min(min(..), ..) >
-    /// length`, with no NaN among them).
+    /// length`, with no NaN among them). Lanes no longer alive step on
+    /// unseen.
     #[inline(always)]
-    unsafe fn step(&mut self) -> __mmask8 {
+    unsafe fn step(&mut self) {
         let (t0, t1, t2) = (self.t0, self.t1, self.t2);
         let lt01 = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(t0, t1);
         let lt02 = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(t0, t2);
@@ -423,43 +439,42 @@ impl Group {
         let beyond = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(self.t0, self.length)
             & _mm512_cmp_pd_mask::<_CMP_GT_OQ>(self.t1, self.length)
             & _mm512_cmp_pd_mask::<_CMP_GT_OQ>(self.t2, self.length);
-        _mm512_cmpeq_epi64_mask(self.code, self.end) | beyond
+        self.alive &= !(_mm512_cmpeq_epi64_mask(self.code, self.end) | beyond);
     }
 
-    /// The lanes in `ended` take the rays of `rays` from `at` on, in order.
+    /// The lanes take the next packet: the rays of `rays` from `at` on,
+    /// eight or as many as are left, each from the origin's voxel; returns
+    /// where the rays after them start.
     #[inline(always)]
-    unsafe fn refill(&mut self, ended: __mmask8, rays: &LaneRays, at: usize, origin: __m512i) {
-        // SAFETY: the caller keeps `at <= rays.len`, and `rays` is padded
-        // with LANES rays
-        let k = ended;
-        self.t0 = _mm512_mask_expandloadu_pd(self.t0, k, rays.t[0].as_ptr().add(at));
-        self.t1 = _mm512_mask_expandloadu_pd(self.t1, k, rays.t[1].as_ptr().add(at));
-        self.t2 = _mm512_mask_expandloadu_pd(self.t2, k, rays.t[2].as_ptr().add(at));
-        self.dt0 = _mm512_mask_expandloadu_pd(self.dt0, k, rays.dt[0].as_ptr().add(at));
-        self.dt1 = _mm512_mask_expandloadu_pd(self.dt1, k, rays.dt[1].as_ptr().add(at));
-        self.dt2 = _mm512_mask_expandloadu_pd(self.dt2, k, rays.dt[2].as_ptr().add(at));
-        self.sub0 = _mm512_mask_expandloadu_epi64(self.sub0, k, rays.sub[0].as_ptr().add(at).cast());
-        self.sub1 = _mm512_mask_expandloadu_epi64(self.sub1, k, rays.sub[1].as_ptr().add(at).cast());
-        self.sub2 = _mm512_mask_expandloadu_epi64(self.sub2, k, rays.sub[2].as_ptr().add(at).cast());
-        self.end = _mm512_mask_expandloadu_epi64(self.end, k, rays.end.as_ptr().add(at).cast());
-        self.length = _mm512_mask_expandloadu_pd(self.length, k, rays.length.as_ptr().add(at));
-        self.code = _mm512_mask_mov_epi64(self.code, k, origin);
-    }
-
-    /// Whether every lane holds a finished ray (the padding's).
-    #[inline(always)]
-    unsafe fn finished(&self) -> bool {
-        _mm512_cmp_pd_mask::<_CMP_EQ_OQ>(self.length, _mm512_set1_pd(f64::NEG_INFINITY)) == 0xff
+    unsafe fn start(&mut self, rays: &LaneRays, at: usize, origin: __m512i) -> usize {
+        // SAFETY (the loads): the caller keeps `at <= rays.len`, and the
+        // arrays hold LANES values after the last ray
+        let pd = |from: &[f64]| _mm512_loadu_pd(from[at..at + LANES].as_ptr());
+        let epi = |from: &[u64]| _mm512_loadu_si512(from[at..at + LANES].as_ptr().cast());
+        self.t0 = pd(&rays.t[0]);
+        self.t1 = pd(&rays.t[1]);
+        self.t2 = pd(&rays.t[2]);
+        self.dt0 = pd(&rays.dt[0]);
+        self.dt1 = pd(&rays.dt[1]);
+        self.dt2 = pd(&rays.dt[2]);
+        self.sub0 = epi(&rays.sub[0]);
+        self.sub1 = epi(&rays.sub[1]);
+        self.sub2 = epi(&rays.sub[2]);
+        self.end = epi(&rays.end);
+        self.length = pd(&rays.length);
+        self.code = origin;
+        let n = (rays.len - at).min(LANES);
+        self.alive = ((1u32 << n) - 1) as __mmask8;
+        at + n
     }
 }
 
-/// Appends the codes of the lanes not in `ended` to `buffer` at `filled`,
-/// less a lane's that repeats the code its neighbour below appends (rays
-/// next to each other in a scan often enter the same voxel at the same
-/// step); returns the new `filled`.
+/// Appends the codes of the lanes in `going` to `buffer` at `filled`,
+/// less a lane's that repeats the code its neighbour below appends (the
+/// rays of a packet often enter the same voxel at the same step); returns
+/// the new `filled`.
 #[inline(always)]
-unsafe fn append(buffer: &mut [u64; BUFFER + LANES], filled: usize, code: __m512i, ended: __mmask8) -> usize {
-    let going = !ended;
+unsafe fn append(buffer: &mut [u64; BUFFER + LANES], filled: usize, code: __m512i, going: __mmask8) -> usize {
     let below = _mm512_alignr_epi64::<7>(code, code);
     let repeat = _mm512_cmpeq_epi64_mask(code, below) & (going << 1);
     let kept = going & !repeat;
@@ -473,7 +488,7 @@ unsafe fn append(buffer: &mut [u64; BUFFER + LANES], filled: usize, code: __m512
 /// batches and in no particular order (a voxel may come more than once).
 /// Returns once every ray of `rays` has entered a lane; with `drain`, once
 /// every lane's ray has ended. Rays still in the lanes stay in `lanes` for
-/// the next call.
+/// the next call. Packets are made of rays in the order of `rays`.
 ///
 /// # Safety
 /// The processor must support AVX-512F ([`available`]).
@@ -529,16 +544,19 @@ unsafe fn fill(
     let len = rays.len;
     let mut at = *next;
     let done = loop {
-        let ended_a = a.step();
-        let ended_b = b.step();
-        filled = append(buffer, filled, a.code, ended_a);
-        filled = append(buffer, filled, b.code, ended_b);
-        // ended lanes take the next rays, in order
-        a.refill(ended_a, rays, at, origin);
-        at = (at + ended_a.count_ones() as usize).min(len);
-        b.refill(ended_b, rays, at, origin);
-        at = (at + ended_b.count_ones() as usize).min(len);
-        if at == len && (!drain || (a.finished() && b.finished())) {
+        a.step();
+        b.step();
+        filled = append(buffer, filled, a.code, a.alive);
+        filled = append(buffer, filled, b.code, b.alive);
+        // a group whose packet has ended takes the next one (a branch
+        // taken once a packet: a packet's rays take tens of steps)
+        if a.alive == 0 {
+            at = a.start(rays, at, origin);
+        }
+        if b.alive == 0 {
+            at = b.start(rays, at, origin);
+        }
+        if at == len && (!drain || (a.alive | b.alive) == 0) {
             break true;
         }
         if filled > BUFFER - LANES {
