@@ -49,9 +49,9 @@ pub(crate) fn available() -> bool {
 pub(crate) struct LaneRays {
     t: [Box<[f64]>; 3],
     dt: [Box<[f64]>; 3],
-    /// Per axis, what a step subtracts from the axis's bits of a code: the
-    /// axis's mask for a step up, one for a step down (see [`step_code`]).
-    sub: [Box<[u64]>; 3],
+    /// What a step subtracts from the stepped axis's bits of a code, under
+    /// that axis's mask (see [`step_bits`]).
+    step: Box<[u64]>,
     end: Box<[u64]>,
     length: Box<[f64]>,
     /// Rays before the padding.
@@ -64,15 +64,7 @@ impl Default for LaneRays {
         let n = Self::CAPACITY + LANES;
         let f = || vec![0.0; n].into_boxed_slice();
         let u = || vec![0; n].into_boxed_slice();
-        LaneRays {
-            t: [f(), f(), f()],
-            dt: [f(), f(), f()],
-            sub: [u(), u(), u()],
-            end: u(),
-            length: f(),
-            len: 0,
-            padded: false,
-        }
+        LaneRays { t: [f(), f(), f()], dt: [f(), f(), f()], step: u(), end: u(), length: f(), len: 0, padded: false }
     }
 }
 
@@ -115,24 +107,22 @@ impl LaneRays {
         for i in 0..3 {
             self.t[i][n] = ray.t_max[i];
             self.dt[i][n] = ray.t_delta[i];
-            self.sub[i][n] = sub(ray, i);
         }
+        self.step[n] = step_bits(ray);
         self.end[n] = ray.end_code;
         self.length[n] = ray.length;
     }
 }
 
-/// What a step of `ray` along `axis` subtracts from that axis's bits of a
-/// code (see [`step_code`]): the axis's mask for a step up, else one.
+/// What a step of `ray` subtracts from the stepped axis's bits of a code
+/// (see [`step_code`]), for every axis at once: under an axis's mask, the
+/// whole mask for a step up, the axis's lowest bit for a step down. The
+/// bits of the axes that step up, and the three lowest bits.
 #[inline(always)]
-fn sub(ray: &FanRay, axis: usize) -> u64 {
-    // the slot of the axis in `AxisSteps` (x 1, y 2, z 0)
-    let up = (ray.steps.add[(axis + 1) % 3] as i64) > 0;
-    if up {
-        AXIS_MASKS[axis]
-    } else {
-        1
-    }
+fn step_bits(ray: &FanRay) -> u64 {
+    // the slot of an axis in `AxisSteps` (x 1, y 2, z 0)
+    let up = |axis: usize| (ray.steps.add[(axis + 1) % 3] as i64) > 0;
+    (0..3).filter(|&axis| up(axis)).fold(0b111, |bits, axis| bits | AXIS_MASKS[axis])
 }
 
 /// [`RayFan::ray`] for every point of `points` (at most
@@ -253,6 +243,7 @@ pub(crate) unsafe fn set_up(
             let to = &mut to[n..n + LANES];
             _mm512_storeu_si512(to.as_mut_ptr().cast(), _mm512_maskz_compress_epi64(kept, v));
         };
+        let mut step = _mm512_set1_epi64(0b111);
         for i in 0..3 {
             let dir = _mm512_cvtps_pd(_mm256_div_ps(d[i], length));
             let up = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(dir, _mm512_setzero_pd());
@@ -265,9 +256,9 @@ pub(crate) unsafe fn set_up(
                 _mm512_mask_div_pd(never, moves, _mm512_set1_pd(fan.resolution), _mm512_abs_pd(dir)),
                 &mut rays.dt[i],
             );
-            let sub = _mm512_mask_blend_epi64(up, _mm512_set1_epi64(1), _mm512_set1_epi64(AXIS_MASKS[i] as i64));
-            store_epi(sub, &mut rays.sub[i]);
+            step = _mm512_mask_or_epi64(step, up, step, _mm512_set1_epi64(AXIS_MASKS[i] as i64));
         }
+        store_epi(step, &mut rays.step);
         store_epi(code, &mut rays.end);
         store_pd(_mm512_cvtps_pd(length), &mut rays.length);
         rays.len += kept.count_ones() as usize;
@@ -320,7 +311,7 @@ pub(crate) struct Lanes {
 struct Saved {
     t: [[f64; LANES]; 3],
     dt: [[f64; LANES]; 3],
-    sub: [[u64; LANES]; 3],
+    step: [u64; LANES],
     code: [u64; LANES],
     end: [u64; LANES],
     length: [f64; LANES],
@@ -334,7 +325,7 @@ impl Default for Lanes {
         let saved = Saved {
             t: r.t_max.map(|t| [t; LANES]),
             dt: r.t_delta.map(|dt| [dt; LANES]),
-            sub: [0, 1, 2].map(|axis| [sub(&r, axis); LANES]),
+            step: [step_bits(&r); LANES],
             code: [r.code; LANES],
             end: [r.end_code; LANES],
             length: [r.length; LANES],
@@ -354,9 +345,7 @@ struct Group {
     dt0: __m512d,
     dt1: __m512d,
     dt2: __m512d,
-    sub0: __m512i,
-    sub1: __m512i,
-    sub2: __m512i,
+    step: __m512i,
     code: __m512i,
     end: __m512i,
     length: __m512d,
@@ -377,9 +366,7 @@ impl Group {
             dt0: pd(&s.dt[0]),
             dt1: pd(&s.dt[1]),
             dt2: pd(&s.dt[2]),
-            sub0: epi(&s.sub[0]),
-            sub1: epi(&s.sub[1]),
-            sub2: epi(&s.sub[2]),
+            step: epi(&s.step),
             code: epi(&s.code),
             end: epi(&s.end),
             length: pd(&s.length),
@@ -398,9 +385,7 @@ impl Group {
         pd(self.dt0, &mut s.dt[0]);
         pd(self.dt1, &mut s.dt[1]);
         pd(self.dt2, &mut s.dt[2]);
-        epi(self.sub0, &mut s.sub[0]);
-        epi(self.sub1, &mut s.sub[1]);
-        epi(self.sub2, &mut s.sub[2]);
+        epi(self.step, &mut s.step);
         epi(self.code, &mut s.code);
         epi(self.end, &mut s.end);
         pd(self.length, &mut s.length);
@@ -434,8 +419,7 @@ impl Group {
             ),
             _mm512_set1_epi64(AXIS_MASKS[0] as i64),
         );
-        let by = _mm512_mask_blend_epi64(s0, _mm512_mask_blend_epi64(s1, self.sub2, self.sub1), self.sub0);
-        self.code = step_code(self.code, mask, by);
+        self.code = step_code(self.code, mask, _mm512_and_si512(mask, self.step));
         let beyond = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(self.t0, self.length)
             & _mm512_cmp_pd_mask::<_CMP_GT_OQ>(self.t1, self.length)
             & _mm512_cmp_pd_mask::<_CMP_GT_OQ>(self.t2, self.length);
@@ -457,9 +441,7 @@ impl Group {
         self.dt0 = pd(&rays.dt[0]);
         self.dt1 = pd(&rays.dt[1]);
         self.dt2 = pd(&rays.dt[2]);
-        self.sub0 = epi(&rays.sub[0]);
-        self.sub1 = epi(&rays.sub[1]);
-        self.sub2 = epi(&rays.sub[2]);
+        self.step = epi(&rays.step);
         self.end = epi(&rays.end);
         self.length = pd(&rays.length);
         self.code = origin;
@@ -571,8 +553,9 @@ unsafe fn fill(
 
 /// `code` moved one voxel along the axis whose bits are `mask`: the axis's
 /// bits minus `by` (the mask itself for a step up: `x - mask` is `(x |
-/// !mask) + 1`, whose carry runs through the other axes' bits; one for a
-/// step down, whose borrow runs through them), the other bits kept.
+/// !mask) + 1`, whose carry runs through the other axes' bits; the axis's
+/// lowest bit for a step down, whose borrow runs through them), the other
+/// bits kept.
 #[inline(always)]
 unsafe fn step_code(code: __m512i, mask: __m512i, by: __m512i) -> __m512i {
     let moved = _mm512_sub_epi64(_mm512_and_si512(code, mask), by);
@@ -689,8 +672,8 @@ mod tests {
                 for i in 0..3 {
                     assert_eq!(bits(&got.t[i][..n]), bits(&want.t[i][..n]), "t_max, axis {i}, res {res}");
                     assert_eq!(bits(&got.dt[i][..n]), bits(&want.dt[i][..n]), "t_delta, axis {i}, res {res}");
-                    assert_eq!(got.sub[i][..n], want.sub[i][..n], "steps, axis {i}, res {res}");
                 }
+                assert_eq!(got.step[..n], want.step[..n], "steps, res {res}");
                 assert_eq!(got.end[..n], want.end[..n], "res {res}");
                 assert_eq!(bits(&got.length[..n]), bits(&want.length[..n]), "res {res}");
             }
