@@ -420,9 +420,8 @@ impl Group {
             _mm512_set1_epi64(AXIS_MASKS[0] as i64),
         );
         self.code = step_code(self.code, mask, _mm512_and_si512(mask, self.step));
-        let beyond = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(self.t0, self.length)
-            & _mm512_cmp_pd_mask::<_CMP_GT_OQ>(self.t1, self.length)
-            & _mm512_cmp_pd_mask::<_CMP_GT_OQ>(self.t2, self.length);
+        let nearest = _mm512_min_pd(_mm512_min_pd(self.t0, self.t1), self.t2);
+        let beyond = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(nearest, self.length);
         self.alive &= !(_mm512_cmpeq_epi64_mask(self.code, self.end) | beyond);
     }
 
