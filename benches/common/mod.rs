@@ -29,12 +29,20 @@ pub fn scans(kind: SceneKind, scans: usize) -> Vec<Scan> {
 }
 
 /// For the probes (`probes/src/bin/`): the scene and resolution their first two
-/// arguments name (`indoor|outdoor RES`; indoor, 0.2 m when absent) and the
-/// benchmark's scans of that scene (24 indoors, 6 outdoors).
+/// arguments name (`indoor|outdoor|FILE.graph RES`; indoor, 0.2 m when absent) and the
+/// benchmark's scans of that scene (24 indoors, 6 outdoors), or the scans of
+/// the `.graph` file (such as the full-size sequences, `--full`), in the world
+/// frame as `graph2tree` puts them.
 pub fn scene_from_args() -> (SceneKind, f64, Vec<Scan>) {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let kind = if args.first().map(String::as_str) == Some("outdoor") { SceneKind::Outdoor } else { SceneKind::Indoor };
+    let first = args.first().map_or("indoor", String::as_str);
+    let kind = if first == "outdoor" { SceneKind::Outdoor } else { SceneKind::Indoor };
     let res: f64 = args.get(1).map_or(0.2, |s| s.parse().expect("RES"));
+    if first.ends_with(".graph") {
+        let graph = octolinear::formats::graph::read_file(first).expect("read the .graph file");
+        let scans = graph.nodes.iter().map(|n| n.graph2tree()).map(|(c, o)| (c.points, o)).collect();
+        return (kind, res, scans);
+    }
     (kind, res, scans(kind, if kind == SceneKind::Indoor { 24 } else { 6 }))
 }
 
