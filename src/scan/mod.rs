@@ -461,7 +461,13 @@ mod tests {
         // colour trees must keep OctoMap's key order: colours blended in
         // after each scan make that order visible in the next one
         for kind in [NodeKind::Plain, NodeKind::Color, NodeKind::Stamped] {
-            let new_tree = || OccupancyTree::with_kind(0.1, SensorModel::default(), kind).unwrap();
+            // stamped trees on a fixed clock: builds that straddle a second
+            // of the system clock would differ in their stamps
+            let new_tree = || {
+                let mut t = OccupancyTree::with_kind(0.1, SensorModel::default(), kind).unwrap();
+                t.set_clock(crate::tree::Clock::Fixed(1234));
+                t
+            };
             let paint = |t: &mut OccupancyTree, scan: usize| {
                 if kind == NodeKind::Color {
                     for (i, p) in scans[scan].0.iter().enumerate() {
