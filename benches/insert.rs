@@ -21,7 +21,8 @@ mod common;
 use common::*;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use octolinear::formats::ot;
-use octolinear::scan::{KeySet, ScanUpdate};
+use octolinear::internals::{key_sets, KeySet, TreeInternals};
+use octolinear::scan::ScanUpdate;
 use octolinear::{InnerNodes, Key, OccupancyTree};
 use octolinear_sim::SceneKind;
 use std::cell::OnceCell;
@@ -50,7 +51,7 @@ fn key_lists(updates: &[ScanUpdate]) -> KeyLists {
     let hashed = updates
         .iter()
         .map(|u| {
-            let (free, occupied) = u.key_sets();
+            let (free, occupied) = key_sets(u);
             (free.iter().map(|h| h.decode()).collect(), occupied.iter().map(|h| h.decode()).collect())
         })
         .collect();

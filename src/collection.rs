@@ -35,7 +35,7 @@ pub struct MapCollection {
 #[derive(Debug, thiserror::Error)]
 pub enum CollectionError {
     /// A file could not be opened, read or written.
-    #[error("{path}: {source}")]
+    #[error("I/O error on {path}")]
     Io {
         /// The collection file or submap file concerned.
         path: PathBuf,
@@ -53,7 +53,7 @@ pub enum CollectionError {
         reason: String,
     },
     /// A submap's `.bt` file could not be decoded.
-    #[error("submap {path}: {source}")]
+    #[error("submap {path} refused")]
     Submap {
         /// The submap file.
         path: PathBuf,

@@ -170,12 +170,12 @@ impl KeySpace {
     #[inline(always)]
     pub fn coord_to_key(&self, coord: f64) -> Result<u16, KeyError> {
         // OctoMap's `(int) floor(x) + 32768` in range exactly when `floor(x)`
-        // is in [-32768, 32768) (NaN is not); `floor` is one `roundsd` on
-        // the crate's x86-64-v2 target
-        let floored = (self.resolution_factor * coord).floor();
+        // is in [-32768, 32768), that is when `x` is (integer bounds; NaN
+        // is not)
+        let scaled = self.resolution_factor * coord;
         let center = f64::from(KEY_CENTER);
-        if (-center..center).contains(&floored) {
-            Ok((floored as i32 + KEY_CENTER as i32) as u16)
+        if (-center..center).contains(&scaled) {
+            Ok((floor_to_int(scaled) + KEY_CENTER as i32) as u16)
         } else if !coord.is_finite() {
             Err(KeyError::NotFinite { value: coord })
         } else {
@@ -194,8 +194,8 @@ impl KeySpace {
     /// `coordToKeyChecked(point3d)`: the key of the voxel containing `p`.
     #[inline(always)]
     pub fn key(&self, p: Point3) -> Result<Key, KeyError> {
-        #[cfg(all(target_arch = "x86_64", target_feature = "sse4.1"))]
-        if let Some((k, _)) = self.key_sse41(p) {
+        #[cfg(target_arch = "x86_64")]
+        if let Some((k, _)) = crate::arch::key_and_octant(self.resolution_factor, p) {
             return Ok(k);
         }
         self.key_per_axis(p)
@@ -207,54 +207,12 @@ impl KeySpace {
     /// on their way out of the vector unit.
     #[inline(always)]
     pub fn key_and_octant(&self, p: Point3) -> Result<(Key, usize), KeyError> {
-        #[cfg(all(target_arch = "x86_64", target_feature = "sse4.1"))]
-        if let Some(k) = self.key_sse41(p) {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(k) = crate::arch::key_and_octant(self.resolution_factor, p) {
             return Ok(k);
         }
         let key = self.key_per_axis(p)?;
         Ok((key, key.child_index(0)))
-    }
-
-    /// [`Self::key`] for points inside the map, two axes per instruction:
-    /// the same double products, `floor`s and range tests as
-    /// [`Self::coord_to_key`], in half the instructions of three scalar
-    /// passes (a point query's conversion is on its critical path).
-    /// `None` when an axis is out of range or not finite.
-    /// With the octant of [`Self::key_and_octant`]: a key's top bit is set
-    /// exactly when the product is at least zero (-0.0 included).
-    #[cfg(all(target_arch = "x86_64", target_feature = "sse4.1"))]
-    #[inline(always)]
-    fn key_sse41(&self, p: Point3) -> Option<(Key, usize)> {
-        use std::arch::x86_64::*;
-        // SAFETY: SSE2 and SSE4.1 are enabled for this build (the `cfg`
-        // above); the intrinsics touch registers only.
-        let (ok, octant, xy, z) = unsafe {
-            let factor = _mm_set1_pd(self.resolution_factor);
-            let xy = _mm_mul_pd(factor, _mm_cvtps_pd(_mm_set_ps(0.0, 0.0, p.y, p.x)));
-            // z in lane 0 alone (lane 1 converts 0.0, which is in range): a
-            // broadcast was compiled into a 16-byte load of a 12-byte
-            // point copied to the stack, which the processor cannot
-            // forward from the copy's two stores (a stall on every point)
-            let z = _mm_mul_pd(factor, _mm_cvtps_pd(_mm_set_ss(p.z)));
-            let zero = _mm_setzero_pd();
-            let octant = _mm_movemask_pd(_mm_cmpge_pd(xy, zero)) | (_mm_movemask_pd(_mm_cmpge_sd(z, zero)) & 1) << 2;
-            let (xy, z) = (_mm_floor_pd(xy), _mm_floor_pd(z));
-            let (lo, hi) = (_mm_set1_pd(-f64::from(KEY_CENTER)), _mm_set1_pd(f64::from(KEY_CENTER)));
-            // false for NaN, as the scalar range test
-            let in_range = |v| _mm_and_pd(_mm_cmpge_pd(v, lo), _mm_cmplt_pd(v, hi));
-            let ok = _mm_movemask_pd(_mm_and_pd(in_range(xy), in_range(z))) == 3;
-            let (xy, z) = (_mm_cvttpd_epi32(xy), _mm_cvttpd_epi32(z));
-            (ok, octant as usize, _mm_cvtsi128_si64(xy) as u64, _mm_cvtsi128_si32(z) as u32)
-        };
-        let c = KEY_CENTER;
-        ok.then(|| {
-            let key = Key([
-                (xy as u32).wrapping_add(c) as u16,
-                ((xy >> 32) as u32).wrapping_add(c) as u16,
-                z.wrapping_add(c) as u16,
-            ]);
-            (key, octant)
-        })
     }
 
     /// [`Self::key`] one axis at a time (the error names the first axis
@@ -446,6 +404,36 @@ mod tests {
         assert_eq!(ks.coord_to_key(-3276.8), Ok(0));
         assert_eq!(ks.coord_to_key(0.0), Ok(32768));
         assert_eq!(ks.coord_to_key(-0.0), Ok(32768));
+    }
+
+    /// `coord_to_key` is OctoMap's `floor(resolution_factor * x) + 32768`,
+    /// in range exactly when that floor is in [-32768, 32768): at integer
+    /// products and one ulp either side, near zero and the map edges, and
+    /// for random coordinates.
+    #[test]
+    fn checked_keys_are_the_floor_of_the_product() {
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        for res in [0.01, 0.05, 0.1, 0.3, 1.0] {
+            let ks = KeySpace::new(res);
+            let mut coords: Vec<f64> = vec![0.0, -0.0, 1e-300, -1e-300, f64::from(f32::from_bits(1)), -1e-45];
+            for n in [0.0, 1.0, -1.0, 7.0, -7.0, 32767.0, -32768.0, 32768.0, -32769.0] {
+                let c = n * res;
+                coords.extend([c, c.next_up(), c.next_down()]);
+                let f = f64::from(c as f32);
+                coords.extend([f, f64::from((c as f32).next_up()), f64::from((c as f32).next_down())]);
+            }
+            for _ in 0..20_000 {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                coords.push(f64::from(f32::from_bits(s as u32)) % (ks.node_size(0) * 0.6));
+            }
+            for c in coords {
+                let floored = (ks.resolution_factor * c).floor();
+                let want = (-32768.0..32768.0).contains(&floored).then(|| (floored as i32 + 32768) as u16);
+                assert_eq!(ks.coord_to_key(c).ok(), want, "{c:e} at {res}");
+            }
+        }
     }
 
     /// The two-lane conversion gives the per-axis keys and errors for

@@ -5,7 +5,7 @@
 //! `KeySet`s and then updates them one by one in the sets' iteration order.
 //! For plain and stamped trees the result does not depend on that order
 //! (each voxel is updated once, and a node's final pruning only depends on
-//! its children's final state), which is why [`OccupancyTree::update_batch`]
+//! its children's final state), which is why `OccupancyTree::update_batch`
 //! may walk the keys in Morton order. A `ColorOcTree` is different: when a
 //! node's eight children become equal part-way through the pass, OctoMap
 //! prunes it (the node takes the children's average colour) and the next key

@@ -16,12 +16,23 @@
 //! bt::write(&tree, &mut file)?; // the bytes OctoMap's writeBinary writes
 //! # Ok(()) }
 //! ```
+//!
+//! Errors say what failed and where (file, line, byte offset, value). An
+//! error caused by another one (an I/O error, a key outside the map) gives
+//! it as [`std::error::Error::source`] and does not repeat it in its own
+//! message: print the chain for the whole story (anyhow's `{:#}` does).
 
-#![warn(missing_docs)]
+#![deny(missing_docs)]
+#![deny(unsafe_code)]
 
+#[allow(unsafe_code)]
+mod arch;
 pub mod collection;
 pub mod formats;
 pub mod geometry;
+#[cfg(feature = "internals")]
+#[doc(hidden)]
+pub mod internals;
 pub mod key;
 mod keyorder;
 pub mod mapped;
@@ -29,6 +40,7 @@ pub mod morton;
 pub mod ray;
 pub mod scan;
 pub mod sensor;
+pub mod tiles;
 pub mod tree;
 
 pub use collection::{MapCollection, MapNode};

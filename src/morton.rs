@@ -80,11 +80,8 @@ impl MortonCode {
     #[inline]
     pub fn encode_bmi2(key: Key) -> Self {
         #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("bmi2") {
-                // SAFETY: the CPU supports BMI2, checked just above.
-                return unsafe { bmi2::encode(key) };
-            }
+        if let Some(bmi2) = crate::arch::bmi2::Bmi2::detect() {
+            return bmi2.morton_encode(key);
         }
         Self::encode(key)
     }
@@ -99,11 +96,8 @@ impl MortonCode {
     #[inline]
     pub fn decode_bmi2(self) -> Key {
         #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("bmi2") {
-                // SAFETY: the CPU supports BMI2, checked just above.
-                return unsafe { bmi2::decode(self) };
-            }
+        if let Some(bmi2) = crate::arch::bmi2::Bmi2::detect() {
+            return bmi2.morton_decode(self);
         }
         self.decode()
     }
@@ -152,34 +146,6 @@ pub fn sort_codes(codes: &mut Vec<u64>) {
             hist[b] += 1;
         }
         std::mem::swap(codes, &mut buf);
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-mod bmi2 {
-    use super::MortonCode;
-    use crate::key::Key;
-    use std::arch::x86_64::{_pdep_u64, _pext_u64};
-
-    const MASK_X: u64 = 0x2492_4924_9249;
-
-    #[target_feature(enable = "bmi2")]
-    pub unsafe fn encode(key: Key) -> MortonCode {
-        let [x, y, z] = key.0;
-        MortonCode(
-            _pdep_u64(u64::from(x), MASK_X)
-                | _pdep_u64(u64::from(y), MASK_X << 1)
-                | _pdep_u64(u64::from(z), MASK_X << 2),
-        )
-    }
-
-    #[target_feature(enable = "bmi2")]
-    pub unsafe fn decode(code: MortonCode) -> Key {
-        Key([
-            _pext_u64(code.0, MASK_X) as u16,
-            _pext_u64(code.0, MASK_X << 1) as u16,
-            _pext_u64(code.0, MASK_X << 2) as u16,
-        ])
     }
 }
 

@@ -5,8 +5,9 @@
 use hashbrown::HashMap;
 use octolinear::formats::{bt, ot, ros};
 use octolinear::morton::MortonCode;
+use octolinear::scan::ScanUpdate;
 use octolinear::tree::NodeKind;
-use octolinear::{Clock, InnerNodes, Key, OccupancyTree, SensorModel};
+use octolinear::{Clock, InnerNodes, Key, OccupancyTree, ScanReport, SensorModel};
 use proptest::prelude::*;
 use std::io::BufReader;
 
@@ -191,7 +192,13 @@ proptest! {
         for &c in &codes {
             a.update(MortonCode(c).decode(), delta, inner);
         }
-        b.update_batch(&codes, delta, inner);
+        // `apply_update`: the batched walk `insert_point_cloud` applies
+        let update = if hit {
+            ScanUpdate { free: Vec::new(), occupied: codes }
+        } else {
+            ScanUpdate { free: codes, occupied: Vec::new() }
+        };
+        b.apply_update(&update, ScanReport::default(), inner);
         let (mut x, mut y) = (Vec::new(), Vec::new());
         ot::write(&a, &mut x).unwrap();
         ot::write(&b, &mut y).unwrap();

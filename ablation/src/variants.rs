@@ -4,7 +4,7 @@
 //!   in-memory layout: `values: Vec<f32>`, `masks: Vec<u8>`,
 //!   `first_child: Vec<u32>`, child groups of exactly `popcount(mask)`
 //!   slots), driven key by key through [`OccupancyTree::update`] or through
-//!   the batch walk ([`OccupancyTree::update_batch`], what
+//!   the batch walk ([`TreeInternals::update_batch`], what
 //!   `insert_point_cloud` uses), and optionally [`OccupancyTree::compact`]ed
 //!   after the last scan.
 //! * [`MappedLayout`] is the native read-only format: built as
@@ -16,6 +16,7 @@
 //!   the same in two arrays (values, child indices).
 
 use super::{Layout, MAX_DEPTH};
+use octolinear::internals::TreeInternals;
 use octolinear::key::Key;
 use octolinear::mapped::{self, MappedMap};
 use octolinear::morton::MortonCode;
@@ -25,7 +26,7 @@ use octolinear::tree::{InnerNodes, OccupancyTree};
 // ----- octolinear's arena ------------------------------------------------
 
 /// [`OccupancyTree`] behind the [`Layout`] interface. `BATCH` applies each
-/// scan's lists with [`OccupancyTree::update_batch`] instead of key by key;
+/// scan's lists with [`TreeInternals::update_batch`] instead of key by key;
 /// `COMPACT` calls [`OccupancyTree::compact`] in [`Layout::finish`].
 #[derive(Clone, Debug)]
 pub struct ArenaLayout<const BATCH: bool, const COMPACT: bool> {

@@ -6,6 +6,7 @@
 use super::common::{build_counting, num_points, Scan};
 use super::{median, secs, Stat};
 use octolinear::formats::{graph, ot};
+use octolinear::internals::TreeInternals;
 use octolinear::OccupancyTree;
 use octolinear_oracle::{OracleTree, ScanBatch};
 use octolinear_sim::{simulate, LidarConfig, SceneKind};

@@ -3,11 +3,13 @@
 
 use super::common::{format_g6, progress, save_map, spinner, MapFormat};
 use super::input;
+use super::tiles;
 use anyhow::{bail, Context, Result};
 use octolinear::formats::{bt, ot, write_atomically};
 use octolinear::geometry::graph2tree_transform;
 use octolinear::scan::OutOfMap;
 use octolinear::sensor::{SensorModel, SensorProbabilities};
+use octolinear::tiles::{MemoryBudget, TaskPart, TiledMap};
 use octolinear::{
     BoundsRule, InnerNodes, KeySpace, NodeKind, OccupancyTree, Point3, PointCloud, Pose6D, ScanOptions, ScanReport,
 };
@@ -46,7 +48,22 @@ use std::time::{Duration, Instant};
 ///
 /// Example: octolinear build --points a.ply b.pcd --trajectory traj.txt -o map.bt
 ///
+/// With an output NAME.tiles (a directory), the map is written as a tile
+/// set (formats/tiles.md): the octree's subtrees at --tile-depth, one .olm
+/// file each, and a manifest. `octolinear convert NAME.tiles OUT` gives the
+/// bytes a plain build to OUT gives. --task K/N builds only some tiles so
+/// that N processes can share the work (each casts every scan); once all
+/// have finished, `octolinear tiles manifest NAME.tiles` writes the
+/// manifest. --memory-cap keeps the map's tiles in memory up to that size
+/// and writes the others out (into the tile set, or beside OUT in a
+/// temporary directory), reading them back when scans reach them again:
+/// the map is the same. Tiles cannot hold colour maps, and --compress-ml
+/// (OctoMap's prune() stops at the first level where nothing merged, a
+/// decision over the whole map) is not offered with them.
+///
 /// Example: octolinear build --points room.ply --color -o room.ot
+///
+/// Example: octolinear build scans.graph -o map.tiles --tile-depth 8 --memory-cap 2G
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub struct Args {
@@ -109,6 +126,65 @@ pub struct Args {
     /// Print the statistics as one JSON object instead of text.
     #[arg(long)]
     json: bool,
+    /// Depth of the tiles' roots (1 to 15; a tile is res * 2^(16-D) metres
+    /// a side) for a tile set output or a --memory-cap build [default: 8].
+    #[arg(long, value_name = "D")]
+    tile_depth: Option<u8>,
+    /// Build only the tiles of task K of N (0 <= K < N) into a NAME.tiles
+    /// output; `octolinear tiles manifest` combines the tasks' parts.
+    #[arg(long, value_name = "K/N")]
+    task: Option<String>,
+    /// Keep at most SIZE bytes of tiles in memory (e.g. 512M, 2G; K, M, G
+    /// are powers of 1024); the others wait on disk. The output is the same.
+    #[arg(long, value_name = "SIZE")]
+    memory_cap: Option<String>,
+}
+
+/// Tile depth of tiled builds without --tile-depth: tiles of 25.6 m at
+/// 0.1 m, a few MB of tree each where scans map densely.
+const DEFAULT_TILE_DEPTH: u8 = 8;
+
+/// How a tiled build runs, from the flags.
+struct Tiling {
+    depth: u8,
+    task: Option<TaskPart>,
+    memory_cap: Option<usize>,
+}
+
+/// The tiling the flags ask for; `None` for a plain build.
+fn tiling(a: &Args, tile_output: bool) -> Result<Option<Tiling>> {
+    if !tile_output && a.tile_depth.is_none() && a.memory_cap.is_none() {
+        if a.task.is_some() {
+            bail!("--task builds part of a tile set: the output must be NAME.tiles");
+        }
+        return Ok(None);
+    }
+    let depth = a.tile_depth.unwrap_or(DEFAULT_TILE_DEPTH);
+    if !(1..=octolinear::tiles::MAX_TILE_DEPTH).contains(&depth) {
+        bail!("--tile-depth must be between 1 and 15, got {depth}");
+    }
+    if a.color {
+        bail!("colour maps cannot be tiled (--color with a tile set, --tile-depth or --memory-cap)");
+    }
+    if a.compress_ml {
+        bail!("--compress-ml cannot be tiled: OctoMap's prune() decides level by level over the whole map");
+    }
+    let task = a.task.as_deref().map(tiles::task_arg).transpose()?;
+    if task.is_some() && !tile_output {
+        bail!("--task builds part of a tile set: the output must be NAME.tiles");
+    }
+    let memory_cap = a.memory_cap.as_deref().map(tiles::size_arg).transpose()?;
+    Ok(Some(Tiling { depth, task, memory_cap }))
+}
+
+/// A temporary directory for the tiles a capped build writes out, removed
+/// when dropped.
+struct SpillDir(PathBuf);
+
+impl Drop for SpillDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -312,6 +388,73 @@ fn insert_one_by_one(
     Ok(())
 }
 
+/// Inserts scans into a tiled map: ray by ray with `simple`, else with
+/// per-scan sets, the next scan cast while one is applied; `tick` after
+/// each scan.
+fn insert_tiled(
+    map: &mut TiledMap,
+    scans: impl Iterator<Item = Scan> + Send,
+    simple: bool,
+    opts: &ScanOptions,
+    tick: impl Fn() + Send + Sync,
+) -> Result<(), (usize, octolinear::tiles::TileError)> {
+    if simple {
+        for (i, scan) in scans.enumerate() {
+            map.insert_point_cloud_rays(&scan.points.points, scan.origin, InnerNodes::Update).map_err(|e| (i, e))?;
+            tick();
+        }
+        return Ok(());
+    }
+    map.insert_point_clouds(scans.map(|scan| (scan.points.points, scan.origin)), opts, |_, _| tick())
+}
+
+/// Writes a tiled build's tile set (or its task's part) and reports it.
+fn finish_tile_set(
+    a: &Args,
+    map: &mut TiledMap,
+    input: &str,
+    (scans, points, seconds): (usize, usize, f64),
+) -> Result<()> {
+    let phase = spinner(&format!("writing {}", a.output.display()));
+    let manifest = map.flush(&a.output)?;
+    if manifest.task.is_none() {
+        tiles::remove_unlisted_tiles(&a.output, &manifest)?;
+    }
+    phase.finish_and_clear();
+    let nodes = map.stats().nodes;
+    let bytes: u64 = manifest.tiles.iter().map(|t| t.bytes).sum();
+    if a.json {
+        let out = serde_json::json!({
+            "input": input, "output": a.output, "tree_type": manifest.kind.id(),
+            "scans": scans, "points": points, "insert_seconds": seconds,
+            "tile_depth": manifest.depth, "tiles": manifest.tiles.len(), "tile_bytes": bytes,
+            "task": manifest.task.map(|t| [t.index, t.count]),
+            "nodes": if manifest.task.is_none() { Some(nodes) } else { None },
+        });
+        println!("{out}");
+        return Ok(());
+    }
+    println!("Data points in graph: {points} ({scans} scans)");
+    println!("time to insert scans: {seconds} sec");
+    match manifest.task {
+        Some(t) => println!(
+            "Tiles of task {} of {} written to {} ({} tiles, {bytes} bytes); once every task is done, run: octolinear tiles manifest {}",
+            t.index,
+            t.count,
+            a.output.display(),
+            manifest.tiles.len(),
+            a.output.display()
+        ),
+        None => println!(
+            "Map written to {} ({} tiles at depth {}, {bytes} bytes; {nodes} nodes merged)",
+            a.output.display(),
+            manifest.tiles.len(),
+            manifest.depth
+        ),
+    }
+    Ok(())
+}
+
 /// What went into the map, counted as the scans stream past.
 #[derive(Default)]
 struct Tally {
@@ -383,7 +526,10 @@ fn input_name(a: &Args) -> String {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let format = MapFormat::of(&a.output)?;
+    let tile_output = tiles::is_tile_set(&a.output);
+    // a tile set is written by its own path below; `format` then only
+    // passes the checks that concern other outputs
+    let format = if tile_output { MapFormat::Ot } else { MapFormat::of(&a.output)? };
     let sensor = sensor_model(&a)?;
     if a.color && a.input.is_some() {
         bail!("--color needs --points files with colours (a .graph file has none)");
@@ -399,6 +545,29 @@ pub fn run(a: Args) -> Result<()> {
     }
     let kind = if a.color { NodeKind::Color } else { NodeKind::Plain };
     let mut tree = OccupancyTree::with_kind(a.res, sensor, kind)?;
+    let tiling = tiling(&a, tile_output)?;
+    let mut spill_dir = None;
+    let mut tiled = match &tiling {
+        Some(t) => {
+            let mut map = TiledMap::new(a.res, sensor, kind, t.depth)?;
+            if let Some(task) = t.task {
+                map.set_task(task);
+            }
+            if let Some(bytes) = t.memory_cap {
+                let dir = if tile_output {
+                    a.output.clone()
+                } else {
+                    let name = a.output.file_name().map_or_else(|| "map".into(), |n| n.to_string_lossy().into_owned());
+                    let dir = a.output.with_file_name(format!(".{name}.spill-{}", std::process::id()));
+                    spill_dir = Some(SpillDir(dir.clone()));
+                    dir
+                };
+                map.set_budget(MemoryBudget { bytes, dir })?;
+            }
+            Some(map)
+        }
+        None => None,
+    };
     let input = input_name(&a);
     let mut graph = a.input.as_deref().map(input::open_graph).transpose()?;
     let (announced, source): (usize, Scans<'_>) = match graph.as_mut() {
@@ -458,7 +627,10 @@ pub fn run(a: Args) -> Result<()> {
             }
         }
     });
-    let inserted = if a.simple || a.color {
+    let inserted = if let Some(map) = tiled.as_mut() {
+        insert_tiled(map, scans, a.simple, &opts, || bar.inc(1))
+            .map_err(|(i, e)| anyhow::Error::new(e).context(format!("scan {}", tally.ids[i])))
+    } else if a.simple || a.color {
         insert_one_by_one(&mut tree, scans, a.simple, &opts, after_each)
     } else {
         // with several threads the following scans are cast while one is applied
@@ -484,6 +656,16 @@ pub fn run(a: Args) -> Result<()> {
     let (seconds, read_seconds) = (start.elapsed().as_secs_f64(), reading.as_secs_f64());
     tally.warn(&a, &input, announced);
     let (scans, points) = (tally.ids.len(), tally.points);
+    if let Some(mut map) = tiled {
+        if tile_output {
+            return finish_tile_set(&a, &mut map, &input, (scans, points, seconds));
+        }
+        let phase = spinner("merging the tiles");
+        tree = map.merge()?;
+        phase.finish_and_clear();
+        drop(map);
+        drop(spill_dir);
+    }
     // one tree throughout (no copies): peak memory is the tree, compacted
     // in place, plus a scan's key sets
     let phase = spinner("compacting the tree");

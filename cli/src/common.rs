@@ -73,8 +73,12 @@ pub fn load_map(path: &Path) -> Result<LoadedMap> {
 }
 
 /// Reads any map by extension (`.ot` and `.olm` may hold a counting tree).
-/// An `.olm` map is verified on the way (checksums and structure).
+/// An `.olm` map is verified on the way (checksums and structure); a tile
+/// set (`NAME.tiles`) is merged into one tree, each tile verified.
 pub fn load_any(path: &Path) -> Result<AnyMap> {
+    if super::tiles::is_tile_set(path) {
+        return Ok(AnyMap::Occupancy(super::tiles::load(path)?));
+    }
     let format = MapFormat::of(path)?;
     if format == MapFormat::Olm {
         let mapped = open_olm(path)?;

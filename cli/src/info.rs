@@ -4,6 +4,7 @@
 use super::common::{
     human_number, load_any, load_map, open_olm, save_counting, save_map, verify_olm, AnyMap, MapFormat, OutputArg,
 };
+use super::tiles;
 use anyhow::{bail, Context, Result};
 use octolinear::formats::xyz;
 use octolinear::mapped::{Index, MappedMap, SectionKind, TreeKind, Variant};
@@ -11,7 +12,8 @@ use octolinear::sensor::probability;
 use octolinear::{BoundsRule, Key, KeySpace, NodeKind, OccupancyTree, Point3};
 use std::path::PathBuf;
 
-/// Print the kind, resolution and statistics of a map (.bt, .ot or .olm).
+/// Print the kind, resolution and statistics of a map (.bt, .ot or .olm),
+/// or of a tile set (NAME.tiles: its manifest's numbers, no tile read).
 ///
 /// Numbers are printed in their shortest form at the map's f32 precision;
 /// --json gives them in full.
@@ -19,7 +21,8 @@ use std::path::PathBuf;
 /// Example: octolinear info map.ot --json
 #[derive(clap::Args)]
 pub struct Args {
-    /// The map (.bt, .ot or .olm; an .olm map is verified first).
+    /// The map (.bt, .ot or .olm; an .olm map is verified first), or a
+    /// tile set (NAME.tiles).
     map: PathBuf,
     /// One JSON object instead of text.
     #[arg(long)]
@@ -60,6 +63,9 @@ fn summary(tree: &OccupancyTree, kind: &str) -> serde_json::Value {
 }
 
 pub fn run(a: Args) -> Result<()> {
+    if tiles::is_tile_set(&a.map) {
+        return tiles::info(&a.map, a.json);
+    }
     let m = load_map(&a.map)?;
     let s = summary(&m.tree, m.kind);
     if a.json {
@@ -110,7 +116,8 @@ pub fn run(a: Args) -> Result<()> {
 /// Example: octolinear convert map.ot map.bt
 #[derive(clap::Args)]
 pub struct ConvertArgs {
-    /// The map to read (.bt, .ot or .olm).
+    /// The map to read (.bt, .ot or .olm), or a tile set (NAME.tiles),
+    /// merged into one map with every tile verified.
     input: PathBuf,
     #[command(flatten)]
     output: OutputArg,
@@ -204,7 +211,8 @@ enum QueryFormat {
 /// Example: octolinear query map.olm --points points.xyz --format decimal
 #[derive(clap::Args)]
 pub struct QueryArgs {
-    /// The map (.bt, .ot or .olm).
+    /// The map (.bt, .ot or .olm), or a tile set (NAME.tiles: only the
+    /// tiles the points reach are mapped, each checked as an .olm map is).
     map: PathBuf,
     /// Text file with one `x y z` per line (a pipe such as /dev/stdin works:
     /// the map is opened first).
@@ -228,13 +236,17 @@ pub struct QueryArgs {
 enum QueryMap {
     Mapped(MappedMap<memmap2::Mmap>),
     Loaded(AnyMap),
+    /// Tiles mapped as the points reach them.
+    Tiles(octolinear::tiles::TileSet),
 }
 
 pub fn query(a: QueryArgs) -> Result<()> {
     use std::io::Write;
     // the map first: its errors come before a long read of points, and the
     // points may come from a pipe
-    let map = if MapFormat::of(&a.map)? == MapFormat::Olm {
+    let map = if tiles::is_tile_set(&a.map) {
+        QueryMap::Tiles(tiles::open_for_queries(&a.map, a.no_verify)?)
+    } else if MapFormat::of(&a.map)? == MapFormat::Olm {
         let map = open_olm(&a.map)?;
         if !a.no_verify {
             verify_olm(&a.map, &map)?;
@@ -266,6 +278,11 @@ pub fn query(a: QueryArgs) -> Result<()> {
         QueryMap::Loaded(AnyMap::Counting(t)) => {
             let counts = pts.points.iter().map(|p| t.key_space().key(*p).ok().and_then(|k| t.count(k, 0)));
             return print_counts(&pts.points, counts);
+        }
+        QueryMap::Tiles(set) => {
+            let point_keys = keys_of(set.key_space());
+            answers = tiles::search_all(set, &valid(&point_keys))?;
+            (set.manifest().node_kind(), point_keys, set.sensor())
         }
         QueryMap::Loaded(AnyMap::Occupancy(m)) => {
             let point_keys = keys_of(m.tree.key_space());
@@ -324,7 +341,9 @@ fn print_counts(points: &[Point3], counts: impl Iterator<Item = Option<u32>>) ->
 }
 
 /// Check every byte of a memory-mapped `.olm` map: header and section
-/// checksums, zero padding, the child index and the tree structure.
+/// checksums, zero padding, the child index and the tree structure. Of a
+/// tile set (NAME.tiles): its manifest, then every tile file so, with its
+/// length, CRC-32 and root node against the manifest.
 ///
 /// Prints what was checked and the map's node counts (--json: one JSON
 /// object). A damaged map is an error naming the first problem found.
@@ -332,7 +351,7 @@ fn print_counts(points: &[Point3], counts: impl Iterator<Item = Option<u32>>) ->
 /// Example: octolinear verify map.olm
 #[derive(clap::Args)]
 pub struct VerifyArgs {
-    /// The map (.olm).
+    /// The map (.olm), or a tile set (NAME.tiles).
     map: PathBuf,
     /// One JSON object instead of text.
     #[arg(long)]
@@ -340,6 +359,9 @@ pub struct VerifyArgs {
 }
 
 pub fn verify(a: VerifyArgs) -> Result<()> {
+    if tiles::is_tile_set(&a.map) {
+        return tiles::verify(&a.map, a.json);
+    }
     if matches!(MapFormat::of(&a.map), Ok(MapFormat::Bt | MapFormat::Ot)) {
         bail!("{}: verify checks .olm maps (.bt and .ot carry no checksums)", a.map.display());
     }

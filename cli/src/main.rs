@@ -15,6 +15,7 @@ mod points;
 mod raycast;
 mod render;
 mod simulate;
+mod tiles;
 
 use clap::{Parser, Subcommand};
 
@@ -44,6 +45,7 @@ enum Command {
     Raycast(raycast::Args),
     Render(render::Args),
     Mesh(mesh::Args),
+    Tiles(tiles::Args),
 }
 
 /// Restores the default SIGPIPE action so that `octolinear ... | head`
@@ -122,6 +124,7 @@ fn run() -> i32 {
         Command::Raycast(a) => raycast::run(a),
         Command::Render(a) => render::run(a),
         Command::Mesh(a) => mesh::run(a),
+        Command::Tiles(a) => tiles::run(a),
     };
     match result {
         Ok(()) => 0,
@@ -132,36 +135,27 @@ fn run() -> i32 {
     }
 }
 
-/// An error and its causes on one line, `: `-separated, without the causes
-/// that a message already ends with (the library's errors print their
-/// source, an I/O error, as part of their own message).
+/// An error and its causes on one line, `: `-separated, outermost first.
+/// The library's errors do not repeat their cause (an I/O error, a key
+/// error) in their own message but give it as `source()`, so each cause
+/// appears once.
 fn error_line(e: &anyhow::Error) -> String {
-    let mut line = String::new();
-    for cause in e.chain() {
-        let text = cause.to_string();
-        if line.ends_with(&text) {
-            continue;
-        }
-        if !line.is_empty() {
-            line.push_str(": ");
-        }
-        line.push_str(&text);
-    }
-    line
+    format!("{e:#}")
 }
 
 #[cfg(test)]
 mod tests {
     use super::error_line;
+    use anyhow::Context;
 
     #[test]
     fn an_error_line_names_each_cause_once() {
-        let io = std::io::Error::from(std::io::ErrorKind::NotFound);
-        #[derive(Debug, thiserror::Error)]
-        #[error("I/O error at byte 0: {0}")]
-        struct Wrapped(#[source] std::io::Error);
-        let e = anyhow::Error::new(Wrapped(io)).context("cannot read x.graph");
-        assert_eq!(error_line(&e), "cannot read x.graph: I/O error at byte 0: entity not found");
+        let dir = tempfile::tempdir().unwrap();
+        let missing = dir.path().join("x.bt");
+        let e = octolinear::formats::bt::read_file(&missing).context("cannot read x.bt").unwrap_err();
+        let line = error_line(&e);
+        assert!(line.starts_with("cannot read x.bt: I/O error: "), "{line}");
+        assert_eq!(line.matches("os error 2").count(), 1, "{line}");
         let e = anyhow::anyhow!("inner").context("outer");
         assert_eq!(error_line(&e), "outer: inner");
     }

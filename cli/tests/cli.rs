@@ -2016,6 +2016,184 @@ fn to_points_refuses_more_points_than_it_can_hold() {
     assert_eq!(written.lines().count(), 8 * 8usize.pow(4));
 }
 
+// ----- tile sets: tiled builds, builds in parts, memory caps -----------------------------------
+
+/// Builds the fixture's graph to `out` with `flags`; returns the bytes
+/// written (a file) or, for a tile set, its conversion to `as_ext`.
+fn tiled_build_bytes(f: &Fixture, out: &str, flags: &[&str]) -> Vec<u8> {
+    let mut args = vec!["build", f.p("s.graph"), "-o", out];
+    args.extend(flags);
+    ok(&args);
+    std::fs::read(out).unwrap()
+}
+
+/// The bytes `convert SET OUT` writes.
+fn converted(f: &Fixture, set: &str, out: &str) -> Vec<u8> {
+    let out = f.p(out);
+    ok(&["convert", set, out]);
+    std::fs::read(out).unwrap()
+}
+
+#[test]
+fn tiled_builds_convert_to_the_plain_build_bytes() {
+    let f = Fixture::new();
+    assert!(ok(&["tiles", "--help"]).contains("Example: octolinear tiles manifest"));
+    ok(&["build", f.p("s.graph"), "-o", f.p("a.olm"), "--res", "0.1"]);
+    for depth in ["1", "4", "9", "15"] {
+        let set = f.p(&format!("d{depth}.tiles"));
+        let out = ok(&["build", f.p("s.graph"), "-o", set, "--res", "0.1", "--tile-depth", depth]);
+        assert!(out.contains(&format!("at depth {depth}")), "{out}");
+        for plain in ["a.ot", "a.bt", "a.olm"] {
+            let ext = plain.rsplit('.').next().unwrap();
+            let want = std::fs::read(f.path(plain)).unwrap();
+            assert!(converted(&f, set, &format!("d{depth}.{ext}")) == want, "depth {depth}: {ext} differs");
+        }
+        assert!(ok(&["verify", set]).contains(": ok"));
+        let info = json(&ok(&["info", set, "--json"]));
+        assert_eq!(info["tile_depth"], depth.parse::<u64>().unwrap());
+        assert_eq!(info["nodes"].as_u64().unwrap() as usize, read_tree(f.p("a.ot")).size());
+        // another build into the same set leaves no tile of the first behind
+        ok(&["build", f.p("s.graph"), "-o", set, "--res", "0.1", "--tile-depth", depth, "--max-range", "2"]);
+        let manifest = octolinear::tiles::read_manifest(&f.path(&format!("d{depth}.tiles/manifest"))).unwrap();
+        let files = std::fs::read_dir(f.path(&format!("d{depth}.tiles"))).unwrap().count();
+        assert_eq!(files, manifest.tiles.len() + 1, "depth {depth}");
+    }
+}
+
+#[test]
+fn queries_on_a_tile_set_answer_as_the_map_and_map_only_their_tiles() {
+    let f = Fixture::new();
+    let set = f.p("q.tiles");
+    ok(&["build", f.p("s.graph"), "-o", set, "--res", "0.1", "--tile-depth", "12"]);
+    let tree = read_tree(f.p("a.ot"));
+    // the centre of every leaf, and points in unknown space
+    let mut points: Vec<Point3> = tree.leaves(0).step_by(7).map(|l| l.center_point()).collect();
+    points.extend([Point3::new(500.0, 3.0, 1.0), Point3::new(-0.05, 0.05, 40.0), Point3::new(1e9, 0.0, 0.0)]);
+    let text: String = points.iter().map(|p| format!("{} {} {}\n", p.x, p.y, p.z)).collect();
+    let pts = f.write("q.xyz", text);
+    let want = ok(&["query", f.p("a.ot"), "--points", pts]);
+    assert_eq!(ok(&["query", set, "--points", pts]), want);
+    assert_eq!(ok(&["query", set, "--points", pts, "--no-verify"]), want);
+    // a tile no point reaches may be gone; one a point reaches may not
+    let manifest = octolinear::tiles::read_manifest(&f.path("q.tiles/manifest")).unwrap();
+    let one = f.write("one.xyz", format!("{} {} {}\n", points[0].x, points[0].y, points[0].z));
+    let keys = octolinear::KeySpace::new(0.1);
+    let reached = octolinear::tiles::TileId::of_key(keys.key(points[0]).unwrap(), 12);
+    let other = manifest.tiles.iter().find(|t| t.id != reached && !t.root.is_leaf).unwrap().id;
+    std::fs::remove_file(f.path(&format!("q.tiles/{}", other.file_name()))).unwrap();
+    ok(&["query", set, "--points", one]);
+    fail(&["query", set, "--points", pts], &format!("tile {other}"));
+    fail(&["verify", set], "is missing");
+    fail(&["convert", set, f.p("q.ot")], &format!("tile {other}"));
+}
+
+#[test]
+fn tile_sets_built_in_parts_combine_to_the_plain_build() {
+    let f = Fixture::new();
+    let flags =
+        ["--res", "0.1", "--max-range", "6", "--discretize", "--sensor", "0.35", "0.8", "--clamping", "0.15", "0.95"];
+    let want = tiled_build_bytes(&f, f.p("plain.ot"), &flags);
+    let set = f.p("parts.tiles");
+    for k in 0..3 {
+        let task = format!("{k}/3");
+        let mut args = vec!["build", f.p("s.graph"), "-o", set, "--tile-depth", "10", "--task", &task];
+        args.extend(flags);
+        let out = ok(&args);
+        assert!(out.contains(&format!("task {k} of 3")), "{out}");
+        if k == 0 {
+            fail(&["convert", set, f.p("early.ot")], "manifest");
+            fail(&["tiles", "manifest", set], "the part of task 1 of 3 is missing");
+        }
+    }
+    assert!(!f.path("parts.tiles/manifest").exists());
+    ok(&["tiles", "manifest", set]);
+    assert!(!f.path("parts.tiles/task-0-of-3.manifest").exists());
+    assert!(converted(&f, set, "parts.ot") == want);
+    assert!(ok(&["verify", set]).contains(": ok"));
+    fail(&["tiles", "manifest", set], "holds no task parts");
+}
+
+#[test]
+fn memory_capped_builds_equal_uncapped_builds() {
+    let f = Fixture::new();
+    let simple = &["--res", "0.05", "--simple", "--threads", "1"][..];
+    let runs =
+        [(&["--res", "0.1"][..], "a", &[("4K", "9"), ("1", "12"), ("64M", "3")][..]), (simple, "s", &[("1", "11")])];
+    for (flags, name, caps) in runs {
+        let want_ot = tiled_build_bytes(&f, f.p(&format!("{name}-plain.ot")), flags);
+        let want_bt = tiled_build_bytes(&f, f.p(&format!("{name}-plain.bt")), flags);
+        for &(cap, depth) in caps {
+            let capped = [flags, &["--memory-cap", cap, "--tile-depth", depth]].concat();
+            assert!(tiled_build_bytes(&f, f.p(&format!("{name}{cap}.ot")), &capped) == want_ot, "{name} {cap}");
+            assert!(tiled_build_bytes(&f, f.p(&format!("{name}{cap}.bt")), &capped) == want_bt, "{name} {cap}");
+            let set = f.p(&format!("{name}{cap}.tiles"));
+            let mut args = vec!["build", f.p("s.graph"), "-o", set];
+            args.extend(&capped);
+            ok(&args);
+            assert!(converted(&f, set, &format!("{name}{cap}-set.ot")) == want_ot, "{name} {cap} tile set");
+        }
+    }
+    // the tiles written out during a capped build are gone with it
+    let left: Vec<String> = std::fs::read_dir(f.dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains("spill"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
+}
+
+#[test]
+fn damaged_tile_sets_are_errors_naming_the_tile_or_manifest_line() {
+    let f = Fixture::new();
+    let set = f.p("bad.tiles");
+    ok(&["build", f.p("s.graph"), "-o", set, "--tile-depth", "6"]);
+    let manifest_path = f.path("bad.tiles/manifest");
+    let manifest = octolinear::tiles::read_manifest(&manifest_path).unwrap();
+    let tile = manifest.tiles.iter().max_by_key(|t| t.bytes).unwrap().id;
+    let tile_path = f.path(&format!("bad.tiles/{}", tile.file_name()));
+    let original = std::fs::read(&tile_path).unwrap();
+    // a flipped bit in the nodes, then a truncated file
+    let mut flipped = original.clone();
+    let at = flipped.len() - 5;
+    flipped[at] ^= 0x10;
+    for damaged in [flipped, original[..original.len() - 64].to_vec()] {
+        std::fs::write(&tile_path, &damaged).unwrap();
+        for args in [vec!["verify", set], vec!["convert", set, f.p("x.ot")], vec!["info", set, "--json"]] {
+            if args[0] == "info" {
+                ok(&args); // the manifest alone: no tile read
+                continue;
+            }
+            fail(&args, &format!("tile {tile}"));
+        }
+    }
+    std::fs::write(&tile_path, &original).unwrap();
+    assert!(ok(&["verify", set]).contains(": ok"));
+    let text = std::fs::read_to_string(&manifest_path).unwrap();
+    std::fs::write(&manifest_path, text.replacen("tile_depth 6", "tile_depth 7", 1)).unwrap();
+    for args in [vec!["verify", set], vec!["info", set], vec!["convert", set, f.p("x.ot")]] {
+        fail(&args, "manifest: line");
+    }
+    std::fs::write(&manifest_path, &text[..text.len() - 3]).unwrap();
+    fail(&["verify", set], "does not end with a newline");
+    std::fs::remove_file(&manifest_path).unwrap();
+    fail(&["info", set], "manifest");
+}
+
+#[test]
+fn tile_flags_that_cannot_apply_are_refused() {
+    let f = Fixture::new();
+    let g = f.p("s.graph");
+    fail(&["build", g, "-o", f.p("t.tiles"), "--tile-depth", "0"], "--tile-depth must be between 1 and 15");
+    fail(&["build", g, "-o", f.p("t.ot"), "--tile-depth", "16"], "--tile-depth must be between 1 and 15");
+    fail(&["build", g, "-o", f.p("t.ot"), "--task", "0/2"], "the output must be NAME.tiles");
+    fail(&["build", g, "-o", f.p("t.tiles"), "--task", "2/2"], "--task must be K/N");
+    fail(&["build", g, "-o", f.p("t.ot"), "--memory-cap", "12X"], "--memory-cap");
+    fail(&["build", g, "-o", f.p("t.ot"), "--memory-cap", "0"], "--memory-cap");
+    fail(&["build", g, "-o", f.p("t.tiles"), "--compress-ml"], "--compress-ml cannot be tiled");
+    fail(&["tiles", "manifest", f.p("none.tiles")], "none.tiles");
+    fail_usage(&["tiles", "merge", f.p("x.tiles")], "unrecognized subcommand");
+}
+
 // ----- simulate: unlimited range
 
 /// `--range inf` keeps returns beyond the outdoor default of 100 m; a range

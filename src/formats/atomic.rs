@@ -24,8 +24,12 @@
 //!   [`remove_temp_files_on_signals`] at start (the `octolinear` tool does),
 //!   or [`remove_temp_files`] from a handler of its own.
 
+// the module's system calls, its only `unsafe`
 #[cfg(unix)]
+#[allow(unsafe_code)]
 mod signals;
+#[cfg(unix)]
+use signals::process_runs;
 #[cfg(unix)]
 pub use signals::{remove_temp_files, remove_temp_files_on_signals};
 
@@ -57,8 +61,44 @@ use std::path::{Path, PathBuf};
 /// See the [module documentation](self) for permissions, links and
 /// temporary files left by killed processes.
 pub fn write_atomically(path: &Path, write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>) -> io::Result<()> {
+    write_atomically_with(path, true, write)
+}
+
+/// [`write_atomically`] for one of many files written into one directory
+/// together (a tile set's tiles): without the search for stale temporary
+/// files of the name, which lists the directory, and without the sync,
+/// which the writer does once for all of them ([`sync_filesystem`])
+/// before anything refers to them.
+pub(crate) fn write_atomically_batched(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>,
+) -> io::Result<()> {
+    write_atomically_with(path, false, write)
+}
+
+/// Writes to disk everything written so far to the filesystem holding
+/// `dir` (`syncfs`; elsewhere than on Linux, `sync`).
+pub(crate) fn sync_filesystem(dir: &Path) -> io::Result<()> {
+    #[cfg(unix)]
+    {
+        signals::sync_filesystem(dir)
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = dir;
+        Ok(())
+    }
+}
+
+/// [`write_atomically`], with (`alone`) or without the search for stale
+/// temporary files and the sync.
+fn write_atomically_with(
+    path: &Path,
+    alone: bool,
+    write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>,
+) -> io::Result<()> {
     let target = final_target(path)?;
-    let written = replace(&target, write);
+    let written = replace(&target, alone, write);
     if target == path {
         written
     } else {
@@ -66,7 +106,7 @@ pub fn write_atomically(path: &Path, write: impl FnOnce(&mut BufWriter<&File>) -
     }
 }
 
-fn replace(target: &Path, write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>) -> io::Result<()> {
+fn replace(target: &Path, alone: bool, write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>) -> io::Result<()> {
     let name = target
         .file_name()
         .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, format!("{} names no file", target.display())))?;
@@ -81,12 +121,16 @@ fn replace(target: &Path, write: impl FnOnce(&mut BufWriter<&File>) -> io::Resul
         Err(e) => return Err(e),
     };
     #[cfg(unix)]
-    remove_stale_temps(dir, name);
+    if alone {
+        remove_stale_temps(dir, name);
+    }
     let mut temp = create_temp(dir, name, existing.as_ref())?;
     let mut w = BufWriter::with_capacity(1 << 16, &temp.file);
     write(&mut w)?;
     w.into_inner().map_err(io::IntoInnerError::into_error)?;
-    temp.file.sync_all()?;
+    if alone {
+        temp.file.sync_all()?;
+    }
     fs::rename(&temp.path, target)?;
     temp.renamed = true;
     Ok(())
@@ -225,16 +269,6 @@ fn temp_pid(name: &OsStr, file: &OsStr) -> Option<libc::pid_t> {
     (pid > 0).then_some(pid)
 }
 
-/// Whether process `pid` exists (also one of another user, which the
-/// probe may not signal).
-#[cfg(unix)]
-fn process_runs(pid: libc::pid_t) -> bool {
-    // SAFETY: signal 0 only checks that the process exists; `pid` is
-    // positive, so it names one process, never a process group.
-    let probed = unsafe { libc::kill(pid, 0) };
-    probed == 0 || io::Error::last_os_error().raw_os_error() != Some(libc::ESRCH)
-}
-
 #[cfg(all(test, unix))]
 mod tests {
     use super::*;
@@ -329,17 +363,16 @@ mod tests {
             assert_eq!(fs::read_to_string(&out).unwrap(), "new");
             fs::remove_file(&out).unwrap();
         }
-        // root gives the new file the old one's owner and group
-        // SAFETY: geteuid has no preconditions.
-        if unsafe { libc::geteuid() } == 0 {
+        // a process that may give files away (root) gives the new file the
+        // old one's owner and group
+        write_text(&out, "old").unwrap();
+        if std::os::unix::fs::chown(&out, Some(12345), Some(23456)).is_ok() {
             use std::os::unix::fs::MetadataExt;
-            write_text(&out, "old").unwrap();
-            std::os::unix::fs::chown(&out, Some(12345), Some(23456)).unwrap();
             write_text(&out, "new").unwrap();
             let m = fs::metadata(&out).unwrap();
             assert_eq!((m.uid(), m.gid()), (12345, 23456));
-            fs::remove_file(&out).unwrap();
         }
+        fs::remove_file(&out).unwrap();
         let created = dir.path().join("created.txt");
         File::create(&created).unwrap();
         write_text(&out, "new").unwrap();

@@ -10,9 +10,11 @@
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, BT_FIRST_LINE};
 use super::TreeFileError;
 use crate::sensor::SensorModel;
-use crate::tree::{default_extra, LabelFill, NodeKind, OccupancyTree};
-use crate::tree::{in_leaf_pool, NodeId, Parts};
+use crate::tree::{default_extra, ChildGroup, LabelFill, NodeKind, NodeRef, OccupancyTree};
+use crate::tree::{PreorderNode, PreorderVisitor};
+use std::convert::Infallible;
 use std::io::{self, BufRead, Write};
+use std::ops::ControlFlow;
 use std::path::Path;
 
 /// Reads a `.bt` file into a tree with the default sensor model.
@@ -150,34 +152,41 @@ pub fn write(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
 /// the one where `prune` stops would merge something; then a second pass
 /// writes the records with merges below that level only.
 pub(crate) fn write_ml_data(tree: &OccupancyTree, out: &mut Vec<u8>) -> usize {
-    let Some(arena) = tree.arena() else {
+    let Some(root) = tree.root() else {
         return tree.size();
     };
-    let ml = MlView::new(arena.parts(), tree.sensor());
     let stamped = tree.kind() == NodeKind::Stamped;
-    let emit = |lowest: usize, out: &mut Vec<u8>, counts: &mut [usize; 16]| {
+    let sensor = tree.sensor();
+    let emit = |lowest: usize, out: &mut Vec<u8>| {
         if stamped {
-            ml.emit::<true>(0, 0, lowest, out, counts);
+            MlRecords::<true>::write(root, sensor, lowest, out)
         } else {
-            ml.emit::<false>(0, 0, lowest, out, counts);
+            MlRecords::<false>::write(root, sensor, lowest, out)
         }
     };
-    out.reserve(2 * (arena.parts().masks.len() / 8 + 1));
+    out.reserve(records_hint(tree));
     let start = out.len();
-    let mut counts = [0usize; 16];
-    emit(1, out, &mut counts);
+    let counts = emit(1, out);
     // as `OccupancyTree::prune`: the deepest level that merges nothing
     // stops it; only the levels below that one merge
     let stop = (1..16).rev().find(|&d| counts[d] == 0).unwrap_or(0);
     let lowest = stop.max(1);
     if counts[1..lowest].iter().any(|&c| c > 0) {
         out.truncate(start);
-        emit(lowest, out, &mut [0; 16]);
+        emit(lowest, out);
     }
     tree.size() - 8 * counts[lowest..].iter().sum::<usize>()
 }
 
-/// The tree as `toMaxLikelihood()` would leave it, read in place.
+/// Bytes to reserve for a tree's records: a guess (two bytes per node
+/// with children, about a sixth of the nodes on the simulated maps) that
+/// saves most of the output's regrowth.
+fn records_hint(tree: &OccupancyTree) -> usize {
+    2 * (tree.size() / 6 + 1)
+}
+
+/// The records of the tree as `toMaxLikelihood()` would leave it, read in
+/// place by a pre-order walk.
 ///
 /// Maximum likelihood leaves a node one of two values: the upper clamping
 /// bound when it is occupied (class 1), else the lower (class 0). What
@@ -186,100 +195,149 @@ pub(crate) fn write_ml_data(tree: &OccupancyTree, out: &mut Vec<u8>) -> usize {
 /// whether the values of two classes compare equal (they may not, even
 /// within a class, when a bound is NaN; they do across classes when the
 /// bounds are equal).
-struct MlView<'a> {
-    arena: Parts<'a>,
+///
+/// A node with children gets its record when the walk enters it, with the
+/// labels of its leaf children; each inner child adds its label when the
+/// walk leaves it: 3, or, when the child merges (eight leaves that
+/// `pruneNode` would merge, at depth `lowest` or deeper, once every level
+/// below it is pruned), the label of a leaf of its class, its own records
+/// dropped.
+struct MlRecords<'o, const STAMPED: bool> {
     threshold: f32,
     /// The label of a leaf of each class: 2 when its value is occupied, else 1.
     label: [u16; 2],
     /// `equal[a][b]`: whether values of classes `a` and `b` compare equal.
     equal: [[bool; 2]; 2],
+    lowest: usize,
+    out: &'o mut Vec<u8>,
+    /// Merges per depth.
+    counts: [usize; 16],
+    /// The open record of the node at each depth of the walk's path.
+    path: [Open; 16],
+    /// Stamped trees: the stamps of those nodes' children that are (or
+    /// merged into) leaves, by position.
+    stamps: [[u32; 8]; 16],
 }
 
-impl<'a> MlView<'a> {
-    fn new(arena: Parts<'a>, s: &SensorModel) -> Self {
+/// The record of a node whose subtree the walk has not left yet.
+#[derive(Clone, Copy, Default)]
+struct Open {
+    /// Where its record lies in the output.
+    at: usize,
+    labels: u16,
+    /// Classes of the children that are (or merged into) leaves, by position.
+    occupied: u8,
+    /// Children that stay inner.
+    inner: u8,
+    /// Inner children the walk has not left yet.
+    pending: u8,
+}
+
+impl<'o, const STAMPED: bool> MlRecords<'o, STAMPED> {
+    /// Appends the records below `root` with merges at depth `lowest` or
+    /// deeper; returns the merges per depth.
+    fn write(root: NodeRef<'_>, s: &SensorModel, lowest: usize, out: &'o mut Vec<u8>) -> [usize; 16] {
+        if !root.has_children() {
+            // a lone root: a record without children
+            out.extend_from_slice(&[0, 0]);
+            return [0; 16];
+        }
         let value = [s.clamping_min, s.clamping_max];
         let label = value.map(|v| if s.is_occupied(v) { 2 } else { 1 });
         let equal = [0, 1].map(|a| [0, 1].map(|b| value[a] == value[b]));
-        MlView { arena, threshold: s.occupancy_threshold, label, equal }
+        let mut w = MlRecords::<STAMPED> {
+            threshold: s.occupancy_threshold,
+            label,
+            equal,
+            lowest,
+            out,
+            counts: [0; 16],
+            path: [Open::default(); 16],
+            stamps: [[0; 8]; 16],
+        };
+        let ControlFlow::Continue(()) = root.visit_preorder(&mut w);
+        w.counts
     }
 
-    /// Appends the record of inner node `n` at `depth` and those of its
-    /// subtree, merging the nodes at depth `lowest` or deeper that merge
-    /// once every level below them is pruned, and counts those per depth.
-    /// Returns `Some((class, stamp))` when `n` itself merges: the caller
-    /// then drops what was appended and labels `n` a leaf of that class.
-    fn emit<const STAMPED: bool>(
-        &self,
-        n: NodeId,
-        depth: usize,
-        lowest: usize,
-        out: &mut Vec<u8>,
-        counts: &mut [usize; 16],
-    ) -> Option<(u8, u32)> {
-        let at = out.len();
-        out.extend_from_slice(&[0, 0]);
-        let a = self.arena;
-        let mask = a.mask(n);
-        let first = a.first_child[n as usize];
-        let group = first..first + mask.count_ones();
-        // ask for the child groups of the inner children now, all at once,
-        // rather than one after the other as the recursion reaches them
-        if !in_leaf_pool(first) {
-            for g in group.clone() {
-                if a.masks[g as usize] != 0 {
-                    a.prefetch_group(a.first_child[g as usize]);
-                }
-            }
+    /// A child at `pos` of the open node at `depth` that is a leaf of
+    /// `class`, or merged into one.
+    #[inline(always)]
+    fn add_leaf(&mut self, depth: usize, pos: u32, class: u8, stamp: u32) {
+        let open = &mut self.path[depth];
+        open.occupied |= class << pos;
+        open.labels |= self.label[usize::from(class)] << (2 * pos);
+        if STAMPED {
+            self.stamps[depth][pos as usize] = stamp;
         }
-        let mut labels = 0u16;
-        // classes by child position; children that stay inner
-        let mut occupied = 0u8;
-        let mut inner = 0u8;
-        let mut stamps_equal = true;
-        let mut stamp0 = 0;
-        let mut rest = mask;
-        for c in group {
-            let pos = rest.trailing_zeros();
-            rest &= rest - 1;
-            let (class, stamp) = if a.mask(c) == 0 {
-                (u8::from(a.value(c) >= self.threshold), if STAMPED { a.extra(c) } else { 0 })
+    }
+}
+
+impl<const STAMPED: bool> PreorderVisitor for MlRecords<'_, STAMPED> {
+    type Break = Infallible;
+
+    #[inline(always)]
+    fn enter(&mut self, node: &PreorderNode, children: &ChildGroup<'_>) -> ControlFlow<Infallible> {
+        let depth = usize::from(node.depth);
+        self.path[depth] = Open { at: self.out.len(), ..Open::default() };
+        self.out.extend_from_slice(&[0, 0]);
+        let (masks, values, extras) = (children.child_masks(), children.values(), children.extras());
+        for (rank, pos) in children.positions() {
+            if masks[rank] == 0 {
+                let class = u8::from(values[rank] >= self.threshold);
+                self.add_leaf(depth, pos, class, if STAMPED { extras[rank] } else { 0 });
             } else {
-                let before = out.len();
-                match self.emit::<STAMPED>(c, depth + 1, lowest, out, counts) {
-                    Some(leaf) => {
-                        out.truncate(before);
-                        leaf
-                    }
-                    None => {
-                        inner |= 1 << pos;
-                        labels |= 3 << (2 * pos);
-                        continue;
-                    }
-                }
-            };
-            occupied |= class << pos;
-            labels |= self.label[usize::from(class)] << (2 * pos);
-            if STAMPED {
-                if pos == 0 {
-                    stamp0 = stamp;
-                } else if stamp != stamp0 {
-                    stamps_equal = false;
-                }
+                self.path[depth].pending |= 1 << pos;
             }
         }
-        out[at..at + 2].copy_from_slice(&labels.to_le_bytes());
-        // `pruneNode`: eight leaves whose values (and stamps) all equal
-        // child 0's
-        if mask != 0xff || inner != 0 || depth < lowest || !stamps_equal {
+        ControlFlow::Continue(())
+    }
+
+    #[inline(always)]
+    fn leave(&mut self, node: &PreorderNode) -> ControlFlow<Infallible> {
+        let depth = usize::from(node.depth);
+        let open = self.path[depth];
+        self.out[open.at..open.at + 2].copy_from_slice(&open.labels.to_le_bytes());
+        if depth == 0 {
+            return ControlFlow::Continue(());
+        }
+        let merged = self.merges(node, &open);
+        let parent = &mut self.path[depth - 1];
+        let pos = parent.pending.trailing_zeros();
+        parent.pending &= parent.pending - 1;
+        match merged {
+            Some(class) => {
+                self.counts[depth] += 1;
+                self.out.truncate(open.at);
+                self.add_leaf(depth - 1, pos, class, self.stamps[depth][0]);
+            }
+            None => {
+                parent.inner |= 1 << pos;
+                parent.labels |= 3 << (2 * pos);
+            }
+        }
+        ControlFlow::Continue(())
+    }
+}
+
+impl<const STAMPED: bool> MlRecords<'_, STAMPED> {
+    /// `pruneNode`'s test on a node whose subtree the walk has left: eight
+    /// leaves whose values (and stamps) all equal child 0's. `Some(class)`
+    /// of the leaf it becomes.
+    #[inline(always)]
+    fn merges(&self, node: &PreorderNode, open: &Open) -> Option<u8> {
+        if node.child_mask != 0xff || open.inner != 0 || usize::from(node.depth) < self.lowest {
             return None;
         }
-        let class0 = usize::from(occupied & 1);
-        let others = occupied >> 1;
+        let stamps = &self.stamps[usize::from(node.depth)];
+        if STAMPED && stamps.iter().any(|&s| s != stamps[0]) {
+            return None;
+        }
+        let class0 = usize::from(open.occupied & 1);
+        let others = open.occupied >> 1;
         if (others != 0 && !self.equal[1][class0]) || (others != 0x7f && !self.equal[0][class0]) {
             return None;
         }
-        counts[depth] += 1;
-        Some((class0 as u8, stamp0))
+        Some(class0 as u8)
     }
 }
 
@@ -294,52 +352,44 @@ pub fn write_const(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
 /// Writes the binary node stream alone, without header
 /// (`writeBinaryData`): the tree as it is, like [`write_const`].
 pub(crate) fn write_data(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
-    let Some(arena) = tree.arena() else {
+    let Some(root) = tree.root() else {
         return Ok(());
     };
-    let parts = arena.parts();
-    let mut out = Vec::with_capacity(2 * (parts.masks.len() / 8 + 1));
-    write_const_node(parts, tree.sensor(), 0, &mut out);
-    w.write_all(&out)
+    let mut records = ConstRecords { sensor: tree.sensor(), out: Vec::with_capacity(records_hint(tree)) };
+    if !root.has_children() {
+        // a lone root: a record without children
+        records.out.extend_from_slice(&[0, 0]);
+    }
+    let ControlFlow::Continue(()) = root.visit_preorder(&mut records);
+    w.write_all(&records.out)
 }
 
-/// Appends the record of node `n` (which has children) and those of its
-/// subtree: children with children are labelled 3, leaves 2 when occupied,
-/// else 1.
-fn write_const_node(a: Parts<'_>, sensor: &SensorModel, n: NodeId, out: &mut Vec<u8>) {
-    let mask = a.mask(n);
-    let first = a.first_child[n as usize];
-    let group = first..first + mask.count_ones();
-    let inner_group = !in_leaf_pool(first);
-    // ask for the inner children's groups before the recursion needs them
-    if inner_group {
-        for c in group.clone() {
-            if a.masks[c as usize] != 0 {
-                a.prefetch_group(a.first_child[c as usize]);
-            }
+/// The records of the tree as it is: per node with children, children with
+/// children labelled 3, leaves 2 when occupied, else 1.
+struct ConstRecords<'s> {
+    sensor: &'s SensorModel,
+    out: Vec<u8>,
+}
+
+impl PreorderVisitor for ConstRecords<'_> {
+    type Break = Infallible;
+
+    #[inline(always)]
+    fn enter(&mut self, _: &PreorderNode, children: &ChildGroup<'_>) -> ControlFlow<Infallible> {
+        let (masks, values) = (children.child_masks(), children.values());
+        let mut labels = 0u16;
+        for (rank, pos) in children.positions() {
+            let label = if masks[rank] != 0 {
+                3
+            } else if self.sensor.is_occupied(values[rank]) {
+                2
+            } else {
+                1
+            };
+            labels |= label << (2 * pos);
         }
-    }
-    let mut labels = 0u16;
-    let mut rest = mask;
-    for c in group.clone() {
-        let pos = rest.trailing_zeros();
-        rest &= rest - 1;
-        let label = if a.mask(c) != 0 {
-            3
-        } else if sensor.is_occupied(a.value(c)) {
-            2
-        } else {
-            1
-        };
-        labels |= label << (2 * pos);
-    }
-    out.extend_from_slice(&labels.to_le_bytes());
-    if inner_group {
-        for c in group {
-            if a.masks[c as usize] != 0 {
-                write_const_node(a, sensor, c, out);
-            }
-        }
+        self.out.extend_from_slice(&labels.to_le_bytes());
+        ControlFlow::Continue(())
     }
 }
 

@@ -101,7 +101,7 @@ impl ScanGraph {
 #[derive(Debug, thiserror::Error)]
 pub enum GraphError {
     /// The underlying reader failed.
-    #[error("I/O error at byte offset {offset}: {source}")]
+    #[error("I/O error at byte offset {offset}")]
     Io {
         /// Byte offset of the read that failed.
         offset: u64,

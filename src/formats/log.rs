@@ -27,7 +27,7 @@ use crate::geometry::{PointCloud, Pose6D};
 #[derive(Debug, thiserror::Error)]
 pub enum LogError {
     /// Opening or reading failed.
-    #[error("I/O error at line {line}: {source}")]
+    #[error("I/O error at line {line}")]
     Io {
         /// The line being read (0 when the file could not be opened).
         line: u64,

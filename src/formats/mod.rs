@@ -29,7 +29,7 @@ use std::path::Path;
 #[derive(Debug, thiserror::Error)]
 pub enum TreeFileError {
     /// The underlying reader failed (other than by ending early).
-    #[error("I/O error: {0}")]
+    #[error("I/O error")]
     Io(#[from] io::Error),
     /// The text header is malformed: no `data` line, no `id`, a line or
     /// token too long, or a `res` or `size` value that does not parse.

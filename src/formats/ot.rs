@@ -11,9 +11,10 @@
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, OT_FIRST_LINE};
 use super::TreeFileError;
 use crate::sensor::SensorModel;
-use crate::tree::{in_leaf_pool, leaf_index, NodeId, Parts};
-use crate::tree::{CountingTree, NodeKind, NodeRef, OccupancyTree, PreorderBuilder};
+use crate::tree::{ChildGroup, CountingTree, NodeKind, NodeRef, OccupancyTree, PreorderBuilder};
+use crate::tree::{PreorderNode, PreorderVisitor};
 use std::io::{self, BufRead, Write};
+use std::ops::ControlFlow;
 use std::path::Path;
 
 pub use crate::tree::TreeKind;
@@ -237,70 +238,56 @@ fn write_nodes<const P: usize>(
     w: &mut impl Write,
     payload: impl Fn(f32, u32) -> [u8; P],
 ) -> io::Result<()> {
-    let (arena, id) = root.arena_id();
-    let mut out = NodeStream { arena: arena.parts(), payload, out: Vec::with_capacity(FLUSH_AT + 64), w };
-    out.node(id)?;
+    let mut out = NodeStream { payload, out: Vec::with_capacity(FLUSH_AT + 64), w };
+    if let ControlFlow::Break(e) = root.visit_preorder(&mut out) {
+        return Err(e);
+    }
     out.w.write_all(&out.out)
 }
 
 /// Bytes gathered before they go to the writer.
 const FLUSH_AT: usize = 1 << 16;
 
-struct NodeStream<'a, F, W> {
-    arena: Parts<'a>,
+/// The `.ot` records of the nodes a pre-order walk visits, gathered in
+/// `out` and written to `w` in pieces of about [`FLUSH_AT`] bytes.
+struct NodeStream<F, W> {
     payload: F,
     out: Vec<u8>,
     w: W,
 }
 
-impl<const P: usize, F: Fn(f32, u32) -> [u8; P], W: Write> NodeStream<'_, F, W> {
-    /// A childless node's record.
+impl<const P: usize, F: Fn(f32, u32) -> [u8; P], W: Write> NodeStream<F, W> {
     #[inline(always)]
-    fn leaf(&mut self, value: f32, extra: u32) {
-        self.out.extend_from_slice(&(self.payload)(value, extra));
-        self.out.push(0);
+    fn record(&mut self, node: &PreorderNode) {
+        self.out.extend_from_slice(&(self.payload)(node.value, node.extra));
+        self.out.push(node.child_mask);
+    }
+}
+
+impl<const P: usize, F: Fn(f32, u32) -> [u8; P], W: Write> PreorderVisitor for NodeStream<F, W> {
+    type Break = io::Error;
+
+    #[inline(always)]
+    fn enter(&mut self, node: &PreorderNode, _: &ChildGroup<'_>) -> ControlFlow<io::Error> {
+        self.record(node);
+        ControlFlow::Continue(())
     }
 
-    /// Node `n` and its subtree.
-    fn node(&mut self, n: NodeId) -> io::Result<()> {
-        let a = self.arena;
-        let mask = a.mask(n);
-        self.out.extend_from_slice(&(self.payload)(a.value(n), a.extra(n)));
-        self.out.push(mask);
-        if mask == 0 {
-            return Ok(());
-        }
-        let first = a.first_child[n as usize];
-        let k = mask.count_ones() as usize;
-        if in_leaf_pool(first) {
-            // the voxels of a depth-15 node: leaves, values side by side
-            let i = leaf_index(first);
-            let values = &a.leaf_values[i..i + k];
-            match a.leaf_extras.get(i..i + k) {
-                Some(extras) => values.iter().zip(extras).for_each(|(&v, &e)| self.leaf(v, e)),
-                None => values.iter().for_each(|&v| self.leaf(v, 0)),
-            }
-        } else {
-            let group = first as usize..first as usize + k;
-            // ask for the inner children's groups before the recursion needs them
-            for c in group.clone() {
-                if a.masks[c] != 0 {
-                    a.prefetch_group(a.first_child[c]);
-                }
-            }
-            for c in group {
-                if a.masks[c] == 0 {
-                    self.leaf(a.values[c], a.extras.get(c).copied().unwrap_or(0));
-                } else {
-                    self.node(c as NodeId)?;
-                }
-            }
-        }
+    #[inline(always)]
+    fn leaf(&mut self, node: &PreorderNode) -> ControlFlow<io::Error> {
+        self.record(node);
+        ControlFlow::Continue(())
+    }
+
+    #[inline(always)]
+    fn leave(&mut self, _: &PreorderNode) -> ControlFlow<io::Error> {
         if self.out.len() >= FLUSH_AT {
-            self.w.write_all(&self.out)?;
+            if let Err(e) = self.w.write_all(&self.out) {
+                return ControlFlow::Break(e);
+            }
             self.out.clear();
         }
-        Ok(())
+        ControlFlow::Continue(())
     }
 }
 

@@ -17,7 +17,7 @@ use crate::geometry::{Point3, PointCloud};
 #[derive(Debug, thiserror::Error)]
 pub enum XyzError {
     /// Opening or reading failed, or the points did not fit in memory.
-    #[error("I/O error at line {line}: {source}")]
+    #[error("I/O error at line {line}")]
     Io {
         /// The line being read (0 when the file could not be opened).
         line: u64,

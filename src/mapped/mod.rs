@@ -70,6 +70,8 @@
 //! the reader, which then answers as from a damaged file (above).
 
 pub mod format;
+#[allow(unsafe_code)]
+mod mapping;
 mod nav;
 mod query;
 mod search_blocks;
@@ -90,7 +92,9 @@ use crate::geometry::Point3;
 use crate::key::{Key, KeyError, KeySpace, TREE_DEPTH};
 use crate::ray::{CastError, CastOptions, CastOutcome};
 use crate::sensor::SensorModel;
-use crate::tree::{CountingTree, Found, KeyBox, LevelTables, NodeItem, OccupancyTree, PreorderBuilder, Trunks};
+use crate::tree::{
+    CountingTree, Found, KeyBox, LevelTables, NodeItem, OccupancyTree, PathSearch, PreorderBuilder, Trunks,
+};
 use format::Meta;
 use nav::{with_nav, AnyNav, Extras, MlNav, Nav, Node, PtrNav, RankNav};
 use query::RawIter;
@@ -102,7 +106,7 @@ use std::path::Path;
 #[derive(Debug, thiserror::Error)]
 pub enum OlmError {
     /// Opening, mapping or reading the file failed.
-    #[error("I/O error: {0}")]
+    #[error("I/O error")]
     Io(#[from] io::Error),
     /// The first eight bytes are not [`MAGIC`].
     #[error("not an .olm file (magic bytes differ)")]
@@ -267,7 +271,7 @@ impl MappedMap<memmap2::Mmap> {
     /// see the module docs for what an unverified map can answer, and
     /// [`Self::verify`].
     ///
-    /// This is the only `unsafe` in the module. Assumption: the file is
+    /// The mapping is the only `unsafe` in the module. Assumption: the file is
     /// not truncated or modified in place while mapped. Writers in this
     /// crate never modify a file in place (they write a temporary file and
     /// rename it over the old one, so a mapping keeps the old contents).
@@ -278,11 +282,7 @@ impl MappedMap<memmap2::Mmap> {
     /// answers.
     pub fn open(path: &Path) -> Result<Self, OlmError> {
         let file = std::fs::File::open(path)?;
-        // SAFETY: memmap2 requires that the mapped file is not modified or
-        // truncated for the lifetime of the map; see the assumption above.
-        // The map is read-only and only ever read through `&[u8]`.
-        let map = unsafe { memmap2::Mmap::map(&file)? };
-        Self::new(map)
+        Self::new(mapping::map_read_only(&file)?)
     }
 }
 
@@ -540,7 +540,7 @@ impl<'a> MapView<'a> {
     #[cfg(test)]
     pub(crate) fn path_search_all(&self, codes: &[u64]) -> Vec<Option<Found>> {
         with_nav!(self.nav, |nav| {
-            let mut path = query::PathSearch::new(nav);
+            let mut path = PathSearch::new(query::MappedPath(nav));
             codes.iter().map(|&c| path.search(c)).collect()
         })
     }
@@ -553,7 +553,7 @@ impl<'a> MapView<'a> {
         }
         let (keys, sensor) = (&self.meta.keys, &self.meta.header.sensor);
         with_nav!(self.nav, |nav| {
-            let mut path = query::PathSearch::new(nav);
+            let mut path = PathSearch::new(query::MappedPath(nav));
             crate::ray::cast_ray_with(keys, sensor, |c| path.search(c), origin, direction, opts)
         })
     }
@@ -655,7 +655,7 @@ impl<'a> MapSearchIndex<'a> {
                 // known only when all the children lie in the file
                 let first = nav
                     .first_child_index(node, mask)
-                    .filter(|&f| u64::from(f) + u64::from(mask.count_ones()) <= view.node_count())
+                    .filter(|&f| u64::from(f) + u64::from(crate::arch::count_ones(mask)) <= view.node_count())
                     .unwrap_or(0);
                 IndexEntry { node, mask, first }
             };
@@ -690,7 +690,7 @@ impl<'a> MapSearchIndex<'a> {
             Some((e, d)) if e.first != 0 && d < depth => {
                 let pos = (code >> (3 * (TREE_DEPTH - 1 - d))) & 7;
                 if e.mask & (1 << pos) != 0 {
-                    let c = e.first + (e.mask & nav::below(pos as usize)).count_ones();
+                    let c = e.first + crate::arch::count_ones(e.mask & nav::below(pos as usize));
                     (Some((Node { idx: c, label: 0 }, d + 1)), depth)
                 } else if e.mask == 0 {
                     (Some((e.node, d)), d)

@@ -95,7 +95,7 @@ pub(crate) fn below(pos: usize) -> u8 {
 /// Counts of `11` pairs (inner children) in a word of two-bit labels.
 #[inline(always)]
 pub(crate) fn count_inner(x: u64) -> u32 {
-    (x & (x >> 1) & 0x5555_5555_5555_5555).count_ones()
+    crate::arch::count_ones(x & (x >> 1) & 0x5555_5555_5555_5555)
 }
 
 /// Child mask of a label word: bit `i` set when label `i` is not `00`.
@@ -135,20 +135,20 @@ impl RankNav<'_> {
             // holds whole words)
             let base = u32_at(self.dir, 4 * (i >> 3))?;
             let word = u64_at(self.masks, 8 * (i >> 3))?;
-            return Some(base.wrapping_add((word & ((1u64 << (8 * (i & 7))) - 1)).count_ones()));
+            return Some(base.wrapping_add(crate::arch::count_ones(word & ((1u64 << (8 * (i & 7))) - 1))));
         }
         let b = i >> self.log2;
         let mut s = u32_at(self.dir, 4 * b)?;
         let end = i >> 3;
         let mut w = (b << self.log2) >> 3;
         while w < end {
-            s = s.wrapping_add(u64_at(self.masks, 8 * w)?.count_ones());
+            s = s.wrapping_add(crate::arch::count_ones(u64_at(self.masks, 8 * w)?));
             w += 1;
         }
         let rem = i & 7;
         if rem != 0 {
             let word = u64_at(self.masks, 8 * end)?;
-            s = s.wrapping_add((word & ((1u64 << (8 * rem)) - 1)).count_ones());
+            s = s.wrapping_add(crate::arch::count_ones(word & ((1u64 << (8 * rem)) - 1)));
         }
         Some(s)
     }
@@ -188,7 +188,7 @@ impl Nav for RankNav<'_> {
     /// same test, so single and batched searches agree on any bytes).
     #[inline(always)]
     fn child(&self, n: Node, mask: u8, pos: usize) -> Option<Node> {
-        let c = u64::from(self.rank(n.idx)?) + 1 + u64::from((mask & below(pos)).count_ones());
+        let c = u64::from(self.rank(n.idx)?) + 1 + u64::from(crate::arch::count_ones(mask & below(pos)));
         (c > u64::from(n.idx) && c < u64::from(self.n)).then_some(Node { idx: c as u32, label: 0 })
     }
 
@@ -233,7 +233,7 @@ impl Nav for RankNav<'_> {
             // the word's bits below `bit`; the mask and the directory entry
             // plus one come off the chain of dependent steps
             let base = u64::from(u32::from_le_bytes(dir[4 * block..4 * block + 4].try_into().ok()?)) + 1;
-            let child = base + u64::from((word & ((1u64 << bit) - 1)).count_ones());
+            let child = base + u64::from(crate::arch::count_ones(word & ((1u64 << bit) - 1)));
             // `child`'s test (a branch beside the chain of dependent steps)
             if child <= u64::from(i) || child >= n {
                 return None;
@@ -247,7 +247,7 @@ impl Nav for RankNav<'_> {
     #[inline]
     fn children(&self, n: Node, mask: u8, out: &mut [Node; 8]) -> Option<usize> {
         let first = self.first_child(n)?;
-        let k = mask.count_ones();
+        let k = crate::arch::count_ones(mask);
         if first.checked_add(k)? > self.n {
             return None;
         }
@@ -263,7 +263,7 @@ impl Nav for RankNav<'_> {
 
     #[inline]
     fn children_seq(&self, n: Node, mask: u8, slot: &mut (u32, u32), out: &mut [Node; 8]) -> Option<usize> {
-        let k = mask.count_ones();
+        let k = crate::arch::count_ones(mask);
         let first = if slot.0 == n.idx && n.idx != 0 { slot.1 } else { self.first_child(n)? };
         *slot = (n.idx.wrapping_add(1), first.wrapping_add(k));
         if first <= n.idx || first.checked_add(k)? > self.n {
@@ -286,7 +286,7 @@ impl Nav for RankNav<'_> {
 
     #[inline(always)]
     fn group_seq(&self, n: Node, mask: u8, slot: &mut (u32, u32)) -> Option<u32> {
-        let k = mask.count_ones();
+        let k = crate::arch::count_ones(mask);
         let first = if slot.0 == n.idx && n.idx != 0 { slot.1 } else { self.first_child(n)? };
         *slot = (n.idx.wrapping_add(1), first.wrapping_add(k));
         (first > n.idx && first.checked_add(k)? <= self.n).then_some(first)
@@ -342,14 +342,14 @@ impl Nav for PtrNav<'_> {
 
     #[inline(always)]
     fn child(&self, n: Node, mask: u8, pos: usize) -> Option<Node> {
-        let c = self.first_child(n)?.checked_add((mask & below(pos)).count_ones())?;
+        let c = self.first_child(n)?.checked_add(crate::arch::count_ones(mask & below(pos)))?;
         (c < self.n).then_some(Node { idx: c, label: 0 })
     }
 
     #[inline]
     fn children(&self, n: Node, mask: u8, out: &mut [Node; 8]) -> Option<usize> {
         let first = self.first_child(n)?;
-        let k = mask.count_ones();
+        let k = crate::arch::count_ones(mask);
         if first.checked_add(k)? > self.n {
             return None;
         }
@@ -368,7 +368,7 @@ impl Nav for PtrNav<'_> {
     #[inline(always)]
     fn group_seq(&self, n: Node, mask: u8, _slot: &mut (u32, u32)) -> Option<u32> {
         let first = self.first_child(n)?;
-        (first.checked_add(mask.count_ones())? <= self.n).then_some(first)
+        (first.checked_add(crate::arch::count_ones(mask))? <= self.n).then_some(first)
     }
 
     #[inline(always)]
@@ -497,7 +497,7 @@ impl Nav for MlNav<'_> {
     fn group_seq(&self, n: Node, mask: u8, slot: &mut (u32, u32)) -> Option<[Node; 8]> {
         let mut out = [Node::default(); 8];
         let k = self.children_seq(n, mask, slot, &mut out)?;
-        (k == mask.count_ones() as usize).then_some(out)
+        (k == crate::arch::count_ones(mask) as usize).then_some(out)
     }
 
     #[inline(always)]

@@ -15,7 +15,7 @@ use crate::morton::MortonCode;
 use crate::ray::{CastError, CastOptions, CastOutcome};
 use crate::sensor::SensorModel;
 use crate::tree::blocks::BLOCK_DEPTH;
-use crate::tree::{Found, KeyBox, LastAnswer, NodeItem, OccupancyTree, Trunks};
+use crate::tree::{Found, KeyBox, NodeItem, OccupancyTree, PathNodes, Trunks};
 
 /// What ray casting needs from a map: OctoMap's `search` and its key space.
 /// Implemented by [`OccupancyTree`] and by the mapped views, so that one
@@ -398,72 +398,32 @@ pub fn cast_ray<M: OccupancyLookup + ?Sized>(
     crate::ray::cast_ray_with(map.key_space(), map.sensor(), search, origin, direction, opts)
 }
 
-/// Depth-16 searches that restart from the deepest node shared with the
-/// previous key's path instead of the root. Consecutive voxels of a ray
-/// share most of their path, so a step costs a level or two instead of 16.
-/// Answers are those of [`search`]: the shared nodes are the same nodes.
-pub(crate) struct PathSearch<N: Nav> {
-    nav: N,
-    last: LastAnswer,
-    /// Entries `0..len` hold the nodes at depths `0..len` on the previous
-    /// query's path.
-    len: u8,
-    path: [(Node, f32, u8); TREE_DEPTH as usize + 1],
-}
+/// A mapped layout's nodes for a [`PathSearch`] (`castRay`): the path
+/// keeps each node with its value and mask, read together.
+#[derive(Clone, Copy)]
+pub(crate) struct MappedPath<N: Nav>(pub N);
 
-impl<N: Nav> PathSearch<N> {
-    pub fn new(nav: N) -> Self {
-        let path = [(Node::default(), 0.0, 0); TREE_DEPTH as usize + 1];
-        PathSearch { nav, last: LastAnswer::new(), len: 0, path }
+impl<N: Nav> PathNodes for MappedPath<N> {
+    type Entry = (Node, f32, u8);
+
+    fn root(&self) -> Option<Self::Entry> {
+        let r = self.0.root()?;
+        let (value, mask) = self.0.get(r)?;
+        Some((r, value, mask))
     }
 
-    /// `search(key, 0)` for the key whose Morton code is `code`.
     #[inline(always)]
-    pub fn search(&mut self, code: u64) -> Option<Found> {
-        let shared = match self.last.next(code) {
-            Ok(answer) => return answer,
-            Err(shared) => shared,
-        };
-        let start = if self.len == 0 {
-            match self.nav.root().and_then(|r| Some((r, self.nav.get(r)?))) {
-                Some((root, (v, m))) => self.path[0] = (root, v, m),
-                // no root (or a corrupted one): `None` for every query
-                None => return self.last.set(0, None),
-            }
-            0
-        } else {
-            shared.min(self.len - 1)
-        };
-        self.descend(start, code)
+    fn child(&self, (node, _, mask): Self::Entry, pos: usize) -> Option<Result<Self::Entry, u8>> {
+        if mask & (1 << pos) == 0 {
+            return Some(Err(mask));
+        }
+        let c = self.0.child(node, mask, pos)?;
+        let (value, mask) = self.0.get(c)?;
+        Some(Ok((c, value, mask)))
     }
 
-    /// The search from the path's node at depth `start` (kept out of
-    /// line, so that the caller's loop holds only the compare above).
-    #[inline(never)]
-    fn descend(&mut self, start: u8, code: u64) -> Option<Found> {
-        let (mut node, mut value, mut mask) = self.path[start as usize];
-        let mut d = start;
-        let (answer, settled) = loop {
-            if d == TREE_DEPTH {
-                break (Some(Found { value, depth: d, is_leaf: mask == 0, extra: 0 }), d);
-            }
-            let pos = ((code >> (3 * (15 - u32::from(d)))) & 7) as usize;
-            if mask & (1 << pos) == 0 {
-                if mask != 0 {
-                    break (None, d + 1);
-                }
-                break (Some(Found { value, depth: d, is_leaf: true, extra: 0 }), d);
-            }
-            // a corrupted file may end the walk: no answer, as `search`
-            let Some((c, (v, m))) = self.nav.child(node, mask, pos).and_then(|c| Some((c, self.nav.get(c)?))) else {
-                self.len = d + 1;
-                return self.last.set(TREE_DEPTH + 1, None);
-            };
-            (node, value, mask) = (c, v, m);
-            d += 1;
-            self.path[d as usize] = (node, value, mask);
-        };
-        self.len = d + 1;
-        self.last.set(settled, answer)
+    #[inline(always)]
+    fn found(&self, (_, value, mask): Self::Entry, depth: u8) -> Found {
+        Found { value, depth, is_leaf: mask == 0, extra: 0 }
     }
 }

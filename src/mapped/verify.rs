@@ -126,7 +126,7 @@ fn verify_rank(data: &[u8], nav: RankNav<'_>, meta: &Meta) -> Result<VerifyRepor
     padding_is_zero(nav.masks, n as usize, SectionKind::Masks)?;
     let (_, inner) = check_prefix(n, h.rank_block_log2, nav.dir, |i| {
         let m = *nav.masks.get(i)?;
-        Some((m.count_ones(), m != 0))
+        Some((crate::arch::count_ones(m), m != 0))
     })?;
     if inner != h.inner_count {
         return Err(structure(format!("{inner} nodes have children, the header says {}", h.inner_count)));
@@ -167,7 +167,7 @@ fn verify_ml(nav: MlNav<'_>, meta: &Meta) -> Result<VerifyReport, OlmError> {
         if w == 0 && empty_record.is_none() {
             empty_record = Some(j);
         }
-        labelled += u64::from(label_mask(w).count_ones());
+        labelled += u64::from(crate::arch::count_ones(label_mask(w)));
         Some((count_inner(u64::from(w)), true))
     })?;
     if let Some(j) = empty_record {
@@ -220,7 +220,7 @@ fn verify_pointers(data: &[u8], meta: &Meta) -> Result<VerifyReport, OlmError> {
         if fc != next {
             return Err(structure(format!("node {i}'s children start at {fc}, expected {next}")));
         }
-        let k = u64::from(m.count_ones());
+        let k = u64::from(crate::arch::count_ones(m));
         if next + k > n {
             return Err(structure(format!("node {i}'s children run past the {n} nodes")));
         }

@@ -261,7 +261,7 @@ fn write_source<W: Write + Seek>(
                 sinks[m].put(w, &[mask])?;
                 sinks[v].put(w, &src.value_bytes(n))?;
                 put_extra(&mut sinks, w, n)?;
-                children += u64::from(mask.count_ones());
+                children += u64::from(crate::arch::count_ones(mask));
                 i += 1;
                 Ok(())
             })?;
@@ -467,7 +467,7 @@ fn write_pointers<W: Write + Seek>(
         if !n.has_children() {
             continue;
         }
-        let k = n.child_mask().count_ones();
+        let k = crate::arch::count_ones(n.child_mask());
         // groups of the children's subtrees follow this group in order
         let mut next_group = group + k;
         let mut child_pre = pre + 1;

@@ -7,7 +7,7 @@
 //! every code: an aligned block of 512 voxels is a range of 512 Morton
 //! codes, so its bits, read in order, are its codes in order.
 
-use super::KeyHasher;
+use super::key_set::KeyHasher;
 use hashbrown::HashMap;
 use std::hash::BuildHasherDefault;
 
@@ -87,6 +87,7 @@ impl BlockSet {
                 base = words.as_mut_ptr();
                 first
             };
+            debug_assert!(first + WORDS <= words.len() && base.cast_const() == words.as_ptr());
             // SAFETY: `first` is where a block's WORDS words start in
             // `words` (from the table, whose initial entries match no block,
             // or from `add_block`, which keeps the two in step), the offset
@@ -106,7 +107,7 @@ impl BlockSet {
     pub fn sorted_codes(&self, except: Option<&BlockSet>) -> Vec<u64> {
         let mut blocks: Vec<(u64, u32)> = self.index.iter().map(|(&b, &first)| (b, first)).collect();
         blocks.sort_unstable_by_key(|&(b, _)| b);
-        let count = self.words.iter().map(|w| w.count_ones() as usize).sum();
+        let count = self.words.iter().map(|&w| crate::arch::count_ones(w) as usize).sum();
         let mut out = Vec::with_capacity(count);
         for (block, first) in blocks {
             let words = &self.words[first as usize..][..WORDS];

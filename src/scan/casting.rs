@@ -45,7 +45,7 @@ impl Casting {
     /// [`Self::cast`] for every point. The steps of one ray form a chain
     /// of dependent operations, so several rays are walked at once and
     /// their chains overlap: eight or sixteen in vector lanes where the
-    /// processor has AVX-512 (`ray::wide`), else two.
+    /// processor has AVX-512 (`arch::avx512`), else two.
     fn cast_all(
         &mut self,
         keys: &KeySpace,
@@ -61,9 +61,12 @@ impl Casting {
             return;
         };
         #[cfg(target_arch = "x86_64")]
-        if crate::ray::wide::available() {
-            // SAFETY: the processor has AVX-512F and BMI2
-            unsafe { self.cast_all_wide(keys, fan, points, opts) };
+        if let Some(avx512) = crate::arch::avx512::Avx512::detect() {
+            let Casting { free, occupied } = self;
+            let max_range = opts.max_range.unwrap_or(-1.0);
+            if avx512.cast_fan(fan, keys, points, max_range, |c| occupied.insert(c), |codes| free.insert_all(codes)) {
+                self.free.insert(fan.origin_code());
+            }
             return;
         }
         self.cast_all_pairs(keys, fan, points, origin, opts);
@@ -100,36 +103,6 @@ impl Casting {
         }
         while let Some(c) = b.next_code(&b_steps) {
             self.free.insert(c);
-        }
-    }
-
-    /// [`Self::cast_all`] in the lanes of AVX-512 registers (`ray::wide`):
-    /// the rays are set up a chunk at a time, eight at once, each chunk
-    /// walked sixteen rays at once while the lanes still hold the previous
-    /// chunk's last rays. BMI2 gives the set insertion its one-instruction
-    /// variable shift (`shlx`); every AVX-512 processor has it.
-    ///
-    /// # Safety
-    /// The processor must support AVX-512F and BMI2.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,bmi2")]
-    unsafe fn cast_all_wide(&mut self, keys: &KeySpace, fan: &RayFan, points: &[Point3], opts: &ScanOptions) {
-        use crate::ray::wide::{set_up, walk, LaneRays, Lanes};
-        let mut rays = LaneRays::default();
-        let mut lanes = Lanes::default();
-        let mut any = false;
-        let mut chunks = points.chunks(LaneRays::CAPACITY).peekable();
-        while let Some(chunk) = chunks.next() {
-            rays.clear();
-            set_up(&mut rays, fan, keys, chunk, opts.max_range.unwrap_or(-1.0), |c| self.occupied.insert(c));
-            any |= rays.len() > 0;
-            rays.pad();
-            let last = chunks.peek().is_none();
-            let free = &mut self.free;
-            walk(&mut lanes, &rays, fan.origin_code(), last, |codes| free.insert_all(codes));
-        }
-        if any {
-            self.free.insert(fan.origin_code());
         }
     }
 
@@ -304,7 +277,7 @@ pub(super) fn thread_pool(threads: usize) -> Result<std::sync::Arc<rayon::Thread
 
 /// [`crate::OccupancyTree::compute_update`] for a map with key space `keys`: the
 /// update depends on nothing else of the tree.
-pub fn compute_update(
+pub(crate) fn compute_update(
     keys: &KeySpace,
     points: &[Point3],
     origin: Point3,
@@ -424,12 +397,6 @@ impl ScanUpdate {
         (keys(&self.free), keys(&self.occupied))
     }
 
-    /// The lists as OctoMap's hash-based key sets.
-    pub fn key_sets(&self) -> (KeySet, KeySet) {
-        let set = |codes: &[u64]| codes.iter().map(|&c| MortonCode(c)).collect();
-        (set(&self.free), set(&self.occupied))
-    }
-
     /// Number of voxels to update, free and occupied together.
     pub fn len(&self) -> usize {
         self.free.len() + self.occupied.len()
@@ -451,7 +418,7 @@ mod tests {
     #[test]
     fn vector_and_pairwise_walks_give_the_same_update() {
         #[cfg(target_arch = "x86_64")]
-        if crate::ray::wide::available() {
+        if crate::arch::avx512::Avx512::detect().is_some() {
             for (res, max_range) in [(0.05, None), (0.2, None), (0.1, Some(2.5)), (0.02, Some(4.0))] {
                 let keys = KeySpace::new(res);
                 for (points, origin) in super::super::tests::sample_scans().into_iter().take(2) {

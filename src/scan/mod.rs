@@ -10,7 +10,7 @@
 //! tree is bit-identical for any thread count.
 //!
 //! The sets are not hash sets, although OctoMap's are: rays walk Morton
-//! codes ([`RayFan`]) and set one bit per voxel in bitmaps of aligned
+//! codes (`RayFan`) and set one bit per voxel in bitmaps of aligned
 //! 8x8x8 blocks (`block_set`), which absorb the repeats as they happen
 //! (rays of one scan share the voxels near the sensor, about ten visits a
 //! voxel indoors) and give the codes in Morton order, which the batched
@@ -26,21 +26,22 @@
 
 use crate::geometry::Point3;
 use crate::key::{Key, KeyError};
-use crate::morton::MortonCode;
-use crate::ray::{point_along, RayFan, RayKeys};
+use crate::ray::{point_along, RayKeys};
 use crate::tree::{InnerNodes, OccupancyTree};
 use pipeline::{Job, Pipeline, StdMonitor};
 use std::sync::Mutex;
 
+// its insertion loop writes through a raw pointer
+#[allow(unsafe_code)]
 mod block_set;
 mod casting;
-mod key_set;
+pub(crate) mod key_set;
 mod options;
 mod pipeline;
 
+pub(crate) use casting::compute_update;
 use casting::thread_pool;
-pub use casting::{compute_update, ScanUpdate};
-pub use key_set::{KeyHasher, KeySet};
+pub use casting::ScanUpdate;
 pub use options::{OutOfMap, ScanError, ScanOptions, ScanReport, UpdateBox};
 
 impl OccupancyTree {
@@ -221,7 +222,8 @@ impl OccupancyTree {
 
     /// Applies a scan's key sets key by key: misses, then hits, each key
     /// once, in the given order. The result is the same for any order;
-    /// [`Self::insert_point_cloud`] uses the faster [`Self::update_batch`].
+    /// [`Self::insert_point_cloud`] applies them in one batched walk
+    /// instead ([`Self::apply_update`]).
     pub fn apply_sorted(&mut self, free: &[Key], occupied: &[Key], inner: InnerNodes) {
         for &k in free {
             self.update_occupancy(k, false, inner);
@@ -240,25 +242,6 @@ impl OccupancyTree {
         opts: &ScanOptions,
     ) -> Result<(ScanUpdate, ScanReport), ScanError> {
         compute_update(self.key_space(), points, origin, opts)
-    }
-
-    /// The raw output of ray casting for a scan of finite points with
-    /// default options: the free codes of every ray and the occupied codes
-    /// of every end point, repeats included, unsorted.
-    /// [`ScanUpdate::from_codes`] turns them into [`Self::compute_update`]'s
-    /// result; benchmarks use them to compare ways of removing the repeats.
-    pub fn cast_codes(&self, points: &[Point3], origin: Point3) -> (Vec<u64>, Vec<u64>) {
-        let (mut free, mut occupied) = (Vec::new(), Vec::new());
-        let fan = RayFan::new(self.key_space(), origin).ok();
-        for &p in points {
-            let Ok(key) = self.key_space().key(p) else { continue };
-            let code = MortonCode::encode(key).0;
-            occupied.push(code);
-            if let Some(fan) = &fan {
-                fan.for_each_code(p, code, |c| free.push(c));
-            }
-        }
-        (free, occupied)
     }
 
     /// OctoMap's `insertPointCloudRays` ("simple" mode): ray by ray, each
@@ -314,7 +297,7 @@ impl OccupancyTree {
 mod tests {
     use super::*;
     use crate::sensor::SensorModel;
-    use crate::tree::NodeKind;
+    use crate::tree::{Clock, NodeKind};
 
     fn scan() -> Vec<Point3> {
         vec![
@@ -461,11 +444,11 @@ mod tests {
         // colour trees must keep OctoMap's key order: colours blended in
         // after each scan make that order visible in the next one
         for kind in [NodeKind::Plain, NodeKind::Color, NodeKind::Stamped] {
-            // stamped trees on a fixed clock: builds that straddle a second
-            // of the system clock would differ in their stamps
+            // a fixed clock: the system's may tick between the two builds,
+            // and stamps decide what prunes
             let new_tree = || {
                 let mut t = OccupancyTree::with_kind(0.1, SensorModel::default(), kind).unwrap();
-                t.set_clock(crate::tree::Clock::Fixed(1234));
+                t.set_clock(Clock::Fixed(7));
                 t
             };
             let paint = |t: &mut OccupancyTree, scan: usize| {

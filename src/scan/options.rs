@@ -91,7 +91,7 @@ pub struct ScanReport {
 pub enum ScanError {
     /// The sensor origin is not finite (an origin outside the map is
     /// accepted, as in OctoMap).
-    #[error("sensor origin ({x}, {y}, {z}): {source}")]
+    #[error("sensor origin ({x}, {y}, {z}) refused")]
     Origin {
         /// Origin x, metres.
         x: f32,
@@ -103,7 +103,7 @@ pub enum ScanError {
         source: KeyError,
     },
     /// An end point lies outside the map under [`OutOfMap::Error`].
-    #[error("point {index} ({x}, {y}, {z}) lies outside the map: {source}")]
+    #[error("point {index} ({x}, {y}, {z}) lies outside the map")]
     PointOutOfMap {
         /// Index of the point in the input slice.
         index: usize,

@@ -177,7 +177,7 @@ impl<S: NodeStore> Batch<'_, S> {
             new_children = needed & !mask;
             if new_children != 0 {
                 a.add_missing_children(n, new_children, 0.0, depth);
-                self.size += new_children.count_ones() as isize;
+                self.size += crate::arch::count_ones(new_children) as isize;
             }
         }
         let (first, mask) = (a.first_child(n), a.mask(n));
@@ -185,7 +185,7 @@ impl<S: NodeStore> Batch<'_, S> {
         if depth == TREE_DEPTH - 1 {
             for &c in codes {
                 let pos = (c & 7) as u32;
-                let child = first + (u32::from(mask) & ((1 << pos) - 1)).count_ones();
+                let child = first + crate::arch::count_ones(u32::from(mask) & ((1 << pos) - 1));
                 changed |= self.apply_leaf(child, c, new_children & (1 << pos) != 0);
             }
         } else {
@@ -193,7 +193,7 @@ impl<S: NodeStore> Batch<'_, S> {
             while rest != 0 {
                 let pos = rest.trailing_zeros() as usize;
                 rest &= rest - 1;
-                let child = first + (mask & ((1u8 << pos) - 1)).count_ones();
+                let child = first + crate::arch::count_ones(mask & ((1u8 << pos) - 1));
                 let range = &codes[bounds[pos]..bounds[pos + 1]];
                 changed |= self.apply(child, depth + 1, range, new_children & (1 << pos) != 0);
             }

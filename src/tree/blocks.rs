@@ -57,11 +57,11 @@ impl Runs {
         let mut offsets = Vec::with_capacity(m13.len());
         // where the next node's descendants start at each level below
         let (mut at14, mut at15, mut at_voxel) = (0, 0, 0);
-        let children = |masks: &[u8]| masks.iter().map(|m| m.count_ones() as usize).sum::<usize>();
+        let children = |masks: &[u8]| masks.iter().map(|&m| crate::arch::count_ones(m) as usize).sum::<usize>();
         for &m in m13 {
             offsets.push(bytes.len() as u32);
             bytes.push(m);
-            let n14 = m.count_ones() as usize;
+            let n14 = crate::arch::count_ones(m) as usize;
             let s14 = &m14[at14..at14 + n14];
             let n15 = children(s14);
             let s15 = &m15[at15..at15 + n15];
@@ -82,7 +82,7 @@ impl Runs {
 #[inline(always)]
 pub(crate) fn walk(b: &[u8], mut at: usize, code: u64) -> Option<BlockEnd> {
     let pos = |depth: u8| (code >> (3 * (15 - depth))) as u32 & 7;
-    let below = |m: u8, p: u32| (u32::from(m) & ((1 << p) - 1)).count_ones() as usize;
+    let below = |m: u8, p: u32| crate::arch::count_ones(u32::from(m) & ((1 << p) - 1)) as usize;
     let ended = |m: u8| Some(if m == 0 { BlockEnd::Coarse } else { BlockEnd::Unknown });
     let m13 = *b.get(at)?;
     let p = pos(BLOCK_DEPTH);
@@ -90,7 +90,7 @@ pub(crate) fn walk(b: &[u8], mut at: usize, code: u64) -> Option<BlockEnd> {
         return ended(m13);
     }
     // depth 14: the children of the one node at depth 13
-    let (n14, r14) = (m13.count_ones() as usize, below(m13, p));
+    let (n14, r14) = (crate::arch::count_ones(m13) as usize, below(m13, p));
     let w14 = word(b, at + 1)?;
     let m14 = *b.get(at + 1 + r14)?;
     let p = pos(BLOCK_DEPTH + 1);
@@ -100,8 +100,8 @@ pub(crate) fn walk(b: &[u8], mut at: usize, code: u64) -> Option<BlockEnd> {
     // depth 15, after the depth-14 masks: this node's rank is the bits of
     // the masks before its parent's and of its parent's below it
     at += 1 + n14;
-    let n15 = (w14 & low_bytes(n14)).count_ones() as usize;
-    let r15 = (w14 & low_bytes(r14)).count_ones() as usize + below(m14, p);
+    let n15 = crate::arch::count_ones(w14 & low_bytes(n14)) as usize;
+    let r15 = crate::arch::count_ones(w14 & low_bytes(r14)) as usize + below(m14, p);
     let m15 = *b.get(at + r15)?;
     let p = pos(BLOCK_DEPTH + 2);
     if m15 & (1 << p) == 0 {
@@ -131,9 +131,9 @@ fn ones(b: &[u8], at: usize, len: usize) -> Option<usize> {
     let mut n = 0;
     let mut i = 0;
     while i + 8 <= len {
-        n += word(b, at + i)?.count_ones();
+        n += crate::arch::count_ones(word(b, at + i)?);
         i += 8;
     }
-    n += (word(b, at + i)? & low_bytes(len - i)).count_ones();
+    n += crate::arch::count_ones(word(b, at + i)? & low_bytes(len - i));
     Some(n as usize)
 }

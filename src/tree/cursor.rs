@@ -1,10 +1,12 @@
-//! Depth-16 searches that resume from the previous query's path.
+//! Depth-16 searches that resume from the previous query's path, over any
+//! node source: the arena ([`ArenaPath`]) or a mapped file's layout.
 //!
 //! Consecutive voxels of a ray share all but their last level or two, so
 //! restarting from the deepest node common to both keys turns a 16-level
 //! descent into one or two steps. Keys come as Morton codes: the levels two
 //! codes share are their common leading bits, a third of a `leading_zeros`.
-//! Answers are exactly [`OccupancyTree::search`]'s.
+//! Answers are exactly [`OccupancyTree::search`]'s (and the mapped view's
+//! `search`): the shared nodes are the same nodes.
 
 use super::arena::Parts;
 use super::{Found, NodeId, OccupancyTree, ROOT};
@@ -13,10 +15,9 @@ use crate::key::TREE_DEPTH;
 /// A path cursor's previous query and how far its answer holds: a query
 /// sharing at least `settled` levels with `code` has `answer` too (the leaf
 /// found, or the missing child, lies on its path as well), so a ray
-/// crossing a pruned voxel or unknown space gets it in a compare. Shared by
-/// this cursor and the mapped view's.
+/// crossing a pruned voxel or unknown space gets it in a compare.
 #[derive(Clone, Copy)]
-pub(crate) struct LastAnswer {
+struct LastAnswer {
     code: u64,
     settled: u8,
     answer: Option<Found>,
@@ -24,7 +25,7 @@ pub(crate) struct LastAnswer {
 
 impl LastAnswer {
     /// Nothing holds yet.
-    pub fn new() -> Self {
+    fn new() -> Self {
         LastAnswer { code: 0, settled: TREE_DEPTH + 1, answer: None }
     }
 
@@ -32,7 +33,7 @@ impl LastAnswer {
     /// holds, else `Err` with the levels `code` shares with the previous
     /// query (whose path the cursor still has).
     #[inline(always)]
-    pub fn next(&mut self, code: u64) -> Result<Option<Found>, u8> {
+    fn next(&mut self, code: u64) -> Result<Option<Found>, u8> {
         let shared = shared_levels(code, self.code);
         self.code = code;
         if shared >= self.settled {
@@ -45,34 +46,51 @@ impl LastAnswer {
     /// The current query's answer, holding for queries that share
     /// `settled` levels with it (0: every query; 17: none).
     #[inline(always)]
-    pub fn set(&mut self, settled: u8, answer: Option<Found>) -> Option<Found> {
+    fn set(&mut self, settled: u8, answer: Option<Found>) -> Option<Found> {
         (self.settled, self.answer) = (settled, answer);
         answer
     }
 }
 
-/// A search cursor over one tree (which cannot change while it exists).
-pub(crate) struct PathSearch<'a> {
-    parts: Option<Parts<'a>>,
+/// The nodes a [`PathSearch`] descends through: what it keeps of a node
+/// on its path, and one step of a descent.
+pub(crate) trait PathNodes: Copy {
+    /// A node on the path, with what a step from it needs.
+    type Entry: Copy + Default;
+    /// The root; `None` for an empty map (every answer is then `None`).
+    fn root(&self) -> Option<Self::Entry>;
+    /// Child `pos` (0..8) of `e`, a node above depth 16: `Some(Ok(child))`,
+    /// `Some(Err(mask of e))` when it does not exist, `None` when the node
+    /// source gives no answer (a corrupted file).
+    fn child(&self, e: Self::Entry, pos: usize) -> Option<Result<Self::Entry, u8>>;
+    /// The answer for a descent that ends at `e`, a leaf at `depth`.
+    fn found(&self, e: Self::Entry, depth: u8) -> Found;
+}
+
+/// A search cursor over one map (which cannot change while it exists).
+pub(crate) struct PathSearch<S: PathNodes> {
+    nodes: S,
     last: LastAnswer,
     /// Entries `0..=len` are the nodes at depths `0..=len` on the previous
     /// query's path.
     len: u8,
-    path: [NodeId; TREE_DEPTH as usize + 1],
+    path: [S::Entry; TREE_DEPTH as usize + 1],
 }
 
-impl<'a> PathSearch<'a> {
-    pub fn new(tree: &'a OccupancyTree) -> Self {
-        let parts = tree.arena().map(|a| a.parts());
+impl<S: PathNodes> PathSearch<S> {
+    pub fn new(nodes: S) -> Self {
         let mut last = LastAnswer::new();
-        if parts.is_none() {
-            // an empty tree answers `None` to everything
+        let root = nodes.root();
+        if root.is_none() {
+            // an empty map answers `None` to everything
             last.set(0, None);
         }
-        PathSearch { parts, last, len: 0, path: [ROOT; TREE_DEPTH as usize + 1] }
+        // an empty map's path is never read
+        let path = [root.unwrap_or_default(); TREE_DEPTH as usize + 1];
+        PathSearch { nodes, last, len: 0, path }
     }
 
-    /// `tree.search(key, 0)` for the key whose Morton code is `code`.
+    /// `search(key, 0)` for the key whose Morton code is `code`.
     #[inline(always)]
     pub fn search(&mut self, code: u64) -> Option<Found> {
         match self.last.next(code) {
@@ -85,27 +103,61 @@ impl<'a> PathSearch<'a> {
     /// line, so that the caller's loop holds only the compare above).
     #[inline(never)]
     fn descend(&mut self, start: u8, code: u64) -> Option<Found> {
-        let p = self.parts?;
-        let mut node = self.path[start as usize];
+        let mut e = self.path[start as usize];
         let mut d = start;
         let (answer, settled) = loop {
             if d == TREE_DEPTH {
-                break (Some(Found { value: p.value(node), depth: d, is_leaf: true, extra: p.extra(node) }), d);
+                break (Some(self.nodes.found(e, d)), d);
             }
-            match p.descend(node, (code >> (3 * (15 - u32::from(d)))) & 7) {
-                Ok(c) => {
-                    node = c;
+            match self.nodes.child(e, ((code >> (3 * (15 - u32::from(d)))) & 7) as usize) {
+                Some(Ok(c)) => {
+                    e = c;
                     d += 1;
                     self.path[d as usize] = c;
                 }
-                Err(0) => {
-                    break (Some(Found { value: p.value(node), depth: d, is_leaf: true, extra: p.extra(node) }), d)
-                }
-                Err(_) => break (None, d + 1),
+                Some(Err(0)) => break (Some(self.nodes.found(e, d)), d),
+                Some(Err(_)) => break (None, d + 1),
+                // a corrupted file may end the walk: no answer, as `search`
+                None => break (None, TREE_DEPTH + 1),
             }
         };
         self.len = d;
         self.last.set(settled, answer)
+    }
+}
+
+/// The arena's nodes for a [`PathSearch`] (`OccupancyTree::cast_ray`).
+#[derive(Clone, Copy)]
+pub(crate) struct ArenaPath<'a> {
+    /// Empty arrays for an empty tree, whose path is never walked.
+    parts: Parts<'a>,
+    empty: bool,
+}
+
+impl<'a> ArenaPath<'a> {
+    pub fn new(tree: &'a OccupancyTree) -> Self {
+        match tree.arena() {
+            Some(a) => ArenaPath { parts: a.parts(), empty: false },
+            None => ArenaPath { parts: Parts::EMPTY, empty: true },
+        }
+    }
+}
+
+impl PathNodes for ArenaPath<'_> {
+    type Entry = NodeId;
+
+    fn root(&self) -> Option<NodeId> {
+        (!self.empty).then_some(ROOT)
+    }
+
+    #[inline(always)]
+    fn child(&self, n: NodeId, pos: usize) -> Option<Result<NodeId, u8>> {
+        Some(self.parts.descend(n, pos as u64))
+    }
+
+    #[inline(always)]
+    fn found(&self, n: NodeId, depth: u8) -> Found {
+        Found { value: self.parts.value(n), depth, is_leaf: true, extra: self.parts.extra(n) }
     }
 }
 
@@ -167,7 +219,7 @@ mod tests {
                 MortonCode::encode(key).0
             })
             .collect();
-        let mut ours = PathSearch::new(&tree);
+        let mut ours = PathSearch::new(ArenaPath::new(&tree));
         let theirs = map.view().path_search_all(&codes);
         for (&code, t) in codes.iter().zip(theirs) {
             let key = MortonCode(code).decode();

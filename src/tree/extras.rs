@@ -96,7 +96,7 @@ impl OccupancyTree {
         while let Some(n) = stack.pop() {
             if a.has_children(n) {
                 let first = a.first_child(n);
-                stack.extend((0..a.mask(n).count_ones()).map(|i| first + i));
+                stack.extend((0..crate::arch::count_ones(a.mask(n))).map(|i| first + i));
             } else {
                 let v = a.value(n);
                 if sensor.is_occupied(v) && now.wrapping_sub(a.extra(n)) > max_age {

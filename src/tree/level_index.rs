@@ -131,7 +131,7 @@ impl LevelIndex {
             let w = u64::from_le_bytes(bytes);
             words.push(w);
             first.push(children);
-            children += w.count_ones();
+            children += crate::arch::count_ones(w);
         }
         let mut index = LevelIndex { words, first, deepest, last, nodes, voxels, trunks: Trunks::at_root(0) };
         let trunks = {
@@ -184,12 +184,12 @@ impl LevelIndex {
     fn child(&self, n: u32, m: u8, pos: usize) -> u32 {
         if n >= self.deepest {
             if let Voxels::FirstChild(f) = &self.voxels {
-                return f[(n - self.deepest) as usize] + (u32::from(m) & ((1 << pos) - 1)).count_ones();
+                return f[(n - self.deepest) as usize] + crate::arch::count_ones(u32::from(m) & ((1 << pos) - 1));
             }
         }
         let w = (n >> 3) as usize;
         let bit = 8 * (n & 7) + pos as u32;
-        let c = self.first[w] + (self.words[w] & ((1 << bit) - 1)).count_ones();
+        let c = self.first[w] + crate::arch::count_ones(self.words[w] & ((1 << bit) - 1));
         if n >= self.deepest {
             LEAF_POOL | (c - self.nodes)
         } else {
@@ -242,7 +242,7 @@ impl LevelIndex {
             if word & (1 << bit) == 0 {
                 return ended((word >> (8 * (i & 7))) as u8);
             }
-            i = self.first[w] + (word & ((1 << bit) - 1)).count_ones();
+            i = self.first[w] + crate::arch::count_ones(word & ((1 << bit) - 1));
         }
         self.last_step(i, code)
     }
@@ -345,7 +345,8 @@ impl Voxels {
     ) -> (Self, u8) {
         let deepest = &masks[start(LAST_INNER)..];
         // the depth-15 nodes' child groups in the leaf pool, in order
-        let groups = || deepest.iter().zip(&leaf_first).map(|(&m, &f)| (leaf_index(f), m.count_ones() as usize));
+        let groups =
+            || deepest.iter().zip(&leaf_first).map(|(&m, &f)| (leaf_index(f), crate::arch::count_ones(m) as usize));
         if p.extras.is_empty() && p.leaf_extras.is_empty() {
             let voxels = groups().map(|(_, k)| k).sum();
             if let Some((codes, values)) =
@@ -435,7 +436,7 @@ impl BreadthFirst {
                 if depth == LAST_INNER {
                     b.leaf_first.push(first);
                 } else {
-                    next.extend((0..m.count_ones()).map(|k| first + k));
+                    next.extend((0..crate::arch::count_ones(m)).map(|k| first + k));
                 }
             }
             std::mem::swap(&mut level, &mut next);

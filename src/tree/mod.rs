@@ -27,18 +27,18 @@ mod update;
 
 pub use arena::ArenaUsage;
 pub(crate) use arena::LabelFill;
-pub(crate) use arena::{in_leaf_pool, leaf_index, prefetch_lines, Parts, WHOLE_PREFETCH_BYTES};
+pub(crate) use arena::{leaf_index, prefetch_lines, Parts, WHOLE_PREFETCH_BYTES};
 pub(crate) use arena::{NodeArena, NodeId};
 use batch::Batch;
 pub use counting::CountingTree;
-pub(crate) use cursor::{LastAnswer, PathSearch};
+pub(crate) use cursor::{ArenaPath, PathNodes, PathSearch};
 pub(crate) use extras::default_extra;
 pub use iter::{KeyBox, NodeItem, NodeIter};
 pub use kind::{NodeKind, TreeKind};
 use level_index::LevelSlot;
 #[cfg(test)]
 pub(crate) use parallel::MIN_CODES as PARALLEL_MIN_CODES;
-pub use preorder::{NodeRef, PreorderBuilder, TooDeep};
+pub use preorder::{ChildGroup, NodeRef, PreorderBuilder, PreorderNode, PreorderVisitor, TooDeep};
 use search::descend_to;
 pub(crate) use search::search_target;
 pub(crate) use search_index::LevelTables;
@@ -188,7 +188,7 @@ pub struct OccupancyTree {
 /// of the slots free.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Compaction {
-    /// After a batch update ([`OccupancyTree::update_batch`], so after each
+    /// After a batch update (`OccupancyTree::update_batch`, so after each
     /// scan of `insert_point_cloud`) that leaves more than an eighth of the
     /// slots free. Each compaction follows at least that many frees, so its
     /// cost is bounded by a few slot moves per update.

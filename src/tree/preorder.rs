@@ -1,10 +1,12 @@
 //! Structural access for the file formats: the read-only [`NodeRef`]
-//! cursor, and [`PreorderBuilder`], which builds a tree from nodes
-//! given in depth-first pre-order.
+//! cursor, [`NodeRef::visit_preorder`], which walks a subtree in
+//! depth-first pre-order for the writers, and [`PreorderBuilder`], which
+//! builds a tree from nodes given in that order.
 
-use super::arena::PreorderFill;
+use super::arena::{in_leaf_pool, leaf_index, Parts, PreorderFill};
 use super::{default_extra, NodeArena, NodeId, NodeKind, OccupancyTree, TreeError};
 use crate::sensor::SensorModel;
+use std::ops::ControlFlow;
 
 /// A read-only cursor on a node, for structural walks (writers of other
 /// formats, comparisons). Valid while the tree is borrowed.
@@ -15,9 +17,26 @@ pub struct NodeRef<'a> {
 }
 
 impl<'a> NodeRef<'a> {
-    /// The arena and id of this node, for whole-tree passes.
-    pub(crate) fn arena_id(&self) -> (&'a NodeArena, NodeId) {
-        (self.arena, self.id)
+    /// Walks this node's subtree in depth-first pre-order (children 0..7),
+    /// the order of OctoMap's files: `visitor` is told of each node with
+    /// children before its subtree and again after it, and of each node
+    /// without children. Depths count from this node (0; so they are the
+    /// tree's depths when this is the root). The walk stops at the first
+    /// [`ControlFlow::Break`] and returns it.
+    ///
+    /// This is how the file formats write trees: the walk reads each child
+    /// group once, straight from the node arrays, and asks for the cache
+    /// lines of the groups it will visit next, so it runs as fast as a
+    /// hand-written recursion over the arena.
+    pub fn visit_preorder<V: PreorderVisitor>(&self, visitor: &mut V) -> ControlFlow<V::Break> {
+        let parts = self.arena.parts();
+        let mask = parts.mask(self.id);
+        let node =
+            PreorderNode { depth: 0, child_mask: mask, value: parts.value(self.id), extra: parts.extra(self.id) };
+        if mask == 0 {
+            return visitor.leaf(&node);
+        }
+        visit_subtree(&parts, self.id, &node, visitor)
     }
 
     /// The log-odds value.
@@ -53,7 +72,7 @@ impl<'a> NodeRef<'a> {
     /// Number of existing children.
     #[inline]
     pub fn child_count(&self) -> u32 {
-        self.arena.mask(self.id).count_ones()
+        crate::arch::count_ones(self.arena.mask(self.id))
     }
 
     /// The `rank`-th existing child (0-based, in child order).
@@ -67,6 +86,156 @@ impl<'a> NodeRef<'a> {
         let arena = self.arena;
         arena.children(self.id).map(move |(i, id)| (i, NodeRef { arena, id }))
     }
+}
+
+/// One node as [`NodeRef::visit_preorder`] reaches it: what an `.ot`
+/// record holds, and where the node lies.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PreorderNode {
+    /// Depth below the walk's start (0 for the start itself).
+    pub depth: u8,
+    /// Bit `i` set when child `i` exists (0 for a leaf).
+    pub child_mask: u8,
+    /// The log-odds value.
+    pub value: f32,
+    /// Colour or stamp, by the tree's [`NodeKind`] (0 for plain trees).
+    pub extra: u32,
+}
+
+/// The children of a node with children, in child order, as
+/// [`PreorderVisitor::enter`] gets them: their masks, values and extras
+/// side by side, so a writer that labels a node by its children (the
+/// `.bt` formats) reads them in one pass.
+#[derive(Clone, Copy, Debug)]
+pub struct ChildGroup<'a> {
+    mask: u8,
+    masks: &'a [u8],
+    values: &'a [f32],
+    extras: &'a [u32],
+}
+
+/// Child masks of a group of voxels, which never have children.
+const NO_MASKS: [u8; 8] = [0; 8];
+/// Extras of a group in a tree without extras.
+const NO_EXTRAS: [u32; 8] = [0; 8];
+
+impl<'a> ChildGroup<'a> {
+    /// The parent's child mask: bit `i` set when child `i` exists.
+    #[inline(always)]
+    pub fn mask(&self) -> u8 {
+        self.mask
+    }
+
+    /// Number of children (1..=8).
+    #[inline(always)]
+    pub fn len(&self) -> usize {
+        self.values.len()
+    }
+
+    /// Always false: a group has at least one child.
+    #[inline(always)]
+    pub fn is_empty(&self) -> bool {
+        self.values.is_empty()
+    }
+
+    /// The children's child masks, in child order (0 for a leaf).
+    #[inline(always)]
+    pub fn child_masks(&self) -> &'a [u8] {
+        self.masks
+    }
+
+    /// The children's log-odds values, in child order.
+    #[inline(always)]
+    pub fn values(&self) -> &'a [f32] {
+        self.values
+    }
+
+    /// The children's colours or stamps, in child order (0 for plain trees).
+    #[inline(always)]
+    pub fn extras(&self) -> &'a [u32] {
+        self.extras
+    }
+
+    /// Each child's position (0..8, x = 1, y = 2, z = 4) with its rank in
+    /// the group, in child order.
+    #[inline(always)]
+    pub fn positions(&self) -> impl Iterator<Item = (usize, u32)> {
+        let mut rest = self.mask;
+        (0..self.len()).map(move |rank| {
+            let pos = rest.trailing_zeros();
+            rest &= rest.wrapping_sub(1);
+            (rank, pos)
+        })
+    }
+}
+
+/// What [`NodeRef::visit_preorder`] calls, node by node in depth-first
+/// pre-order. A node with children gets [`Self::enter`], then its
+/// children's calls in child order, then [`Self::leave`]; a node without
+/// children gets [`Self::leaf`] alone. Each call may stop the walk with
+/// [`ControlFlow::Break`] (a writer's I/O error, say).
+pub trait PreorderVisitor {
+    /// What a visitor stops the walk with.
+    type Break;
+
+    /// A node with children, before its subtree, with its children.
+    fn enter(&mut self, node: &PreorderNode, children: &ChildGroup<'_>) -> ControlFlow<Self::Break>;
+
+    /// A node without children (by default: nothing).
+    #[inline(always)]
+    fn leaf(&mut self, _node: &PreorderNode) -> ControlFlow<Self::Break> {
+        ControlFlow::Continue(())
+    }
+
+    /// A node with children, after its subtree (by default: nothing).
+    #[inline(always)]
+    fn leave(&mut self, _node: &PreorderNode) -> ControlFlow<Self::Break> {
+        ControlFlow::Continue(())
+    }
+}
+
+/// The walk below inner-pool node `n` (`node`, which has children).
+fn visit_subtree<V: PreorderVisitor>(
+    p: &Parts<'_>,
+    n: NodeId,
+    node: &PreorderNode,
+    visitor: &mut V,
+) -> ControlFlow<V::Break> {
+    let first = p.first_child[n as usize];
+    let k = crate::arch::count_ones(node.child_mask) as usize;
+    let depth = node.depth + 1;
+    if in_leaf_pool(first) {
+        // the voxels of a depth-15 node: leaves, values side by side
+        let i = leaf_index(first);
+        let values = &p.leaf_values[i..i + k];
+        let extras = p.leaf_extras.get(i..i + k).unwrap_or(&NO_EXTRAS[..k]);
+        let group = ChildGroup { mask: node.child_mask, masks: &NO_MASKS[..k], values, extras };
+        visitor.enter(node, &group)?;
+        for (&value, &extra) in values.iter().zip(extras) {
+            visitor.leaf(&PreorderNode { depth, child_mask: 0, value, extra })?;
+        }
+        return visitor.leave(node);
+    }
+    let f = first as usize;
+    let masks = &p.masks[f..f + k];
+    let extras = p.extras.get(f..f + k).unwrap_or(&NO_EXTRAS[..k]);
+    let group = ChildGroup { mask: node.child_mask, masks, values: &p.values[f..f + k], extras };
+    // ask for the inner children's groups before the walk needs them
+    for (c, &m) in masks.iter().enumerate() {
+        if m != 0 {
+            p.prefetch_group(p.first_child[f + c]);
+        }
+    }
+    visitor.enter(node, &group)?;
+    for (c, &child_mask) in masks.iter().enumerate() {
+        let child = PreorderNode { depth, child_mask, value: group.values[c], extra: extras[c] };
+        if child_mask == 0 {
+            visitor.leaf(&child)?;
+        } else {
+            visit_subtree(p, (f + c) as NodeId, &child, visitor)?;
+        }
+    }
+    visitor.leave(node)
 }
 
 /// Builds a tree from nodes given in depth-first pre-order (children
@@ -155,5 +324,111 @@ impl PreorderBuilder {
 impl Default for PreorderBuilder {
     fn default() -> Self {
         Self::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::key::Key;
+    use crate::tree::{Clock, InnerNodes};
+
+    /// What a walk reported, as events.
+    #[derive(Debug, PartialEq)]
+    enum Event {
+        Enter(PreorderNode, Vec<(u8, f32, u32)>),
+        Leaf(PreorderNode),
+        Leave(u8),
+    }
+
+    struct Recorder {
+        events: Vec<Event>,
+        /// Stop at this many events.
+        stop_at: usize,
+    }
+
+    impl Recorder {
+        fn push(&mut self, e: Event) -> ControlFlow<usize> {
+            self.events.push(e);
+            if self.events.len() == self.stop_at {
+                ControlFlow::Break(self.events.len())
+            } else {
+                ControlFlow::Continue(())
+            }
+        }
+    }
+
+    impl PreorderVisitor for Recorder {
+        type Break = usize;
+
+        fn enter(&mut self, node: &PreorderNode, g: &ChildGroup<'_>) -> ControlFlow<usize> {
+            assert_eq!(g.mask(), node.child_mask);
+            assert_eq!(g.positions().count(), g.len());
+            let children = g.positions().map(|(r, _)| (g.child_masks()[r], g.values()[r], g.extras()[r])).collect();
+            self.push(Event::Enter(*node, children))
+        }
+
+        fn leaf(&mut self, node: &PreorderNode) -> ControlFlow<usize> {
+            self.push(Event::Leaf(*node))
+        }
+
+        fn leave(&mut self, node: &PreorderNode) -> ControlFlow<usize> {
+            self.push(Event::Leave(node.depth))
+        }
+    }
+
+    /// The events a walk must report, from the `NodeRef` cursor.
+    fn expected(n: NodeRef<'_>, depth: u8, out: &mut Vec<Event>) {
+        let node = PreorderNode { depth, child_mask: n.child_mask(), value: n.value(), extra: n.extra() };
+        if !n.has_children() {
+            out.push(Event::Leaf(node));
+            return;
+        }
+        let children = n.children().map(|(_, c)| (c.child_mask(), c.value(), c.extra())).collect();
+        out.push(Event::Enter(node, children));
+        n.children().for_each(|(_, c)| expected(c, depth + 1, out));
+        out.push(Event::Leave(depth));
+    }
+
+    #[test]
+    fn a_walk_visits_every_node_in_preorder_with_its_children_and_stops_on_break() {
+        // a stamped tree (extras in both pools) with voxels, coarse leaves
+        // from pruning and nodes of every depth
+        let mut tree = OccupancyTree::with_kind(0.1, SensorModel::default(), NodeKind::Stamped).unwrap();
+        for i in 0..400u16 {
+            tree.set_clock(Clock::Fixed(u32::from(i % 5)));
+            let k = Key([32768 + i % 13, 32760 + i % 7, 32770 + i / 40]);
+            tree.update_occupancy(k, i % 4 != 0, InnerNodes::Update);
+        }
+        tree.set_clock(Clock::Fixed(9));
+        for x in 32800..32816 {
+            for y in 32800..32808 {
+                for z in 32800..32808 {
+                    tree.update_occupancy(Key([x, y, z]), true, InnerNodes::Update);
+                }
+            }
+        }
+        tree.prune();
+        let root = tree.root().unwrap();
+        let mut want = Vec::new();
+        expected(root, 0, &mut want);
+        assert!(want.iter().any(|e| matches!(e, Event::Leaf(n) if n.depth < 16)), "a coarse leaf");
+        let mut all = Recorder { events: Vec::new(), stop_at: usize::MAX };
+        assert_eq!(root.visit_preorder(&mut all), ControlFlow::Continue(()));
+        assert_eq!(all.events, want);
+        let mut some = Recorder { events: Vec::new(), stop_at: want.len() / 2 };
+        assert_eq!(root.visit_preorder(&mut some), ControlFlow::Break(want.len() / 2));
+        assert_eq!(some.events[..], want[..want.len() / 2]);
+    }
+
+    #[test]
+    fn a_walk_from_a_lone_root_reports_one_leaf() {
+        let mut b = PreorderBuilder::new();
+        b.push(1.5, 0, 0).unwrap();
+        let tree = b.finish(0.1, SensorModel::default()).unwrap().unwrap();
+        let mut all = Recorder { events: Vec::new(), stop_at: usize::MAX };
+        assert_eq!(tree.root().unwrap().visit_preorder(&mut all), ControlFlow::Continue(()));
+        let root = PreorderNode { depth: 0, child_mask: 0, value: 1.5, extra: 0 };
+        assert_eq!(all.events, [Event::Leaf(root)]);
     }
 }

@@ -9,7 +9,7 @@ use super::{pack_rgb, unpack_rgb, NodeId, NodeKind, Rules, WHITE};
 fn max_child_value<S: NodeStore>(a: &S, n: NodeId) -> f32 {
     let first = a.first_child(n);
     let mut max = -f32::MAX;
-    for i in 0..a.mask(n).count_ones() {
+    for i in 0..crate::arch::count_ones(a.mask(n)) {
         let v = a.value(first + i);
         if v > max {
             max = v;
@@ -54,7 +54,7 @@ pub(super) fn prune_or_update_plain<S: NodeStore>(a: &mut S, n: NodeId) -> bool 
     let v0 = a.value(first);
     let mut max = -f32::MAX;
     let mut same = mask == 0xff;
-    for i in 0..mask.count_ones() {
+    for i in 0..crate::arch::count_ones(mask) {
         let c = first + i;
         let v = a.value(c);
         if v > max {
@@ -87,7 +87,7 @@ pub(super) fn update_from_children<S: NodeStore>(a: &mut S, n: NodeId, rules: Ru
 pub(super) fn average_child_color<S: NodeStore>(a: &S, n: NodeId) -> u32 {
     let (mut sum, mut count) = ([0u32; 3], 0u32);
     let first = a.first_child(n);
-    for c in first..first + a.mask(n).count_ones() {
+    for c in first..first + crate::arch::count_ones(a.mask(n)) {
         let e = a.extra(c);
         if e != WHITE {
             let rgb = unpack_rgb(e);

@@ -41,7 +41,7 @@ impl OccupancyTree {
             if m & (1 << pos) == 0 {
                 Err(m)
             } else {
-                Ok(first_child[n as usize] + (u32::from(m) & ((1 << pos) - 1)).count_ones())
+                Ok(first_child[n as usize] + crate::arch::count_ones(u32::from(m) & ((1 << pos) - 1)))
             }
         };
         let k = key.packed();

@@ -47,7 +47,7 @@ impl OccupancyTree {
     pub fn calc_num_nodes(&self) -> usize {
         fn count(a: &NodeArena, n: NodeId) -> usize {
             let first = a.first_child(n);
-            1 + (0..a.mask(n).count_ones()).map(|i| count(a, first + i)).sum::<usize>()
+            1 + (0..crate::arch::count_ones(a.mask(n))).map(|i| count(a, first + i)).sum::<usize>()
         }
         self.arena.as_ref().map_or(0, |a| count(a, ROOT))
     }
@@ -160,7 +160,7 @@ impl Face<'_> {
         for side in [u8::from(!self.upper), u8::from(self.upper)] {
             let bit = 1u8 << self.axis;
             for pos in (0..8u8).filter(|&pos| mask & (1 << pos) != 0 && ((pos & bit) != 0) == (side == 1)) {
-                let child = first + (u32::from(mask) & ((1 << pos) - 1)).count_ones();
+                let child = first + crate::arch::count_ones(u32::from(mask) & ((1 << pos) - 1));
                 let key = key | (u16::from(side) << (15 - depth));
                 self.descend(child, depth + 1, key, best);
             }
@@ -173,7 +173,7 @@ fn count_leaves(a: &NodeArena, n: NodeId) -> usize {
         return 1;
     }
     let first = a.first_child(n);
-    (0..a.mask(n).count_ones()).map(|i| count_leaves(a, first + i)).sum()
+    (0..crate::arch::count_ones(a.mask(n))).map(|i| count_leaves(a, first + i)).sum()
 }
 
 #[cfg(test)]

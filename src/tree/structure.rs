@@ -28,7 +28,7 @@ impl OccupancyTree {
             let first = a.first_child(n);
             let mut all = mask == 0xff;
             let mut first_leaf = None;
-            for i in 0..mask.count_ones() {
+            for i in 0..crate::arch::count_ones(mask) {
                 match would_merge(a, first + i, depth + 1, rules, counts) {
                     None => all = false,
                     Some((v, e)) => match first_leaf {
@@ -50,7 +50,7 @@ impl OccupancyTree {
         }
         fn merge_below(a: &mut NodeArena, n: NodeId, depth: u8, lowest: u8, rules: Rules, pruned: &mut usize) {
             let first = a.first_child(n);
-            for i in 0..a.mask(n).count_ones() {
+            for i in 0..crate::arch::count_ones(a.mask(n)) {
                 merge_below(a, first + i, depth + 1, lowest, rules, pruned);
             }
             if depth >= lowest && prune_node(a, n, rules).is_some() {
@@ -83,7 +83,7 @@ impl OccupancyTree {
                 *added += 8;
             }
             let first = a.first_child(n);
-            for i in 0..a.mask(n).count_ones() {
+            for i in 0..crate::arch::count_ones(a.mask(n)) {
                 recurse(a, first + i, depth + 1, added);
             }
         }

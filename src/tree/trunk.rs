@@ -120,7 +120,7 @@ impl<N: Copy + Default> Trunks<N> {
             };
             let (mut depth, mut prefix) = (1u8, (pos as u64) << (3 * (TREE_DEPTH - 1)));
             while depth < TREE_DEPTH {
-                let Some(m) = mask(node).filter(|m| m.count_ones() == 1) else { break };
+                let Some(m) = mask(node).filter(|m| m.is_power_of_two()) else { break };
                 let p = m.trailing_zeros() as usize;
                 let Some(c) = child(node, m, p) else { break };
                 prefix |= (p as u64) << (3 * (TREE_DEPTH - 1 - depth));

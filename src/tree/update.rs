@@ -118,7 +118,8 @@ impl OccupancyTree {
     /// pruned once, after its whole subtree. This is equivalent because each
     /// voxel appears once, so leaf values do not depend on the order, and a
     /// node's final pruning only depends on its children's final state.
-    pub fn update_batch(&mut self, codes: &[u64], delta: f32, inner: InnerNodes) {
+    #[cfg(any(test, feature = "internals"))]
+    pub(crate) fn update_batch(&mut self, codes: &[u64], delta: f32, inner: InnerNodes) {
         self.update_batch_split(codes, delta, inner, 1, &|| {});
     }
 
@@ -126,7 +127,7 @@ impl OccupancyTree {
     /// current rayon pool, split in `2 * workers` parts, when the batch has
     /// 262,144 codes or more and no changes are being recorded. The tree is
     /// the one [`Self::update_batch`] gives.
-    pub fn update_batch_shared(&mut self, codes: &[u64], delta: f32, inner: InnerNodes, workers: usize) {
+    pub(crate) fn update_batch_shared(&mut self, codes: &[u64], delta: f32, inner: InnerNodes, workers: usize) {
         self.update_batch_split(codes, delta, inner, workers, &|| {});
     }
 
@@ -187,7 +188,7 @@ impl OccupancyTree {
                 return;
             }
             let first = a.first_child(n);
-            for i in 0..a.mask(n).count_ones() {
+            for i in 0..crate::arch::count_ones(a.mask(n)) {
                 recurse(a, first + i, rules);
             }
             update_from_children(a, n, rules);

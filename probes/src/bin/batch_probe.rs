@@ -6,6 +6,7 @@
 //! what sharing costs, two what it gains). Prints CPU and wall times (the
 //! fastest of REPS).
 
+use octolinear::internals::TreeInternals;
 use octolinear::{InnerNodes, OccupancyTree, ScanOptions};
 use octolinear_sim::{simulate, LidarConfig, SceneKind};
 use std::time::Instant;

@@ -5,6 +5,7 @@
 //! the full-size sequences), then times their insertion into a fresh tree.
 //! Meant for `valgrind --tool=callgrind` or `perf record`.
 
+use octolinear::internals::TreeInternals;
 use octolinear::{OccupancyTree, ScanOptions};
 use octolinear_sim::{simulate, LidarConfig, SceneKind};
 use std::time::Instant;

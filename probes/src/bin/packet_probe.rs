@@ -2,7 +2,7 @@
 //! packets: `cargo run --release -p octolinear-probes --bin packet_probe --
 //! indoor|outdoor|FILE.graph RES`. Rays of each scan, in the scan's order,
 //! go in packets of 1, 4, 8 and 16, each packet's rays stepped in lockstep
-//! (as `ray::wide` does with eight); per step a ray's voxel is counted
+//! (as `arch::avx512` does with eight); per step a ray's voxel is counted
 //! unless the ray before it in the packet enters the same voxel. Prints the
 //! codes left for the scan's sets and the lane steps (lanes whose ray has
 //! ended wait for the packet's last), both against the rays' steps. A
@@ -11,7 +11,7 @@
 #[path = "../../../benches/common/mod.rs"]
 mod common;
 
-use octolinear::ray::RayFan;
+use octolinear::internals::RayFan;
 use octolinear::{MortonCode, OccupancyTree};
 
 fn main() {

@@ -13,7 +13,7 @@
 #[path = "../../../benches/common/mod.rs"]
 mod common;
 
-use octolinear::ray::RayFan;
+use octolinear::internals::RayFan;
 use octolinear::{MortonCode, OccupancyTree, ScanOptions};
 use std::hint::black_box;
 use std::time::Instant;

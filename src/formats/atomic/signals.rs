@@ -1,4 +1,6 @@
-//! The table of temporary files that a signal handler removes.
+//! The table of temporary files that a signal handler removes, and the
+//! other system calls of atomic writes (the process probe of the stale-file
+//! removal): all of their `unsafe`.
 //!
 //! A handler may not allocate or take a lock a thread might hold, so the
 //! table is fixed: [`SLOTS`] slots, each a flag and a buffer holding a
@@ -211,5 +213,38 @@ extern "C" fn remove_temp_files_and_end(signal: c_int) {
         default.sa_sigaction = libc::SIG_DFL;
         libc::sigaction(signal, &default, ptr::null_mut());
         libc::raise(signal);
+    }
+}
+
+/// Whether process `pid` exists (also one of another user, which the
+/// probe may not signal), by sending it signal 0.
+pub(super) fn process_runs(pid: libc::pid_t) -> bool {
+    debug_assert!(pid > 0);
+    // SAFETY: signal 0 only checks that the process exists; `pid` is
+    // positive, so it names one process, never a process group.
+    let probed = unsafe { libc::kill(pid, 0) };
+    probed == 0 || io::Error::last_os_error().raw_os_error() != Some(libc::ESRCH)
+}
+
+/// Writes to disk everything written so far to the filesystem holding
+/// `dir` (`syncfs`; elsewhere than on Linux, `sync`).
+pub(super) fn sync_filesystem(dir: &std::path::Path) -> std::io::Result<()> {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        let d = std::fs::File::open(dir)?;
+        // SAFETY: syncfs on a descriptor this function owns and keeps open
+        // for the call.
+        if unsafe { libc::syncfs(d.as_raw_fd()) } != 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        Ok(())
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = dir;
+        // SAFETY: sync takes no arguments and cannot fail.
+        unsafe { libc::sync() };
+        Ok(())
     }
 }

@@ -214,7 +214,7 @@ impl PreorderFill {
             if depth >= 16 {
                 return Err(FillError::TooDeep);
             }
-            let k = mask.count_ones();
+            let k = crate::arch::count_ones(mask);
             let first = s.take_group(k as usize, depth);
             s.arena.masks[id as usize] = mask;
             s.arena.first_child[id as usize] = first;
@@ -308,7 +308,7 @@ impl LabelFill {
             let g = &mut self.open[depth - 1];
             let pos = g.due.trailing_zeros();
             g.due &= g.due - 1;
-            g.first + (u32::from(g.mask) & ((1u32 << pos) - 1)).count_ones()
+            g.first + crate::arch::count_ones(u32::from(g.mask) & ((1u32 << pos) - 1))
         } else if !self.started {
             self.started = true;
             0
@@ -324,7 +324,7 @@ impl LabelFill {
             return Err(FillError::TooDeep);
         }
         let due = even_bits(labels & (labels >> 1));
-        let k = mask.count_ones();
+        let k = crate::arch::count_ones(mask);
         let s = &mut self.slots;
         let first = s.take_group(k as usize, depth);
         let mut rest = mask;
@@ -357,7 +357,7 @@ impl LabelFill {
                 break;
             }
             if g.parent != 0 {
-                let max = max_of(self.slots.group_values(g.first, g.mask.count_ones() as usize));
+                let max = max_of(self.slots.group_values(g.first, crate::arch::count_ones(g.mask) as usize));
                 self.slots.arena.values[g.parent as usize] = max;
             }
             self.depth -= 1;

@@ -24,6 +24,8 @@
 //! add a `u32` *extra* per node in each pool; plain trees leave those arrays
 //! empty and pay nothing for them.
 
+#[allow(unsafe_code)]
+mod atomic_view;
 mod fill;
 mod free;
 mod parts;
@@ -251,7 +253,7 @@ impl NodeArena {
             return;
         }
         let first = first as usize;
-        let k = self.masks[n as usize].count_ones() as usize;
+        let k = crate::arch::count_ones(self.masks[n as usize]) as usize;
         let parts = self.parts();
         for c in first..first + k {
             if self.masks[c] != 0 {
@@ -267,7 +269,7 @@ impl NodeArena {
         if m & (1 << pos) == 0 {
             None
         } else {
-            Some(self.first_child[n as usize] + (m & ((1u8 << pos) - 1)).count_ones())
+            Some(self.first_child[n as usize] + crate::arch::count_ones(m & ((1u8 << pos) - 1)))
         }
     }
 
@@ -442,11 +444,11 @@ impl NodeArena {
     pub fn insert_child(&mut self, n: NodeId, pos: usize, value: f32, depth: u8) -> NodeId {
         let m = self.masks[n as usize];
         debug_assert_eq!(m & (1 << pos), 0);
-        let old_len = m.count_ones() as usize;
+        let old_len = crate::arch::count_ones(m) as usize;
         let old = self.first_child[n as usize];
         let new = self.alloc_run(old_len + 1, leaf_group(depth));
         debug_assert!(old_len == 0 || in_leaf_pool(old) == in_leaf_pool(new), "depth {depth} is not n's");
-        let rank = (m & ((1u8 << pos) - 1)).count_ones();
+        let rank = crate::arch::count_ones(m & ((1u8 << pos) - 1));
         for i in 0..rank {
             self.copy_slot(old + i, new + i);
         }
@@ -472,9 +474,9 @@ impl NodeArena {
     pub fn remove_child(&mut self, n: NodeId, pos: usize) -> usize {
         let m = self.masks[n as usize];
         debug_assert_ne!(m & (1 << pos), 0);
-        let old_len = m.count_ones() as usize;
+        let old_len = crate::arch::count_ones(m) as usize;
         let old = self.first_child[n as usize];
-        let rank = (m & ((1u8 << pos) - 1)).count_ones();
+        let rank = crate::arch::count_ones(m & ((1u8 << pos) - 1));
         let freed = NodeStore::free_subtree_children(self, old + rank) + 1;
         if old_len == 1 {
             self.masks[n as usize] = 0;
@@ -509,7 +511,7 @@ impl NodeArena {
             if m == 0 {
                 continue;
             }
-            let len = m.count_ones();
+            let len = crate::arch::count_ones(m);
             let first_old = self.first_child[old as usize];
             let first_new =
                 if in_leaf_pool(first_old) { out.push_leaf_run(len as usize) } else { out.push_run(len as usize) };
@@ -549,7 +551,7 @@ impl NodeArena {
         let (mut next, mut next_leaf) = (1u32, 0u32);
         let mut stack = vec![root];
         while let Some(n) = stack.pop() {
-            let k = self.masks[n as usize].count_ones();
+            let k = crate::arch::count_ones(self.masks[n as usize]);
             if k == 0 {
                 continue;
             }

@@ -17,6 +17,10 @@ pub(crate) struct Parts<'a> {
 }
 
 impl Parts<'_> {
+    /// The arrays of no node.
+    pub const EMPTY: Self =
+        Parts { values: &[], masks: &[], first_child: &[], extras: &[], leaf_values: &[], leaf_extras: &[] };
+
     /// The value of any node.
     #[inline(always)]
     pub fn value(&self, n: NodeId) -> f32 {
@@ -53,7 +57,7 @@ impl Parts<'_> {
         if m & (1 << pos) == 0 {
             Err(m)
         } else {
-            Ok(self.first_child[n as usize] + (u32::from(m) & ((1 << pos) - 1)).count_ones())
+            Ok(self.first_child[n as usize] + crate::arch::count_ones(u32::from(m) & ((1 << pos) - 1)))
         }
     }
 

@@ -21,12 +21,7 @@ pub(crate) fn prefetch_lines<T>(s: &[T]) {
 /// updates ask for the groups they will visit next all at once.
 #[inline(always)]
 pub(crate) fn prefetch<T>(s: &[T], i: usize) {
-    #[cfg(target_arch = "x86_64")]
     if let Some(x) = s.get(i) {
-        // SAFETY: a prefetch is a hint that never faults nor changes memory;
-        // SSE is part of the x86_64 baseline
-        unsafe { std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>((x as *const T).cast()) }
+        crate::arch::prefetch(x);
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = (s, i);
 }

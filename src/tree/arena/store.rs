@@ -42,7 +42,7 @@ pub(crate) trait NodeStore {
     #[inline]
     fn add_children(&mut self, n: NodeId, mask: u8, value: f32, extra: Option<u32>, depth: u8) -> NodeId {
         debug_assert_eq!(self.mask(n), 0);
-        let len = mask.count_ones();
+        let len = crate::arch::count_ones(mask);
         let new = if len == 0 { NO_CHILD } else { self.alloc_run(len as usize, leaf_group(depth)) };
         for i in 0..len {
             self.init_slot(new + i, value, extra);
@@ -66,7 +66,7 @@ pub(crate) trait NodeStore {
         }
         let old = self.first_child(n);
         let new_mask = m | add;
-        let new = self.alloc_run(new_mask.count_ones() as usize, leaf_group(depth));
+        let new = self.alloc_run(crate::arch::count_ones(new_mask) as usize, leaf_group(depth));
         let (mut from, mut to) = (old, new);
         for i in 0..8 {
             if m & (1 << i) != 0 {
@@ -78,7 +78,7 @@ pub(crate) trait NodeStore {
                 to += 1;
             }
         }
-        self.free_run(old, m.count_ones() as usize);
+        self.free_run(old, crate::arch::count_ones(m) as usize);
         self.set_children(n, new_mask, new);
         new
     }
@@ -106,7 +106,7 @@ pub(crate) trait NodeStore {
         if m == 0 {
             return 0;
         }
-        let len = m.count_ones() as usize;
+        let len = crate::arch::count_ones(m) as usize;
         let first = self.first_child(n);
         let mut freed = len;
         if !in_leaf_pool(first) {

@@ -1,12 +1,13 @@
-//! Rays of one fan set up eight at a time and walked sixteen at a time,
-//! one per lane of AVX-512 registers (two groups of eight lanes).
+//! AVX-512F (with BMI2 and POPCNT), detected at run time: a scan's rays
+//! set up eight at a time and walked sixteen at a time, one per lane of
+//! AVX-512 registers (two groups of eight lanes).
 //!
 //! A ray's steps form one chain of dependent operations (compare the three
 //! `t_max`, add the chosen increment, move the Morton code), so a scalar
 //! walk waits on latency; two walks interleaved (`Casting::cast_all`'s
 //! scalar path) still leave most of the machine idle. Here every lane runs
-//! [`WalkState::next_code`](super::WalkState::next_code)'s arithmetic on
-//! its own ray: the same double compares (ties to the higher axis), the
+//! [`WalkState::next_code`](crate::ray::WalkState::next_code)'s arithmetic
+//! on its own ray: the same double compares (ties to the higher axis), the
 //! same double additions and the same end tests, so each lane visits
 //! exactly the voxels of the scalar walk.
 //!
@@ -22,12 +23,15 @@
 //! more lane steps (lanes whose ray has ended wait for the packet's last).
 //! The codes kept are packed into a buffer that is handed on in batches.
 //!
-//! Only on x86-64 processors with AVX-512F, chosen at run time
-//! ([`available`]); the scalar walk remains for the others.
+//! The functions with `#[target_feature(enable = "avx512f")]` call each
+//! other safely; the way in from other code is [`Avx512::cast_fan`], whose
+//! token proves the processor has the instructions. Those that call the
+//! set insertions (inlined into them) add BMI2, for its one-instruction
+//! variable shift `shlx`, and those that count lanes add POPCNT.
 
-use super::{FanRay, RayFan, AXIS_MASKS};
 use crate::geometry::Point3;
 use crate::key::KeySpace;
+use crate::ray::{FanRay, RayFan, AXIS_MASKS};
 use std::arch::x86_64::*;
 
 /// Lanes of a group (doubles in a 512-bit register).
@@ -36,17 +40,75 @@ const LANES: usize = 8;
 /// Codes gathered before they are handed on.
 const BUFFER: usize = 512;
 
-/// Whether this processor can run the lanes (and its callers' BMI2 shifts:
-/// every AVX-512 processor has BMI2).
-pub(crate) fn available() -> bool {
-    std::arch::is_x86_feature_detected!("avx512f") && std::arch::is_x86_feature_detected!("bmi2")
+/// Proof that the processor has AVX-512F, BMI2 and POPCNT (every AVX-512
+/// processor has the other two): only [`Avx512::detect`] makes one.
+#[derive(Clone, Copy)]
+pub(crate) struct Avx512(());
+
+impl Avx512 {
+    /// `Some` on a processor with AVX-512F, BMI2 and POPCNT.
+    pub(crate) fn detect() -> Option<Self> {
+        let has = std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("bmi2")
+            && std::arch::is_x86_feature_detected!("popcnt");
+        has.then_some(Avx512(()))
+    }
+
+    /// `Casting::cast`'s work for every point of `points`, in the lanes:
+    /// calls `occupied` with the code of every end voxel within
+    /// `max_range` of `fan`'s origin (any distance when it is negative) and
+    /// `free` with batches of the codes of the voxels the rays step into
+    /// (in no particular order, some more than once). The rays are set up
+    /// a chunk at a time, eight at once, each chunk walked sixteen rays at
+    /// once while the lanes still hold the previous chunk's last rays.
+    /// Returns whether any ray was walked (then the origin's voxel is free
+    /// too, which `free` was not given).
+    #[inline]
+    pub(crate) fn cast_fan(
+        self,
+        fan: &RayFan,
+        keys: &KeySpace,
+        points: &[Point3],
+        max_range: f64,
+        occupied: impl FnMut(u64),
+        free: impl FnMut(&[u64]),
+    ) -> bool {
+        // SAFETY: an `Avx512` exists only on a processor with AVX-512F,
+        // BMI2 and POPCNT.
+        unsafe { cast_fan_lanes(fan, keys, points, max_range, occupied, free) }
+    }
+}
+
+/// [`Avx512::cast_fan`].
+#[target_feature(enable = "avx512f,bmi2,popcnt")]
+fn cast_fan_lanes(
+    fan: &RayFan,
+    keys: &KeySpace,
+    points: &[Point3],
+    max_range: f64,
+    mut occupied: impl FnMut(u64),
+    mut free: impl FnMut(&[u64]),
+) -> bool {
+    let mut rays = LaneRays::default();
+    let mut lanes = Lanes::default();
+    let mut any = false;
+    let mut chunks = points.chunks(LaneRays::CAPACITY).peekable();
+    while let Some(chunk) = chunks.next() {
+        rays.clear();
+        set_up(&mut rays, fan, keys, chunk, max_range, &mut occupied);
+        any |= rays.len() > 0;
+        rays.pad();
+        let last = chunks.peek().is_none();
+        walk(&mut lanes, &rays, fan.origin_code(), last, &mut free);
+    }
+    any
 }
 
 /// Rays set up and waiting for a lane, as a structure of arrays with room
 /// for [`Self::CAPACITY`] rays and the [`LANES`] finished rays that
 /// [`walk`] reads after the last one (it loads a packet's eight rays at
 /// once; the lanes past the last ray are not alive).
-pub(crate) struct LaneRays {
+struct LaneRays {
     t: [Box<[f64]>; 3],
     dt: [Box<[f64]>; 3],
     /// What a step subtracts from the stepped axis's bits of a code, under
@@ -70,22 +132,22 @@ impl Default for LaneRays {
 
 impl LaneRays {
     /// Rays a set-up may hold (88 bytes each: the arrays stay in L1).
-    pub(crate) const CAPACITY: usize = 256;
+    const CAPACITY: usize = 256;
 
     /// No ray waiting, and no padding: [`Self::push`] or [`set_up`] rays,
     /// then [`Self::pad`].
-    pub(crate) fn clear(&mut self) {
+    fn clear(&mut self) {
         self.len = 0;
         self.padded = false;
     }
 
-    pub(crate) fn len(&self) -> usize {
+    fn len(&self) -> usize {
         self.len
     }
 
     /// Adds `ray` after the waiting ones (before [`Self::pad`]).
     #[inline(always)]
-    pub(crate) fn push(&mut self, ray: FanRay) {
+    fn push(&mut self, ray: FanRay) {
         assert!(!self.padded && self.len < Self::CAPACITY, "LaneRays full or padded");
         self.write(self.len, &ray);
         self.len += 1;
@@ -93,7 +155,7 @@ impl LaneRays {
 
     /// Appends the [`LANES`] rays that [`walk`] reads past the last:
     /// [`FanRay::finished`], which ends at its first step.
-    pub(crate) fn pad(&mut self) {
+    fn pad(&mut self) {
         let finished = FanRay::finished();
         for n in self.len..self.len + LANES {
             self.write(n, &finished);
@@ -128,17 +190,14 @@ fn step_bits(ray: &FanRay) -> u64 {
 /// [`RayFan::ray`] for every point of `points` (at most
 /// [`LaneRays::CAPACITY`] less the rays already in `rays`), with
 /// `Casting::cast`'s end voxel: rays longer than `max_range` (when it is
-/// not negative) are cut there ([`super::cut_to_range`]); `occupied` is
+/// not negative) are cut there ([`crate::ray::cut_to_range`]); `occupied` is
 /// called with the code of the voxel of each point within range, and the
 /// non-empty rays join `rays`. Ends without a key are skipped. Eight points
 /// at a time, with the scalar code's operations in the same precision and
 /// order (every one correctly rounded), so the rays are the same to the
 /// bit; the last `points.len() % 8` by the scalar code.
-///
-/// # Safety
-/// The processor must support AVX-512F ([`available`]).
-#[target_feature(enable = "avx512f")]
-pub(crate) unsafe fn set_up(
+#[target_feature(enable = "avx512f,bmi2,popcnt")]
+fn set_up(
     rays: &mut LaneRays,
     fan: &RayFan,
     keys: &KeySpace,
@@ -151,10 +210,11 @@ pub(crate) unsafe fn set_up(
     for batch in eight.by_ref() {
         // x, y and z of the eight points: 24 consecutive floats
         // (`Point3` is `repr(C)`), the first 16 in `lo`
-        // SAFETY: `batch` holds 8 points, 96 bytes
+        debug_assert_eq!(batch.len(), LANES);
         let floats = batch.as_ptr().cast::<f32>();
-        let lo = _mm512_loadu_ps(floats);
-        let hi = _mm512_castps256_ps512(_mm256_loadu_ps(floats.add(16)));
+        // SAFETY: `batch` holds 8 points, 96 bytes: floats 0..16 and 16..24
+        let (lo, hi) = unsafe { (_mm512_loadu_ps(floats), _mm256_loadu_ps(floats.add(16))) };
+        let hi = _mm512_castps256_ps512(hi);
         let axis = |first: i32| {
             let idx = _mm512_setr_epi32(
                 first,
@@ -222,7 +282,8 @@ pub(crate) unsafe fn set_up(
         }
         let mut codes = [0u64; LANES];
         let hit = in_map & within;
-        _mm512_storeu_si512(codes.as_mut_ptr().cast(), _mm512_maskz_compress_epi64(hit, code));
+        // SAFETY: `codes` holds LANES codes, 64 bytes
+        unsafe { _mm512_storeu_si512(codes.as_mut_ptr().cast(), _mm512_maskz_compress_epi64(hit, code)) };
         codes[..hit.count_ones() as usize].iter().for_each(|&c| occupied(c));
 
         // the ray (`RayFan::ray`): direction, length, per axis the step,
@@ -237,11 +298,13 @@ pub(crate) unsafe fn set_up(
         let n = rays.len;
         let store_pd = |v: __m512d, to: &mut [f64]| {
             let to = &mut to[n..n + LANES];
-            _mm512_storeu_pd(to.as_mut_ptr(), _mm512_maskz_compress_pd(kept, v));
+            // SAFETY: `to` holds LANES values, 64 bytes
+            unsafe { _mm512_storeu_pd(to.as_mut_ptr(), _mm512_maskz_compress_pd(kept, v)) };
         };
         let store_epi = |v: __m512i, to: &mut [u64]| {
             let to = &mut to[n..n + LANES];
-            _mm512_storeu_si512(to.as_mut_ptr().cast(), _mm512_maskz_compress_epi64(kept, v));
+            // SAFETY: `to` holds LANES values, 64 bytes
+            unsafe { _mm512_storeu_si512(to.as_mut_ptr().cast(), _mm512_maskz_compress_epi64(kept, v)) };
         };
         let mut step = _mm512_set1_epi64(0b111);
         for i in 0..3 {
@@ -264,7 +327,7 @@ pub(crate) unsafe fn set_up(
         rays.len += kept.count_ones() as usize;
     }
     for &p in eight.remainder() {
-        let (within, end) = super::cut_to_range(p, fan.origin, max_range);
+        let (within, end) = crate::ray::cut_to_range(p, fan.origin, max_range);
         let Ok(key) = keys.key(end) else { continue };
         let code = crate::morton::MortonCode::encode(key).0;
         if within {
@@ -278,14 +341,16 @@ pub(crate) unsafe fn set_up(
 
 /// `Point3::norm_sq` of eight vectors given by axis: `(x * x + y * y) + z * z`
 /// in float.
-#[inline(always)]
-unsafe fn squared_norm(v: [__m256; 3]) -> __m256 {
+#[target_feature(enable = "avx512f")]
+#[inline]
+fn squared_norm(v: [__m256; 3]) -> __m256 {
     _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(v[0], v[0]), _mm256_mul_ps(v[1], v[1])), _mm256_mul_ps(v[2], v[2]))
 }
 
 /// [`crate::morton::spread_bits`] in every lane (values below 2^16).
-#[inline(always)]
-unsafe fn spread_bits(v: __m512i) -> __m512i {
+#[target_feature(enable = "avx512f")]
+#[inline]
+fn spread_bits(v: __m512i) -> __m512i {
     let step = |x: __m512i, shift: u32, mask: u64| {
         _mm512_and_si512(
             _mm512_or_si512(x, _mm512_sll_epi64(x, _mm_cvtsi32_si128(shift as i32))),
@@ -302,7 +367,7 @@ unsafe fn spread_bits(v: __m512i) -> __m512i {
 /// [`LANES`], each walking a packet, stepped alternately so that one
 /// group's chain of compares and additions overlaps the other's.
 #[derive(Clone, Copy)]
-pub(crate) struct Lanes {
+struct Lanes {
     groups: [Saved; 2],
 }
 
@@ -354,11 +419,13 @@ struct Group {
 }
 
 impl Group {
-    #[inline(always)]
-    unsafe fn load(s: &Saved) -> Self {
-        // SAFETY: each array holds LANES values
-        let pd = |a: &[f64; LANES]| _mm512_loadu_pd(a.as_ptr());
-        let epi = |a: &[u64; LANES]| _mm512_loadu_si512(a.as_ptr().cast());
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    fn load(s: &Saved) -> Self {
+        // SAFETY: each array holds LANES values, 64 bytes
+        let pd = |a: &[f64; LANES]| unsafe { _mm512_loadu_pd(a.as_ptr()) };
+        // SAFETY: as for `pd`
+        let epi = |a: &[u64; LANES]| unsafe { _mm512_loadu_si512(a.as_ptr().cast()) };
         Group {
             t0: pd(&s.t[0]),
             t1: pd(&s.t[1]),
@@ -374,11 +441,13 @@ impl Group {
         }
     }
 
-    #[inline(always)]
-    unsafe fn store(&self, s: &mut Saved) {
-        // SAFETY: each array holds LANES values
-        let pd = |v: __m512d, a: &mut [f64; LANES]| _mm512_storeu_pd(a.as_mut_ptr(), v);
-        let epi = |v: __m512i, a: &mut [u64; LANES]| _mm512_storeu_si512(a.as_mut_ptr().cast(), v);
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    fn store(&self, s: &mut Saved) {
+        // SAFETY: each array holds LANES values, 64 bytes
+        let pd = |v: __m512d, a: &mut [f64; LANES]| unsafe { _mm512_storeu_pd(a.as_mut_ptr(), v) };
+        // SAFETY: as for `pd`
+        let epi = |v: __m512i, a: &mut [u64; LANES]| unsafe { _mm512_storeu_si512(a.as_mut_ptr().cast(), v) };
         pd(self.t0, &mut s.t[0]);
         pd(self.t1, &mut s.t[1]);
         pd(self.t2, &mut s.t[2]);
@@ -398,8 +467,9 @@ impl Group {
     /// `t_max` lies beyond the ray's length (OctoMap's `min(min(..), ..) >
     /// length`, with no NaN among them). Lanes no longer alive step on
     /// unseen.
-    #[inline(always)]
-    unsafe fn step(&mut self) {
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    fn step(&mut self) {
         let (t0, t1, t2) = (self.t0, self.t1, self.t2);
         let lt01 = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(t0, t1);
         let lt02 = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(t0, t2);
@@ -427,13 +497,16 @@ impl Group {
 
     /// The lanes take the next packet: the rays of `rays` from `at` on,
     /// eight or as many as are left, each from the origin's voxel; returns
-    /// where the rays after them start.
-    #[inline(always)]
-    unsafe fn start(&mut self, rays: &LaneRays, at: usize, origin: __m512i) -> usize {
-        // SAFETY (the loads): the caller keeps `at <= rays.len`, and the
-        // arrays hold LANES values after the last ray
-        let pd = |from: &[f64]| _mm512_loadu_pd(from[at..at + LANES].as_ptr());
-        let epi = |from: &[u64]| _mm512_loadu_si512(from[at..at + LANES].as_ptr().cast());
+    /// where the rays after them start. `rays` must be padded and `at <=
+    /// rays.len` (else the slices below panic).
+    #[target_feature(enable = "avx512f")]
+    #[inline]
+    fn start(&mut self, rays: &LaneRays, at: usize, origin: __m512i) -> usize {
+        debug_assert!(at <= rays.len && rays.padded);
+        // SAFETY: the slice holds LANES values, 64 bytes
+        let pd = |from: &[f64]| unsafe { _mm512_loadu_pd(from[at..at + LANES].as_ptr()) };
+        // SAFETY: as for `pd`
+        let epi = |from: &[u64]| unsafe { _mm512_loadu_si512(from[at..at + LANES].as_ptr().cast()) };
         self.t0 = pd(&rays.t[0]);
         self.t1 = pd(&rays.t[1]);
         self.t2 = pd(&rays.t[2]);
@@ -454,13 +527,19 @@ impl Group {
 /// less a lane's that repeats the code its neighbour below appends (the
 /// rays of a packet often enter the same voxel at the same step); returns
 /// the new `filled`.
-#[inline(always)]
+///
+/// # Safety
+/// `filled <= BUFFER`: the store writes [`LANES`] codes from `filled`.
+#[target_feature(enable = "avx512f")]
+#[inline]
 unsafe fn append(buffer: &mut [u64; BUFFER + LANES], filled: usize, code: __m512i, going: __mmask8) -> usize {
+    debug_assert!(filled <= BUFFER);
     let below = _mm512_alignr_epi64::<7>(code, code);
     let repeat = _mm512_cmpeq_epi64_mask(code, below) & (going << 1);
     let kept = going & !repeat;
-    // SAFETY: `filled <= BUFFER`, and the buffer has LANES more slots
-    _mm512_storeu_si512(buffer.as_mut_ptr().add(filled).cast(), _mm512_maskz_compress_epi64(kept, code));
+    // SAFETY: `filled <= BUFFER` (the caller's contract), and the buffer
+    // has LANES slots more
+    unsafe { _mm512_storeu_si512(buffer.as_mut_ptr().add(filled).cast(), _mm512_maskz_compress_epi64(kept, code)) };
     filled + kept.count_ones() as usize
 }
 
@@ -470,17 +549,8 @@ unsafe fn append(buffer: &mut [u64; BUFFER + LANES], filled: usize, code: __m512
 /// Returns once every ray of `rays` has entered a lane; with `drain`, once
 /// every lane's ray has ended. Rays still in the lanes stay in `lanes` for
 /// the next call. Packets are made of rays in the order of `rays`.
-///
-/// # Safety
-/// The processor must support AVX-512F ([`available`]).
-#[target_feature(enable = "avx512f")]
-pub(crate) unsafe fn walk(
-    lanes: &mut Lanes,
-    rays: &LaneRays,
-    origin_code: u64,
-    drain: bool,
-    mut visit: impl FnMut(&[u64]),
-) {
+#[target_feature(enable = "avx512f,bmi2,popcnt")]
+fn walk(lanes: &mut Lanes, rays: &LaneRays, origin_code: u64, drain: bool, mut visit: impl FnMut(&[u64])) {
     assert!(rays.padded, "LaneRays::pad before walk");
     let mut buffer = [0u64; BUFFER + LANES];
     let mut next = 0usize;
@@ -488,8 +558,10 @@ pub(crate) unsafe fn walk(
     // (`#[inline(never)]` did not keep it out)
     let fill_fn: Fill = std::hint::black_box(fill);
     loop {
-        // SAFETY: AVX-512F as the caller guarantees; `next` starts at 0
-        // and `fill` keeps it within `rays.len`
+        // SAFETY: the processor has AVX-512F and POPCNT (this function
+        // runs only where its target features are); `rays` is padded
+        // (asserted above), `next` starts at 0 and `fill` keeps it within
+        // `rays.len`
         let (filled, done) = unsafe { fill_fn(lanes, rays, &mut next, origin_code, drain, &mut buffer) };
         visit(&buffer[..filled]);
         if done {
@@ -507,9 +579,9 @@ type Fill = unsafe fn(&mut Lanes, &LaneRays, &mut usize, u64, bool, &mut [u64; B
 /// is lost, and the lanes' registers would be kept in memory all along.
 ///
 /// # Safety
-/// The processor must support AVX-512F, `rays` must be padded and `*next
-/// <= rays.len`.
-#[target_feature(enable = "avx512f")]
+/// The processor must support AVX-512F and POPCNT, `rays` must be padded
+/// and `*next <= rays.len`.
+#[target_feature(enable = "avx512f,popcnt")]
 unsafe fn fill(
     lanes: &mut Lanes,
     rays: &LaneRays,
@@ -518,6 +590,7 @@ unsafe fn fill(
     drain: bool,
     buffer: &mut [u64; BUFFER + LANES],
 ) -> (usize, bool) {
+    debug_assert!(rays.padded && *next <= rays.len);
     let mut filled = 0usize;
     let origin = _mm512_set1_epi64(origin_code as i64);
     let mut a = Group::load(&lanes.groups[0]);
@@ -527,10 +600,16 @@ unsafe fn fill(
     let done = loop {
         a.step();
         b.step();
-        filled = append(buffer, filled, a.code, a.alive);
-        filled = append(buffer, filled, b.code, b.alive);
+        // SAFETY: `filled <= BUFFER - LANES` at the start of each turn
+        // (the `break` below), and each append adds at most LANES
+        unsafe {
+            filled = append(buffer, filled, a.code, a.alive);
+            filled = append(buffer, filled, b.code, b.alive);
+        }
         // a group whose packet has ended takes the next one (a branch
-        // taken once a packet: a packet's rays take tens of steps)
+        // taken once a packet: a packet's rays take tens of steps); `at`
+        // stays within `len` (the caller's contract for `*next`, then
+        // `start`)
         if a.alive == 0 {
             at = a.start(rays, at, origin);
         }
@@ -555,8 +634,9 @@ unsafe fn fill(
 /// !mask) + 1`, whose carry runs through the other axes' bits; the axis's
 /// lowest bit for a step down, whose borrow runs through them), the other
 /// bits kept.
-#[inline(always)]
-unsafe fn step_code(code: __m512i, mask: __m512i, by: __m512i) -> __m512i {
+#[target_feature(enable = "avx512f")]
+#[inline]
+fn step_code(code: __m512i, mask: __m512i, by: __m512i) -> __m512i {
     let moved = _mm512_sub_epi64(_mm512_and_si512(code, mask), by);
     // bitwise `mask ? moved : code`
     _mm512_ternarylogic_epi64::<0xe4>(moved, code, mask)
@@ -621,7 +701,7 @@ mod tests {
         let mut rays = LaneRays::default();
         let mut occupied = Vec::new();
         for &p in points {
-            let (within, end) = super::super::cut_to_range(p, fan.origin, max_range);
+            let (within, end) = crate::ray::cut_to_range(p, fan.origin, max_range);
             let Ok(key) = keys.key(end) else { continue };
             let code = MortonCode::encode(key).0;
             if within {
@@ -643,7 +723,7 @@ mod tests {
     /// without a maximum range (rays cut at it, ends beyond it not marked).
     #[test]
     fn set_up_matches_the_scalar_set_up() {
-        if !available() {
+        if Avx512::detect().is_none() {
             eprintln!("skipped: no AVX-512F");
             return;
         }
@@ -663,7 +743,7 @@ mod tests {
                 let (want, want_occupied) = scalar_set_up(&fan, &keys, &pts, max_range);
                 let mut got = LaneRays::default();
                 let mut got_occupied = Vec::new();
-                // SAFETY: AVX-512F is available (checked above)
+                // SAFETY: AVX-512F, BMI2 and POPCNT are available (checked above)
                 unsafe { set_up(&mut got, &fan, &keys, &pts, max_range, |c| got_occupied.push(c)) };
                 assert_eq!(got_occupied, want_occupied, "res {res}");
                 let n = want.len();
@@ -693,7 +773,7 @@ mod tests {
     /// voxels, every ray's first and last included.
     #[test]
     fn walks_match_the_scalar_walk() {
-        if !available() {
+        if Avx512::detect().is_none() {
             eprintln!("skipped: no AVX-512F");
             return;
         }
@@ -708,10 +788,11 @@ mod tests {
             let mut rays = LaneRays::default();
             for &p in &pts {
                 rays.clear();
-                // SAFETY (both calls): AVX-512F is available (checked above)
+                // SAFETY: AVX-512F, BMI2 and POPCNT are available (checked above)
                 unsafe { set_up(&mut rays, &fan, &keys, &[p], -1.0, |_| {}) };
                 rays.pad();
                 let mut got = Vec::new();
+                // SAFETY: as for `set_up`
                 unsafe { walk(&mut Lanes::default(), &rays, fan.origin_code, true, |c| got.extend_from_slice(c)) };
                 assert_eq!(got, scalar_walk(&fan, &keys, p), "res {res}, end {p:?}");
             }
@@ -721,9 +802,11 @@ mod tests {
             let chunks: Vec<&[Point3]> = pts.chunks(97).collect();
             for (i, chunk) in chunks.iter().enumerate() {
                 rays.clear();
+                // SAFETY: AVX-512F, BMI2 and POPCNT are available (checked above)
                 unsafe { set_up(&mut rays, &fan, &keys, chunk, -1.0, |_| {}) };
                 rays.pad();
                 let last = i + 1 == chunks.len();
+                // SAFETY: as for `set_up`
                 unsafe { walk(&mut lanes, &rays, fan.origin_code, last, |c| got.extend(c.iter().copied())) };
             }
             assert!(want.len() > 300, "the rays enter many voxels ({})", want.len());

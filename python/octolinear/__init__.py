@@ -1,0 +1,60 @@
+"""octolinear: OctoMap's probabilistic 3D occupancy maps, bit-compatible and fast.
+
+``OcTree`` is a drop-in for octomap-python's ``octomap.OcTree``: the same
+method names, argument order and answers, and byte-identical ``.bt`` and
+``.ot`` files. Beyond it, array methods answer whole numpy arrays in one
+call without the GIL (``OcTree.occupancy``, ``OcTree.cast_rays``,
+``OcTree.leaves``), and module functions read and build maps:
+``read`` (``.bt``, ``.ot``, ``.olm``), ``open_mapped`` (``.olm`` queried in
+place), ``read_graph``, ``build``, ``read_points``.
+"""
+
+from ._octolinear import (
+    FREE,
+    OCCUPIED,
+    UNKNOWN,
+    ColorOcTree,
+    CountingOcTree,
+    MappedOcTree,
+    NodeIterator,
+    NullPointerException,
+    OcTree,
+    OcTreeKey,
+    OcTreeNode,
+    OcTreeStamped,
+    build,
+    get_num_threads,
+    open_mapped,
+    read,
+    read_graph,
+    read_points,
+    set_num_threads,
+)
+
+# octomap-python's three iterator classes are one class here
+tree_iterator = leaf_iterator = leaf_bbx_iterator = NodeIterator
+
+__all__ = [
+    "FREE",
+    "OCCUPIED",
+    "UNKNOWN",
+    "ColorOcTree",
+    "CountingOcTree",
+    "MappedOcTree",
+    "NodeIterator",
+    "NullPointerException",
+    "OcTree",
+    "OcTreeKey",
+    "OcTreeNode",
+    "OcTreeStamped",
+    "build",
+    "get_num_threads",
+    "leaf_bbx_iterator",
+    "leaf_iterator",
+    "open_mapped",
+    "read",
+    "read_graph",
+    "read_points",
+    "set_num_threads",
+    "tree_iterator",
+]

@@ -1,0 +1,192 @@
+"""Bad input: every mistake is a Python exception with a clear message,
+never a crash, and leaves the tree as it was."""
+
+import numpy as np
+import pytest
+from conftest import SAMPLE_GRAPH, random_scan
+
+import octolinear
+
+
+@pytest.fixture
+def tree(rng):
+    t = octolinear.OcTree(0.1)
+    t.insertPointCloud(*random_scan(rng, 500))
+    return t
+
+
+@pytest.mark.parametrize(
+    "points, error, message",
+    [
+        (np.zeros((10, 2)), ValueError, r"shape \(N, 3\), got \(10, 2\)"),
+        (np.zeros(3), ValueError, r"got \(3,\)"),
+        (np.zeros((4, 3, 1)), ValueError, r"got \(4, 3, 1\)"),
+        (np.zeros((10, 3), dtype=np.int64), TypeError, "dtype float64 or float32, got int64"),
+        (np.zeros((10, 3), dtype=np.float16), TypeError, "got float16"),
+        (np.zeros((10, 3), dtype=np.complex128), TypeError, "got complex128"),
+        ([["a", "b", "c"]], TypeError, "numpy cannot convert"),
+        ("not points", TypeError, "got str that numpy cannot convert"),
+        (None, ValueError, r"shape \(N, 3\), got \(\)"),
+    ],
+)
+def test_wrong_point_arrays_are_refused(tree, points, error, message):
+    before = tree.write()
+    with pytest.raises(error, match=message):
+        tree.insertPointCloud(points, np.zeros(3))
+    with pytest.raises(error, match=message):
+        tree.occupancy(points)
+    with pytest.raises(error, match=message):
+        tree.getLabels(points)
+    assert tree.write() == before
+
+
+def test_lists_of_points_are_accepted(tree):
+    assert tree.getLabels([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]).shape == (2,)
+
+
+@pytest.mark.parametrize(
+    "origin, error",
+    [(np.zeros(2), ValueError), ("xyz", TypeError), (None, TypeError), ([0, 0, "a"], TypeError)],
+)
+def test_wrong_origins_are_refused(tree, origin, error):
+    with pytest.raises(error, match="origin"):
+        tree.insertPointCloud(np.zeros((3, 3)), origin)
+
+
+def test_non_finite_points_are_skipped_and_a_non_finite_origin_refused(rng):
+    points, origin = random_scan(rng, 1000)
+    clean = octolinear.OcTree(0.1)
+    clean.insertPointCloud(points, origin)
+    dirty = points.copy()
+    dirty[::50, 1] = np.nan
+    dirty[1::50, 2] = np.inf
+    with_nan = octolinear.OcTree(0.1)
+    with_nan.insertPointCloud(np.concatenate([points, dirty[::50], dirty[1::50]]), origin)
+    assert with_nan.write() == clean.write()
+    with pytest.raises(ValueError, match="sensor origin"):
+        with_nan.insertPointCloud(points, np.array([np.nan, 0, 0]))
+    with pytest.raises(ValueError, match="maxrange is NaN"):
+        with_nan.insertPointCloud(points, origin, maxrange=float("nan"))
+    assert with_nan.write() == clean.write()
+
+
+@pytest.mark.parametrize("resolution", [0.0, -0.1, float("nan"), float("inf")])
+def test_bad_resolutions_are_refused(resolution):
+    with pytest.raises(ValueError, match="resolution"):
+        octolinear.OcTree(resolution)
+    with pytest.raises(ValueError, match="resolution"):
+        octolinear.build(SAMPLE_GRAPH, resolution=resolution)
+
+
+def test_bad_arguments(tree):
+    with pytest.raises(TypeError, match="OcTree\\(resolution\\)"):
+        octolinear.OcTree(True)
+    with pytest.raises(ValueError, match="depth 17"):
+        tree.search(np.zeros(3), 17)
+    with pytest.raises(ValueError, match="depth 20"):
+        tree.leaves(max_depth=20)
+    with pytest.raises(ValueError, match=r"setProbHit: probability 1.5"):
+        tree.setProbHit(1.5)
+    with pytest.raises(TypeError, match="update"):
+        tree.updateNode(np.zeros(3), "yes")
+    with pytest.raises(TypeError, match="OcTreeNode"):
+        tree.isNodeOccupied(3)
+    with pytest.raises(TypeError):
+        tree.castRay(np.zeros(3), np.ones(3), (0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="bbox min"):
+        tree.leaves(bbox=((1e9, 0, 0), (1, 1, 1)))
+    with pytest.raises(ValueError, match="3 origins for 2 directions"):
+        tree.cast_rays(np.zeros((3, 3)), np.ones((2, 3)))
+    with pytest.raises(ValueError, match="max_range"):
+        octolinear.build(SAMPLE_GRAPH, max_range=-2.0)
+    with pytest.raises(ValueError, match="MissAboveHalf|miss|0.5"):
+        octolinear.build(SAMPLE_GRAPH, sensor=(0.7, 0.9))
+    with pytest.raises(ValueError, match="at most 1024"):
+        octolinear.set_num_threads(5000)
+    with pytest.raises(ValueError, match="at least 1"):
+        octolinear.build(SAMPLE_GRAPH, threads=0)
+    tree.setBBXMin(np.array([-1e9, 0, 0]))
+    tree.useBBXLimit(True)
+    with pytest.raises(ValueError, match="bounding box"):
+        tree.insertPointCloud(np.ones((2, 3)), np.zeros(3))
+
+
+def test_null_nodes_and_exhausted_iterators_raise(tree):
+    node = tree.search(np.array([30.0, 30.0, 30.0]))
+    assert not node
+    for call in (node.getValue, node.getOccupancy, node.hasChildren, lambda: tree.isNodeOccupied(node)):
+        with pytest.raises(octolinear.NullPointerException):
+            call()
+    it = tree.end_leafs()
+    with pytest.raises(octolinear.NullPointerException):
+        it.getCoordinate()
+    with pytest.raises(StopIteration):
+        it.next()
+    with pytest.raises(NotImplementedError, match="snapshots"):
+        tree.search(tree.leaves()[0].tolist()[:3]).setValue(1.0)
+
+
+def test_missing_files(tmp_path):
+    missing = tmp_path / "missing"
+    for call in (
+        lambda: octolinear.read(str(missing) + ".bt"),
+        lambda: octolinear.read(missing),
+        lambda: octolinear.OcTree.read(str(missing) + ".ot"),
+        lambda: octolinear.OcTree(0.1).readBinary(str(missing) + ".bt"),
+        lambda: octolinear.OcTree(str(missing) + ".bt"),
+        lambda: octolinear.open_mapped(str(missing) + ".olm"),
+        lambda: octolinear.read_graph(str(missing) + ".graph"),
+        lambda: octolinear.build(str(missing) + ".graph"),
+        lambda: octolinear.read_points(str(missing) + ".ply"),
+    ):
+        with pytest.raises(FileNotFoundError, match="missing"):
+            call()
+    with pytest.raises(FileNotFoundError):
+        octolinear.OcTree(0.1).write(str(tmp_path / "no" / "dir.ot"))
+    with pytest.raises(ValueError, match="extension"):
+        octolinear.OcTree(0.1).save(tmp_path / "map.png")
+    with pytest.raises(ValueError, match="point cloud format"):
+        octolinear.read_points(tmp_path / "cloud.las")
+    with pytest.raises(TypeError, match="file name"):
+        octolinear.read(42)
+
+
+def corruptions(data, rng):
+    """Truncations at many offsets, flipped bytes and garbage."""
+    for cut in sorted({1, 10, 40, 60, 100, len(data) // 2, len(data) - 1} | set(rng.integers(1, len(data), 20))):
+        yield data[:cut]
+    for at in rng.integers(0, len(data), 60):
+        flipped = bytearray(data)
+        flipped[at] ^= 0xFF
+        yield bytes(flipped)
+    yield b""
+    yield bytes(rng.integers(0, 256, 5000, dtype=np.uint8))
+
+
+@pytest.mark.parametrize("suffix", [".bt", ".ot", ".olm", ".graph"])
+def test_corrupt_files_raise_and_never_crash(tree, tmp_path, rng, suffix):
+    path = tmp_path / ("good" + suffix)
+    if suffix == ".graph":
+        path.write_bytes(SAMPLE_GRAPH.read_bytes())
+    else:
+        tree.save(path)
+    data = path.read_bytes()
+    bad = tmp_path / ("bad" + suffix)
+    refused = 0
+    for corrupt in corruptions(data, rng):
+        bad.write_bytes(corrupt)
+        try:
+            if suffix == ".olm":
+                octolinear.open_mapped(bad, verify=True).occupancy(np.zeros((4, 3)))
+            elif suffix == ".graph":
+                octolinear.read_graph(bad)
+            else:
+                octolinear.read(bad)
+        except (ValueError, OSError) as e:
+            assert str(bad) in str(e), str(e)
+            refused += 1
+    assert refused > 20
+    with pytest.raises(ValueError, match=r"byte|offset|ends"):
+        octolinear.OcTree.read(tree.write()[:-7])
+    with pytest.raises(ValueError, match="binary map data"):
+        octolinear.OcTree(0.1).readBinary(tree.writeBinary()[:-3] + b"\xff" * 1)

@@ -1,0 +1,247 @@
+//! [`TileSet`]: a tile set on disk (`NAME.tiles/`: the manifest and one
+//! `.olm` file per tile) opened for queries, verification and merging.
+//! Opening reads the manifest alone; a tile's file is mapped the first
+//! time a query reaches it, so a query touches only its tiles.
+
+use super::error::TileError;
+use super::file::{check_tile, load_tree, open_tile, TileCheck};
+use super::manifest::{Manifest, TaskPart, MANIFEST_FILE};
+use super::top::{push_subtree, tile_root_node, Top, TopAnswer};
+use crate::geometry::Point3;
+use crate::key::{Key, KeySpace};
+use crate::mapped::MappedMap;
+use crate::ray::{CastOptions, CastOutcome};
+use crate::sensor::SensorModel;
+use crate::tree::{Found, OccupancyTree, PreorderBuilder};
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+/// A tile set opened from its directory.
+pub struct TileSet {
+    dir: PathBuf,
+    manifest: Manifest,
+    keys: KeySpace,
+    top: Top,
+    check: TileCheck,
+    /// Each tile's mapped file, once a query reached it.
+    maps: Vec<OnceLock<MappedMap<memmap2::Mmap>>>,
+}
+
+/// What [`TileSet::verify`] checked.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TileSetReport {
+    /// Tiles checked.
+    pub tiles: usize,
+    /// Bytes of tile files read.
+    pub bytes: u64,
+    /// Nodes of the single tree the set holds.
+    pub nodes: u64,
+}
+
+impl TileSet {
+    /// Opens the tile set in `dir`: reads and checks its manifest. Tiles are
+    /// mapped when queries reach them, each checked as [`TileCheck::Full`]
+    /// says unless [`Self::set_check`] says otherwise.
+    pub fn open(dir: &Path) -> Result<TileSet, TileError> {
+        let path = dir.join(MANIFEST_FILE);
+        let manifest = read_manifest(&path)?;
+        if manifest.task.is_some() {
+            return Err(TileError::Manifest {
+                path,
+                line: 2,
+                reason: "a task's part, not a whole set's manifest".into(),
+            });
+        }
+        let top =
+            Top::build(manifest.depth, manifest.node_kind(), manifest.tiles.iter().map(|t| (t.id.prefix(), t.root)));
+        let maps = (0..manifest.tiles.len()).map(|_| OnceLock::new()).collect();
+        Ok(TileSet {
+            dir: dir.to_path_buf(),
+            keys: KeySpace::new(manifest.resolution),
+            manifest,
+            top,
+            check: TileCheck::Full,
+            maps,
+        })
+    }
+
+    /// How much of each tile file is checked when it is first mapped.
+    pub fn set_check(&mut self, check: TileCheck) {
+        self.check = check;
+    }
+
+    /// The manifest.
+    pub fn manifest(&self) -> &Manifest {
+        &self.manifest
+    }
+
+    /// The set's directory.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The map's coordinate/key arithmetic.
+    pub fn key_space(&self) -> &KeySpace {
+        &self.keys
+    }
+
+    /// The sensor model of the map.
+    pub fn sensor(&self) -> &SensorModel {
+        &self.manifest.sensor
+    }
+
+    /// True when `value` (log-odds) counts as occupied.
+    pub fn is_occupied(&self, value: f32) -> bool {
+        self.manifest.sensor.is_occupied(value)
+    }
+
+    /// Tiles whose files have been mapped so far.
+    pub fn mapped_tiles(&self) -> usize {
+        self.maps.iter().filter(|m| m.get().is_some()).count()
+    }
+
+    /// Nodes of the single tree the set holds (from the manifest).
+    pub fn node_count(&self) -> u64 {
+        let above = u64::from(self.manifest.depth);
+        self.top.node_count(|i| self.manifest.tiles[i].nodes - above)
+    }
+
+    /// Tile `i`'s mapped file, mapped and checked now if not yet.
+    fn tile(&self, i: usize) -> Result<&MappedMap<memmap2::Mmap>, TileError> {
+        if let Some(m) = self.maps[i].get() {
+            return Ok(m);
+        }
+        let entry = &self.manifest.tiles[i];
+        let map = open_tile(&self.dir, entry)?;
+        check_tile(&map, entry, &self.manifest, self.check)
+            .map_err(|reason| TileError::damaged(entry.id, self.dir.join(entry.id.file_name()), reason))?;
+        // another thread may have mapped it meanwhile: either map will do
+        let _ = self.maps[i].set(map);
+        Ok(self.maps[i].get().expect("just set"))
+    }
+
+    /// OctoMap's `search(key, depth)` (0 means 16) on the single tree.
+    pub fn search(&self, key: Key, depth: u8) -> Result<Option<Found>, TileError> {
+        match self.top.search(key, depth) {
+            TopAnswer::Found(f) => Ok(Some(f)),
+            TopAnswer::Unknown => Ok(None),
+            TopAnswer::Tile(i) => Ok(self.tile(i)?.search(key, depth)),
+        }
+    }
+
+    /// [`Self::search`] at the voxel containing `p`.
+    pub fn search_point(&self, p: Point3, depth: u8) -> Result<Option<Found>, TileError> {
+        self.search(self.keys.key(p)?, depth)
+    }
+
+    /// OctoMap's `castRay` on the single tree; maps the tiles the ray reaches.
+    pub fn cast_ray(&self, origin: Point3, direction: Point3, opts: CastOptions) -> Result<CastOutcome, TileError> {
+        super::query::cast_ray(&self.keys, self.sensor(), |k, d| self.search(k, d), origin, direction, opts)
+    }
+
+    /// Checks every tile fully (length, CRC-32, `.olm` checksums and
+    /// structure, root node against the manifest), whatever
+    /// [`Self::set_check`] says; the first fault is the error.
+    pub fn verify(&self) -> Result<TileSetReport, TileError> {
+        let mut bytes = 0;
+        for entry in &self.manifest.tiles {
+            let map = open_tile(&self.dir, entry)?;
+            check_tile(&map, entry, &self.manifest, TileCheck::Full)
+                .map_err(|reason| TileError::damaged(entry.id, self.dir.join(entry.id.file_name()), reason))?;
+            bytes += entry.bytes;
+        }
+        Ok(TileSetReport { tiles: self.manifest.tiles.len(), bytes, nodes: self.node_count() })
+    }
+
+    /// The single tree, each tile read (and verified) in turn.
+    pub fn merge(&self) -> Result<OccupancyTree, TileError> {
+        let kind = self.manifest.node_kind();
+        let mut builder = PreorderBuilder::with_hint(kind, self.node_count() as usize);
+        self.top.merge(&mut builder, &mut |i, b| {
+            let entry = &self.manifest.tiles[i];
+            let path = self.dir.join(entry.id.file_name());
+            let map = open_tile(&self.dir, entry)?;
+            check_tile(&map, entry, &self.manifest, TileCheck::Header)
+                .and_then(|()| load_tree(&map, entry))
+                .map_err(|reason| TileError::damaged(entry.id, &path, reason))
+                .and_then(|tree| {
+                    let root = tree.root().ok_or(TileError::Internal("a loaded tile without nodes"))?;
+                    let node =
+                        tile_root_node(root, entry.id).map_err(|reason| TileError::damaged(entry.id, &path, reason))?;
+                    push_subtree(b, node, kind)
+                })
+        })?;
+        builder
+            .finish(self.manifest.resolution, self.manifest.sensor)?
+            .ok_or(TileError::Internal("the merged node stream is incomplete"))
+    }
+}
+
+/// Reads and parses a manifest or a task's part file.
+pub fn read_manifest(path: &Path) -> Result<Manifest, TileError> {
+    let bytes = std::fs::read(path).map_err(|e| TileError::io(path, e))?;
+    Manifest::parse(&bytes).map_err(|e| TileError::Manifest {
+        path: path.to_path_buf(),
+        line: e.line,
+        reason: e.reason,
+    })
+}
+
+/// Combines the task parts in `dir` (`task-K-of-N.manifest`, written by
+/// [`super::TiledMap::flush`] of each task) into the set's manifest, written
+/// atomically; the parts are then removed. Every part of one count must be
+/// there, with the same parameters.
+pub fn combine_parts(dir: &Path) -> Result<Manifest, TileError> {
+    let parts_error = |reason: String| TileError::Parts { dir: dir.to_path_buf(), reason };
+    let mut parts = Vec::new();
+    let listing = std::fs::read_dir(dir).map_err(|e| TileError::io(dir, e))?;
+    for item in listing {
+        let item = item.map_err(|e| TileError::io(dir, e))?;
+        let name = item.file_name();
+        let Some(name) = name.to_str() else { continue };
+        if name.starts_with("task-") && name.ends_with(".manifest") {
+            let path = item.path();
+            let m = read_manifest(&path)?;
+            let task = m.task.ok_or_else(|| parts_error(format!("{name} is not a task's part")))?;
+            if name != task.file_name() {
+                return Err(parts_error(format!("{name} holds the part of task {} of {}", task.index, task.count)));
+            }
+            parts.push((path, m));
+        }
+    }
+    let Some((_, first)) = parts.first() else {
+        return Err(parts_error("holds no task parts (task-K-of-N.manifest)".into()));
+    };
+    let count = first.task.map_or(0, |t| t.count);
+    let mut seen = vec![false; count as usize];
+    for (path, m) in &parts {
+        let task = m.task.expect("checked above");
+        if task.count != count {
+            return Err(parts_error(format!(
+                "{} is a part of {} tasks, another of {count}",
+                path.display(),
+                task.count
+            )));
+        }
+        let parameters = |m: &Manifest| Manifest { task: None, tiles: Vec::new(), ..m.clone() };
+        if parameters(m) != parameters(first) {
+            let other = TaskPart::file_name(first.task.expect("a part"));
+            return Err(parts_error(format!("{} was built with other parameters than {other}", path.display())));
+        }
+        seen[task.index as usize] = true;
+    }
+    if let Some(missing) = seen.iter().position(|s| !s) {
+        return Err(parts_error(format!("the part of task {missing} of {count} is missing")));
+    }
+    let mut tiles: Vec<_> = parts.iter().flat_map(|(_, m)| m.tiles.iter().copied()).collect();
+    tiles.sort_by_key(|t| t.id.prefix());
+    let manifest = Manifest { task: None, tiles, ..first.clone() };
+    let path = dir.join(MANIFEST_FILE);
+    let bytes = manifest.to_bytes();
+    crate::formats::write_atomically(&path, |w| std::io::Write::write_all(w, &bytes))
+        .map_err(|e| TileError::io(&path, e))?;
+    for (path, _) in &parts {
+        std::fs::remove_file(path).map_err(|e| TileError::io(path, e))?;
+    }
+    Ok(manifest)
+}

@@ -1,0 +1,213 @@
+//! Tiled maps against the single tree: merged bytes, queries, budgets,
+//! tile sets on disk.
+
+use super::*;
+use crate::formats::ot::to_bytes as ot;
+use crate::geometry::Point3;
+use crate::key::Key;
+use crate::ray::CastOptions;
+use crate::scan::ScanOptions;
+use crate::sensor::SensorModel;
+use crate::tree::{Clock, InnerNodes, NodeKind, OccupancyTree};
+
+/// The bundled sample's first scans (indoor lidar).
+fn scans(n: usize) -> Vec<(Vec<Point3>, Point3)> {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/samples/indoor.graph");
+    let g = crate::formats::graph::read_file(path).unwrap();
+    g.nodes.iter().take(n).map(|n| n.graph2tree()).map(|(c, o)| (c.points, o)).collect()
+}
+
+/// A dense sphere of points 2 m around `(0.5, 0.5, 0.5)`: its rays reach
+/// every voxel inside, so a few scans saturate and prune the ball in
+/// blocks up to 16 voxels a side (fine tiles pruned whole, and merged
+/// above the tile depth).
+fn sphere() -> Vec<Point3> {
+    let n = 20_000;
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    (0..n)
+        .map(|i| {
+            let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let r = (1.0 - z * z).sqrt();
+            let a = golden * i as f64;
+            let p = [r * a.cos(), r * a.sin(), z].map(|c| (0.5 + 2.0 * c) as f32);
+            Point3::new(p[0], p[1], p[2])
+        })
+        .collect()
+}
+
+/// A small scan for the refusals.
+fn wall() -> Vec<Point3> {
+    (0..100).map(|i| Point3::new(1.0, 0.01 * i as f32, 0.3)).collect()
+}
+
+fn single(kind: NodeKind, scans: &[(Vec<Point3>, Point3)], opts: &ScanOptions) -> OccupancyTree {
+    let mut t = OccupancyTree::with_kind(0.1, SensorModel::default(), kind).unwrap();
+    for (i, (p, o)) in scans.iter().enumerate() {
+        t.set_clock(Clock::Fixed(1000 + i as u32));
+        t.insert_point_cloud(p, *o, opts).unwrap();
+        if opts.inner == InnerNodes::Defer {
+            t.update_inner_occupancy();
+        }
+    }
+    t
+}
+
+fn tiled(kind: NodeKind, depth: u8, scans: &[(Vec<Point3>, Point3)], opts: &ScanOptions) -> TiledMap {
+    let mut t = TiledMap::new(0.1, SensorModel::default(), kind, depth).unwrap();
+    for (i, (p, o)) in scans.iter().enumerate() {
+        t.set_clock(Clock::Fixed(1000 + i as u32));
+        t.insert_point_cloud(p, *o, opts).unwrap();
+        if opts.inner == InnerNodes::Defer {
+            t.update_inner_occupancy().unwrap();
+        }
+    }
+    t
+}
+
+fn test_scans() -> Vec<(Vec<Point3>, Point3)> {
+    let mut s = scans(2);
+    // the sphere, six times: saturates and prunes
+    for _ in 0..6 {
+        s.push((sphere(), Point3::new(0.5, 0.5, 0.5)));
+    }
+    s
+}
+
+#[test]
+fn merged_tiles_are_the_single_tree_at_every_depth() {
+    let scans = test_scans();
+    for kind in [NodeKind::Plain, NodeKind::Stamped] {
+        for inner in [InnerNodes::Update, InnerNodes::Defer] {
+            if kind == NodeKind::Stamped && inner == InnerNodes::Defer {
+                continue;
+            }
+            let opts = ScanOptions { inner, ..Default::default() };
+            let want = single(kind, &scans, &opts);
+            let want_bytes = ot(&want);
+            for depth in [1, 2, 5, 9, 12, 14, 15] {
+                let map = tiled(kind, depth, &scans, &opts);
+                let merged = map.merge().unwrap();
+                assert!(ot(&merged) == want_bytes, "{kind:?} {inner:?} depth {depth}");
+                assert_eq!(map.stats().nodes as usize, want.size(), "{kind:?} {inner:?} depth {depth}");
+                if kind == NodeKind::Stamped {
+                    let stamps = |t: &OccupancyTree| t.nodes(0).map(|n| n.extra).collect::<Vec<_>>();
+                    assert_eq!(stamps(&merged), stamps(&want), "stamps at depth {depth}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn whole_tiles_prune_into_the_levels_above() {
+    // a pruned node above the tile depth: at depth 15 the wall's saturated
+    // blocks are many tiles, each one leaf
+    let scans = test_scans();
+    let want = single(NodeKind::Plain, &scans, &ScanOptions::default());
+    let coarse = want.leaves(0).find(|l| l.depth < 14).expect("the scans prune above depth 14");
+    let map = tiled(NodeKind::Plain, 15, &scans, &ScanOptions::default());
+    // the tiles below that leaf are leaves of one value, merged above them
+    assert_eq!(map.search(coarse.key, 0).unwrap(), want.search(coarse.key, 0));
+    assert!(map.search(coarse.key, 0).unwrap().unwrap().depth < 14);
+    assert!(ot(&map.merge().unwrap()) == ot(&want));
+}
+
+#[test]
+fn queries_answer_as_the_single_tree() {
+    let scans = test_scans();
+    let want = single(NodeKind::Plain, &scans, &ScanOptions::default());
+    let map = tiled(NodeKind::Plain, 6, &scans, &ScanOptions::default());
+    let mut rng = 12345u64;
+    let mut next = |n: u32| {
+        rng = rng.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((rng >> 33) % u64::from(n)) as u32
+    };
+    for _ in 0..3000 {
+        let k = Key::new((32730 + next(80)) as u16, (32730 + next(80)) as u16, (32740 + next(60)) as u16);
+        let depth = next(17) as u8;
+        assert_eq!(map.search(k, depth).unwrap(), want.search(k, depth), "{k:?} at {depth}");
+    }
+    for _ in 0..200 {
+        let o = Point3::new(next(40) as f32 / 10.0 - 2.0, next(40) as f32 / 10.0 - 2.0, 0.5);
+        let d = Point3::new(next(200) as f32 - 100.0, next(200) as f32 - 100.0, next(20) as f32 - 10.0);
+        let opts = CastOptions { ignore_unknown: next(2) == 0, max_range: Some(8.0) };
+        let a = map.cast_ray(o, d, opts).map_err(|e| e.to_string());
+        let b = want.cast_ray(o, d, opts).map_err(|e| TileError::from(e).to_string());
+        assert_eq!(a, b);
+    }
+}
+
+#[test]
+fn a_tiny_budget_spills_and_reads_back_to_the_same_map() {
+    let dir = tempfile::tempdir().unwrap();
+    let scans = test_scans();
+    let want = single(NodeKind::Stamped, &scans, &ScanOptions::default());
+    for depth in [3, 8] {
+        let mut map = TiledMap::new(0.1, SensorModel::default(), NodeKind::Stamped, depth).unwrap();
+        map.set_budget(MemoryBudget { bytes: 1, dir: dir.path().join(format!("spill{depth}")) }).unwrap();
+        for (i, (p, o)) in scans.iter().enumerate() {
+            map.set_clock(Clock::Fixed(1000 + i as u32));
+            let opts = ScanOptions { threads: Some(2), ..Default::default() };
+            map.insert_point_cloud(p, *o, &opts).unwrap();
+            assert_eq!(map.stats().live_tiles, 0);
+        }
+        let k = want.key(Point3::new(1.1, 0.0, 0.3)).unwrap();
+        assert_eq!(map.search(k, 0).unwrap(), want.search(k, 0));
+        assert!(ot(&map.merge().unwrap()) == ot(&want), "depth {depth}");
+    }
+}
+
+#[test]
+fn a_tile_set_round_trips_and_queries_map_only_their_tiles() {
+    let dir = tempfile::tempdir().unwrap();
+    let scans = test_scans();
+    let want = single(NodeKind::Plain, &scans, &ScanOptions::default());
+    let mut map = tiled(NodeKind::Plain, 5, &scans, &ScanOptions::default());
+    let set_dir = dir.path().join("m.tiles");
+    let manifest = map.flush(&set_dir).unwrap();
+    assert!(manifest.tiles.len() > 4);
+    let set = TileSet::open(&set_dir).unwrap();
+    assert_eq!(set.node_count() as usize, want.size());
+    let p = Point3::new(1.1, 0.0, 0.3);
+    assert_eq!(set.search_point(p, 0).unwrap(), want.search_point(p, 0).unwrap());
+    assert_eq!(set.mapped_tiles(), 1);
+    assert_eq!(set.verify().unwrap().tiles, manifest.tiles.len());
+    assert!(ot(&set.merge().unwrap()) == ot(&want));
+}
+
+#[test]
+fn tasks_build_parts_that_combine_into_the_set() {
+    let dir = tempfile::tempdir().unwrap();
+    let scans = test_scans();
+    let want = single(NodeKind::Plain, &scans, &ScanOptions::default());
+    let set_dir = dir.path().join("m.tiles");
+    for index in 0..3 {
+        let mut map = TiledMap::new(0.1, SensorModel::default(), NodeKind::Plain, 6).unwrap();
+        map.set_task(TaskPart { index, count: 3 });
+        for (p, o) in &scans {
+            map.insert_point_cloud(p, *o, &ScanOptions::default()).unwrap();
+        }
+        map.flush(&set_dir).unwrap();
+        if index == 1 {
+            assert!(matches!(combine_parts(&set_dir), Err(TileError::Parts { .. })));
+        }
+    }
+    combine_parts(&set_dir).unwrap();
+    let set = TileSet::open(&set_dir).unwrap();
+    assert!(ot(&set.merge().unwrap()) == ot(&want));
+}
+
+#[test]
+fn colour_maps_and_lazy_stamped_updates_are_refused() {
+    let e = TiledMap::new(0.1, SensorModel::default(), NodeKind::Color, 4).unwrap_err();
+    assert!(matches!(e, TileError::Unsupported(_)));
+    assert!(matches!(TiledMap::new(0.1, SensorModel::default(), NodeKind::Plain, 16), Err(TileError::BadDepth(16))));
+    let mut m = TiledMap::new(0.1, SensorModel::default(), NodeKind::Stamped, 4).unwrap();
+    let opts = ScanOptions { inner: InnerNodes::Defer, ..Default::default() };
+    assert!(matches!(m.insert_point_cloud(&wall(), Point3::default(), &opts), Err(TileError::Unsupported(_))));
+    let mut m = TiledMap::new(0.1, SensorModel::default(), NodeKind::Plain, 4).unwrap();
+    m.insert_point_cloud(&wall(), Point3::default(), &opts).unwrap();
+    assert!(matches!(m.merge(), Err(TileError::StaleInnerNodes)));
+    m.update_inner_occupancy().unwrap();
+    m.merge().unwrap();
+}

@@ -1,0 +1,149 @@
+//! Every scan-built golden case built as tiles: at depths from coarse
+//! (tiles of half the map) to fine (2 voxels a side, pruned whole and merged
+//! above), and under a memory budget so small that every tile is written
+//! out and read back after each group of updates (the constants say which
+//! cases get which depths), the merged map is
+//! OctoMap's `.ot` and `.bt` to the byte; queries on the tile set written
+//! from it answer as the merged map.
+
+mod common;
+#[path = "common/scans.rs"]
+mod scans;
+
+use common::*;
+use octolinear::formats::{bt, ot};
+use octolinear::tiles::{MemoryBudget, TileSet, TiledMap};
+use octolinear::{CastOptions, InnerNodes, NodeKind, OccupancyTree, Point3, ScanOptions, UpdateBox};
+use rayon::prelude::*;
+use scans::{case_scans, Scan};
+use serde_json::Value;
+
+/// The depths every case is built at.
+const DEPTHS: [u8; 5] = [1, 3, 8, 13, 15];
+
+/// Depths built under a budget of one byte: the first for every case,
+/// the second (thousands of tiles written and read back per scan in the
+/// large cases) for every third.
+const CAPPED_DEPTHS: [u8; 2] = [5, 12];
+
+/// Depths whose tile sets are written and queried: the first for every
+/// case, the second for every third.
+const SET_DEPTHS: [u8; 2] = [3, 13];
+
+fn bytes(tree: &OccupancyTree) -> (Vec<u8>, Vec<u8>) {
+    let (mut o, mut b) = (Vec::new(), Vec::new());
+    ot::write(tree, &mut o).unwrap();
+    bt::write(tree, &mut b).unwrap();
+    (o, b)
+}
+
+/// Builds one case as tiles at `depth`, with a budget when `spill` names
+/// a directory.
+fn build(case: &Value, scans: &[Scan], depth: u8, spill: Option<&std::path::Path>) -> TiledMap {
+    let p = &case["params"];
+    let res = p["resolution"].as_f64().unwrap();
+    let mut map = TiledMap::new(res, case_sensor(case), NodeKind::Plain, depth).unwrap();
+    if let Some(dir) = spill {
+        map.set_budget(MemoryBudget { bytes: 1, dir: dir.to_path_buf() }).unwrap();
+    }
+    let max_range = p["maxrange"].as_f64().unwrap();
+    let lazy = p["lazy_eval"].as_bool().unwrap_or(false);
+    let probe = OccupancyTree::new(res).unwrap();
+    let bbx = p["bbx"].as_str().map(|s| {
+        let v: Vec<f32> = s.split(',').map(|t| t.parse().unwrap()).collect();
+        UpdateBox::new(&probe, Point3::new(v[0], v[1], v[2]), Point3::new(v[3], v[4], v[5])).unwrap()
+    });
+    let opts = ScanOptions {
+        max_range: (max_range >= 0.0).then_some(max_range),
+        discretize: p["discretize"].as_bool().unwrap_or(false),
+        inner: if lazy { InnerNodes::Defer } else { InnerNodes::Update },
+        bbx,
+        ..Default::default()
+    };
+    for (points, origin) in scans {
+        map.insert_point_cloud(points, *origin, &opts).unwrap();
+        if lazy {
+            map.update_inner_occupancy().unwrap();
+        }
+    }
+    map
+}
+
+/// The golden point and ray queries, asked of the tile set and of the
+/// merged tree.
+fn check_queries(f: &mut Failures, g: &Golden, case: &Value, set: &TileSet, merged: &OccupancyTree, depth: u8) {
+    let id = case["id"].as_str().unwrap();
+    if let Some(text) = g.load_text(case, "query_points.csv") {
+        for line in text.lines().skip(1) {
+            let cols: Vec<&str> = line.split(',').collect();
+            let p = point_from_hex(&cols[1..4]);
+            let Ok(k) = merged.key(p) else { continue };
+            for d in [0, 14] {
+                let got = set.search(k, d).unwrap();
+                f.check(got == merged.search(k, d), || format!("{id} depth {depth}: search {k:?} at {d}"));
+            }
+        }
+    }
+    if let Some(text) = g.load_text(case, "query_castray.csv") {
+        for line in text.lines().skip(1) {
+            let cols: Vec<&str> = line.split(',').collect();
+            let (origin, dir) = (point_from_hex(&cols[1..4]), point_from_hex(&cols[4..7]));
+            let opts = CastOptions { ignore_unknown: cols[7] == "1", max_range: Some(parse_f64hex(cols[8])) };
+            let got = set.cast_ray(origin, dir, opts).map_err(|e| e.to_string());
+            let want =
+                merged.cast_ray(origin, dir, opts).map_err(|e| octolinear::tiles::TileError::from(e).to_string());
+            f.check(got == want, || format!("{id} depth {depth}: castRay from {origin:?} along {dir:?}"));
+        }
+    }
+}
+
+/// A directory for the tile files: in memory where Linux offers it
+/// (thousands of small files per case, and a `syncfs` per tile set).
+fn scratch_dir() -> tempfile::TempDir {
+    tempfile::Builder::new().tempdir_in("/dev/shm").or_else(|_| tempfile::tempdir()).unwrap()
+}
+
+fn run_case(g: &Golden, (index, case): (usize, &Value)) -> Vec<String> {
+    let mut f = Failures::default();
+    let id = case["id"].as_str().unwrap();
+    let Some(scans) = case_scans(g, case) else {
+        return vec![format!("{id}: no plain-text scans")];
+    };
+    let dir = scratch_dir();
+    let every_third = index % 3 == 0;
+    let capped = CAPPED_DEPTHS.into_iter().take(if every_third { 2 } else { 1 });
+    let runs = DEPTHS.map(|d| (d, false)).into_iter().chain(capped.map(|d| (d, true)));
+    for (depth, capped) in runs {
+        let spill = capped.then(|| dir.path().join(format!("spill{depth}")));
+        let mut map = build(case, &scans, depth, spill.as_deref());
+        if spill.is_some() {
+            f.check(map.stats().live_tiles == 0, || format!("{id}: tiles stayed in memory under a 1-byte budget"));
+        }
+        let merged = map.merge().unwrap();
+        let (o, b) = bytes(&merged);
+        let what = if capped { "capped " } else { "" };
+        let before = f.0.len();
+        f.check_digest(g, case, "tree.ot", &o);
+        f.check_digest(g, case, "tree.bt", &b);
+        for failure in &mut f.0[before..] {
+            *failure = format!("{what}tile depth {depth}: {failure}");
+        }
+        if depth == SET_DEPTHS[0] || (every_third && depth == SET_DEPTHS[1]) {
+            let set_dir = dir.path().join(format!("d{depth}.tiles"));
+            map.flush(&set_dir).unwrap();
+            let set = TileSet::open(&set_dir).unwrap();
+            check_queries(&mut f, g, case, &set, &merged, depth);
+            f.check(set.merge().unwrap().size() == merged.size(), || format!("{id}: the set merges to another tree"));
+        }
+    }
+    f.0
+}
+
+#[test]
+fn golden_build_cases_built_as_tiles_merge_to_octomap_bytes() {
+    let g = golden();
+    let cases = g.cases("build");
+    assert!(cases.len() > 100, "manifest lists the build cases");
+    let failures: Vec<String> = cases.par_iter().enumerate().flat_map(|(i, c)| run_case(&g, (i, c))).collect();
+    Failures(failures).finish("golden build cases as tiles");
+}
