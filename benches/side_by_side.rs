@@ -3,9 +3,11 @@
 //! one process. Each figure is the median of several repetitions.
 //!
 //! Run with `cargo bench -p octolinear-benches --bench side_by_side` (add `-- --quick` for a
-//! small run; `-- --help` lists the options).
+//! small run, `-- --full` for the full-size sequences; `-- --help` lists the options).
 
 mod common;
+#[path = "side_by_side/full.rs"]
+mod full;
 
 use common::*;
 use octolinear::formats::{bt, ot};
@@ -32,6 +34,8 @@ struct Args {
     outdoor_scans: usize,
     queries: usize,
     rays: usize,
+    /// The full-size mode's options, when it is asked for.
+    full: Option<full::FullArgs>,
 }
 
 impl Args {
@@ -46,7 +50,10 @@ impl Args {
             outdoor_scans: 6,
             queries: 1_000_000,
             rays: 20_000,
+            full: None,
         };
+        let mut full = full::FullArgs::new();
+        let mut full_asked = false;
         let mut it = std::env::args().skip(1);
         while let Some(arg) = it.next() {
             let mut value = |name: &str| it.next().unwrap_or_else(|| panic!("{name} needs a value (see --help)"));
@@ -84,11 +91,24 @@ impl Args {
                 }
                 "--queries" => a.queries = value("--queries").parse().expect("--queries N"),
                 "--rays" => a.rays = value("--rays").parse().expect("--rays N"),
+                "--full" => full_asked = true,
+                "--jobs" => full.jobs = full::FullArgs::parse_jobs(&value("--jobs")),
+                "--octomap-budget" => {
+                    full.octomap_budget = value("--octomap-budget").parse().expect("--octomap-budget SECONDS")
+                }
+                "--dir" => full.dir = Some(value("--dir").into()),
+                "--octolinear" => full.octolinear = value("--octolinear").into(),
+                "--graph2tree" => full.graph2tree = value("--graph2tree").into(),
                 "--help" | "-h" => {
                     println!(
                         "side_by_side [--quick] [--reps N] [--insert-reps N] [--insert-budget SECONDS] \
                          [--res 0.05,0.1,0.2] \
-                         [--scene indoor|outdoor|both] [--scans N] [--queries N] [--rays N]"
+                         [--scene indoor|outdoor|both] [--scans N] [--queries N] [--rays N]\n\
+                         side_by_side --full [--jobs indoor:0.05,indoor:0.1,indoor:0.2,outdoor:0.1,outdoor:0.2] \
+                         [--insert-reps N] [--octomap-budget SECONDS] [--dir DIR] [--octolinear PATH] \
+                         [--graph2tree PATH]\n\
+                         (--full: the full-size sequences, insertion against OctoMap and `octolinear build` \
+                         against graph2tree; build the CLI first: cargo build --release -p octolinear-cli)"
                     );
                     std::process::exit(0);
                 }
@@ -98,6 +118,10 @@ impl Args {
         }
         a.reps = a.reps.max(1);
         a.insert_reps = a.insert_reps.max(1);
+        if full_asked {
+            full.reps = a.insert_reps;
+            a.full = Some(full);
+        }
         a
     }
 }
@@ -561,6 +585,10 @@ fn search_and_iterate(args: &Args, om: &OracleTree, ol: &OccupancyTree, queries:
 }
 
 fn main() {
+    let argv: Vec<String> = std::env::args().skip(1).collect();
+    if argv.first().map(String::as_str) == Some(full::LAUNCH) {
+        full::launch(&argv[1..]);
+    }
     if !octolinear_oracle::available() {
         println!(
             "side_by_side: skipped, OctoMap oracle unavailable \
@@ -569,6 +597,10 @@ fn main() {
         return;
     }
     let args = Args::parse();
+    if let Some(full) = &args.full {
+        full::run_full(full);
+        return;
+    }
     println!(
         "side_by_side: OctoMap {} (system library via the oracle shim) vs octolinear; \
          median of {} runs ({} or more for insertion: up to {MAX_INSERT_REPS} while OctoMap's \

@@ -29,12 +29,20 @@ pub fn scans(kind: SceneKind, scans: usize) -> Vec<Scan> {
 }
 
 /// For the probes (`probes/src/bin/`): the scene and resolution their first two
-/// arguments name (`indoor|outdoor RES`; indoor, 0.2 m when absent) and the
-/// benchmark's scans of that scene (24 indoors, 6 outdoors).
+/// arguments name (`indoor|outdoor|FILE.graph RES`; indoor, 0.2 m when absent) and the
+/// benchmark's scans of that scene (24 indoors, 6 outdoors), or the scans of
+/// the `.graph` file (such as the full-size sequences, `--full`), in the world
+/// frame as `graph2tree` puts them.
 pub fn scene_from_args() -> (SceneKind, f64, Vec<Scan>) {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let kind = if args.first().map(String::as_str) == Some("outdoor") { SceneKind::Outdoor } else { SceneKind::Indoor };
+    let first = args.first().map_or("indoor", String::as_str);
+    let kind = if first == "outdoor" { SceneKind::Outdoor } else { SceneKind::Indoor };
     let res: f64 = args.get(1).map_or(0.2, |s| s.parse().expect("RES"));
+    if first.ends_with(".graph") {
+        let graph = octolinear::formats::graph::read_file(first).expect("read the .graph file");
+        let scans = graph.nodes.iter().map(|n| n.graph2tree()).map(|(c, o)| (c.points, o)).collect();
+        return (kind, res, scans);
+    }
     (kind, res, scans(kind, if kind == SceneKind::Indoor { 24 } else { 6 }))
 }
 
@@ -63,6 +71,17 @@ pub fn build(scans: &[Scan], res: f64, threads: Option<usize>) -> OccupancyTree 
     let scans = scans.iter().map(|(points, origin)| (points.as_slice(), *origin));
     tree.insert_point_clouds(scans, &opts, |_, _| {}).expect("insert");
     tree
+}
+
+/// [`build`], and the voxel updates it applied (free and occupied, summed
+/// over the scans).
+pub fn build_counting(scans: &[Scan], res: f64, threads: Option<usize>) -> (OccupancyTree, usize) {
+    let mut tree = OccupancyTree::new(res).expect("resolution");
+    let opts = scan_options(threads);
+    let scans = scans.iter().map(|(points, origin)| (points.as_slice(), *origin));
+    let mut updates = 0;
+    tree.insert_point_clouds(scans, &opts, |_, r| updates += r.free_updates + r.occupied_updates).expect("insert");
+    (tree, updates)
 }
 
 /// xorshift64*: a small deterministic generator for query inputs.

@@ -16,9 +16,16 @@ enum Scene {
 /// Write a `.graph` file of simulated lidar scans (deterministic from the seed).
 ///
 /// Every scan is held in memory until the file is written: a scan casts at
-/// most 2^24 rays (beams × steps), all scans together at most 2^28.
+/// most 2^24 rays (beams × steps), all scans together at most 2^28. A scan
+/// has one point per ray that hits a surface within range (less the
+/// dropout): indoors nearly every ray, outdoors about three in four with
+/// `--range inf` (the others see the sky).
 ///
 /// Example: octolinear simulate --scene indoor --scans 16 --seed 1 -o indoor.graph
+///
+/// Example (the full-size benchmark sequences, `docs/benchmarks.md`):
+/// octolinear simulate --scene indoor --scans 64 --beams 64 --steps 1250 -o indoor.graph
+/// octolinear simulate --scene outdoor --scans 6 --beams 128 --steps 2048 --range inf -o outdoor.graph
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub struct Args {
@@ -29,13 +36,14 @@ pub struct Args {
     scans: usize,
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Vertical channels of the lidar.
+    /// Vertical channels of the lidar (default 16).
     #[arg(long)]
     beams: Option<u32>,
-    /// Firings per revolution.
+    /// Firings per revolution (default 360): a scan casts beams × steps rays.
     #[arg(long)]
     steps: Option<u32>,
-    /// Maximum range in metres.
+    /// Maximum range in metres (`inf`: every return, however far; default
+    /// 30 indoors, 100 outdoors).
     #[arg(long)]
     range: Option<f64>,
     /// Range noise standard deviation in metres.

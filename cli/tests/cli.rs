@@ -2216,3 +2216,22 @@ fn forget_beyond_drops_far_tiles_and_a_wide_window_drops_nothing() {
     }
     assert!(!f.path("x.ot").exists());
 }
+
+// ----- simulate: unlimited range
+
+/// `--range inf` keeps returns beyond the outdoor default of 100 m; a range
+/// that is not a number is refused with the field named.
+#[test]
+fn simulate_takes_an_unlimited_range() {
+    let f = Fixture::new();
+    let far = |name: &str| {
+        let g = graph::read_file(f.path(name)).unwrap();
+        g.nodes.iter().flat_map(|n| &n.scan).filter(|p| p.norm() > 100.0).count()
+    };
+    let args = ["simulate", "--scene", "outdoor", "--scans", "1", "--beams", "8", "--steps", "90"];
+    ok(&[&args[..], &["-o", f.p("limited.graph")]].concat());
+    ok(&[&args[..], &["--range", "inf", "-o", f.p("unlimited.graph")]].concat());
+    assert_eq!(far("limited.graph"), 0);
+    assert!(far("unlimited.graph") > 0);
+    fail(&["simulate", "--range", "NaN", "-o", f.p("nan.graph")], "max_range = NaN");
+}

@@ -17,7 +17,9 @@ pub struct LidarConfig {
     pub horizontal_steps: u32,
     /// Returns closer than this are dropped (metres).
     pub min_range: f64,
-    /// Returns beyond this are dropped (metres).
+    /// Returns beyond this are dropped (metres); `f64::INFINITY` keeps
+    /// every return, however far (the scene is finite: a ray that hits
+    /// nothing still gives no point).
     pub max_range: f64,
     /// Lowest and highest beam elevation in degrees.
     pub vertical_fov: (f64, f64),
@@ -62,7 +64,7 @@ impl LidarConfig {
         if !(self.min_range >= 0.0 && self.min_range.is_finite()) {
             return bad("min_range", self.min_range.to_string());
         }
-        if !(self.max_range > self.min_range && self.max_range.is_finite()) {
+        if self.max_range.is_nan() || self.max_range <= self.min_range {
             return bad("max_range", self.max_range.to_string());
         }
         let (lo, hi) = self.vertical_fov;

@@ -53,6 +53,25 @@ fn points_finite_within_range_and_graph_well_formed() {
     }
 }
 
+/// An infinite range keeps the returns beyond the default 100 m (the
+/// terrain's far side) and every point stays finite; rays that hit nothing
+/// still give no point.
+#[test]
+fn an_unlimited_range_keeps_every_return() {
+    let limited = LidarConfig { horizontal_steps: 90, ..LidarConfig::outdoor() };
+    let unlimited = LidarConfig { max_range: f64::INFINITY, ..limited.clone() };
+    let (a, b) = (
+        simulate(SceneKind::Outdoor, 2, 7, &limited).unwrap(),
+        simulate(SceneKind::Outdoor, 2, 7, &unlimited).unwrap(),
+    );
+    let far = |g: &ScanGraph| g.nodes.iter().flat_map(|n| &n.scan).filter(|p| p.norm() > 100.0).count();
+    assert_eq!(far(&a), 0);
+    assert!(far(&b) > 0, "no return beyond 100 m");
+    assert!(b.nodes.iter().flat_map(|n| &n.scan).all(|p| p.is_finite()));
+    let rays = 2 * (limited.beams * limited.horizontal_steps) as usize;
+    assert!(b.num_points() < rays, "every ray gave a point: {}", b.num_points());
+}
+
 #[test]
 fn indoor_points_lie_on_walls_and_floor() {
     let cfg = LidarConfig { noise_sigma: 0.0, dropout: 0.0, ..small() };

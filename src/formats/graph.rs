@@ -304,10 +304,15 @@ fn read_cloud<R: Read>(input: &mut Input<R>, node: usize) -> Result<PointCloud, 
                 e => e,
             }
         })?;
-        for i in 0..n {
+        // markers first, then the coordinates in a loop without exits
+        let records = chunk.chunks_exact(POINT_BYTES);
+        if let Some(i) = records.clone().position(|r| i32_at(r, 0) != 3) {
             let ctx = || format!("point {} of node {node}", done + i);
-            cloud.push(vector_at(chunk, i * POINT_BYTES, base, &ctx)?);
+            vector_at(chunk, i * POINT_BYTES, base, &ctx)?;
         }
+        cloud
+            .points
+            .extend(records.map(|r| Point3::new(f64_at(r, 4) as f32, f64_at(r, 12) as f32, f64_at(r, 20) as f32)));
         done += n;
     }
     Ok(cloud)

@@ -250,6 +250,13 @@ fn merge_sorted(mut lists: Vec<Vec<u64>>) -> Vec<u64> {
     lists.pop().unwrap_or_default()
 }
 
+/// Whether every point is finite, in blocks with no early exit inside,
+/// which the compiler vectorises (a test per point with an exit after each
+/// was 2% of a full-size indoor build).
+fn all_finite(points: &[Point3]) -> bool {
+    points.chunks(256).all(|c| c.iter().fold(true, |ok, p| ok & p.x.is_finite() & p.y.is_finite() & p.z.is_finite()))
+}
+
 /// Thread pools by size, built once: a pool per scan would cost more than
 /// casting a small scan's rays.
 pub(super) fn thread_pool(threads: usize) -> Result<std::sync::Arc<rayon::ThreadPool>, ScanError> {
@@ -288,7 +295,7 @@ pub(crate) fn compute_update(
     // only OctoMap's policy lets points without a key through to the
     // casting (which skips them); the input is used as it is when
     // nothing is to be dropped or changed
-    let clean = opts.out_of_map == OutOfMap::OctoMap && !opts.discretize && points.iter().all(|p| p.is_finite());
+    let clean = opts.out_of_map == OutOfMap::OctoMap && !opts.discretize && all_finite(points);
     let mut cleaned: Vec<Point3> = Vec::new();
     if !clean {
         cleaned.reserve(points.len());

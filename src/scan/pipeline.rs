@@ -4,9 +4,10 @@
 //! tree, and when a thread with nothing to do waits.
 //!
 //! Every field a waiting thread depends on lives in one [`State`] behind
-//! one lock, and every change to it goes through [`Pipeline::change`],
-//! which bumps [`State::epoch`] and wakes all waiters after releasing the
-//! lock. A thread decides to wait only while holding that lock, after
+//! one lock, and every change that may let a waiting thread go on bumps
+//! [`State::epoch`] and wakes all waiters (through [`Pipeline::change`],
+//! after releasing the lock, or, where the lock is kept, before). A
+//! thread decides to wait only while holding that lock, after
 //! checking everything; when it lets go of the lock to help with the pool's
 //! work, it compares the epoch on its return and looks again if anything
 //! changed meanwhile, so no change can fall between its last look and its
@@ -74,10 +75,11 @@ impl<T> Monitor for StdMonitor<T> {
 /// results `R` (or a refusal `E`) waiting to be applied, and how far the
 /// applying has come.
 pub(super) struct State<S, R, E> {
-    /// Advanced under the lock: the caller's iterator (which may read and
-    /// transform each scan, as `octolinear build` does) runs on one thread
-    /// at a time.
-    scans: Fuse<S>,
+    /// The caller's iterator, which may read and transform each scan (as
+    /// `octolinear build` does): the thread taking the next scan takes it
+    /// out, advances it without the lock (so that the others can hand
+    /// work in and out meanwhile) and puts it back; `None` while it does.
+    scans: Option<Fuse<S>>,
     /// Scans taken for casting (they are taken in order).
     taken: usize,
     /// Scans applied to the tree (they are applied in order).
@@ -122,7 +124,7 @@ where
     /// most `lookahead` scans ahead of the tree.
     pub(super) fn new(scans: S, lookahead: usize) -> Self {
         let state = State {
-            scans: scans.fuse(),
+            scans: Some(scans.fuse()),
             taken: 0,
             applied: 0,
             applying: false,
@@ -177,16 +179,26 @@ where
                 }
             }
             if !s.exhausted && s.taken - s.applied < self.lookahead {
-                match s.scans.next() {
-                    Some((i, scan)) => {
-                        s.taken += 1;
-                        return Some(Job::Cast(i, scan));
+                // (while another thread reads a scan, this one waits below
+                // for its return or other work)
+                if let Some(mut scans) = s.scans.take() {
+                    // the scan counts as taken while it is read, so that the
+                    // sequence cannot look finished meanwhile
+                    s.taken += 1;
+                    drop(s);
+                    let next = scans.next();
+                    s = self.monitor.lock();
+                    s.scans = Some(scans);
+                    s.epoch += 1;
+                    self.monitor.notify_all();
+                    match next {
+                        Some((i, scan)) => return Some(Job::Cast(i, scan)),
+                        None => {
+                            s.taken -= 1;
+                            s.exhausted = true;
+                        }
                     }
-                    None => {
-                        s.exhausted = true;
-                        s.epoch += 1;
-                        self.monitor.notify_all();
-                    }
+                    continue;
                 }
             }
             if s.exhausted && s.applied == s.taken {

@@ -21,6 +21,108 @@ pub(super) struct Batch<'a, S: NodeStore> {
     /// Where the walk stops short for a parallel update
     /// ([`parallel::Split`]); `None` for a whole walk.
     pub(super) split: Option<&'a mut parallel::Split>,
+    /// Where the batch's codes part among children.
+    pub(super) ranges: ChildRanges<'a>,
+}
+
+/// Codes below a node from which its child ranges come from [`Splits`]
+/// instead of a pass over the codes. Such a node spans more voxels: it
+/// lies at depth [`SPLIT_DEPTH`] or above.
+const LARGE: usize = 1024;
+
+/// The deepest nodes that may have more than [`LARGE`] codes (a depth-13
+/// node spans 512 voxels).
+const SPLIT_DEPTH: usize = 12;
+
+/// Where a sorted batch of codes parts, by depth: for nodes at depth `d`
+/// (0 to [`SPLIT_DEPTH`]), the positions `i` at which `codes[i + 1]` lies
+/// below another child than `codes[i]`, ascending. One pass over the codes
+/// finds them all, and a large node's child ranges are then its few entries
+/// of its depth's list: searching its codes by gallops and binary searches
+/// (chains of dependent loads) took a tenth of a large map's insertion.
+pub(super) struct Splits {
+    at: [Vec<u32>; SPLIT_DEPTH + 1],
+}
+
+impl Splits {
+    /// The splits of `codes` (Morton codes, strictly increasing; fewer
+    /// than 2^32).
+    pub(super) fn new(codes: &[u64]) -> Splits {
+        let mut at: [Vec<u32>; SPLIT_DEPTH + 1] = Default::default();
+        for (i, pair) in codes.windows(2).enumerate() {
+            let differ = pair[0] ^ pair[1];
+            // codes in one depth-13 node (its 512 voxels: the low 9 bits)
+            // part below the split depth
+            if differ >> 9 != 0 {
+                // the depth of the deepest node above both: the highest
+                // bit that differs picks the child below it
+                let top_bit = 63 - differ.leading_zeros();
+                let depth = TREE_DEPTH as usize - 1 - top_bit as usize / 3;
+                at[depth].push(u32::try_from(i).expect("fewer than 2^32 codes in a batch"));
+            }
+        }
+        Splits { at }
+    }
+}
+
+/// A walk's view of a batch's [`Splits`]: the address of the batch's first
+/// code (to turn a node's codes into positions) and, per depth, where the
+/// last node's entries ended. A walk visits each depth's nodes in code
+/// order, so each list is read forward once.
+#[derive(Clone, Copy)]
+pub(super) struct ChildRanges<'a> {
+    splits: &'a Splits,
+    base: usize,
+    next: [usize; SPLIT_DEPTH + 1],
+}
+
+impl<'a> ChildRanges<'a> {
+    /// For a walk over `codes`, whose splits are `splits`.
+    pub(super) fn new(splits: &'a Splits, codes: &[u64]) -> Self {
+        ChildRanges { splits, base: codes.as_ptr() as usize, next: [0; SPLIT_DEPTH + 1] }
+    }
+
+    /// The same batch for another walk (from the start of each list).
+    pub(super) fn restart(&self) -> Self {
+        ChildRanges { next: [0; SPLIT_DEPTH + 1], ..*self }
+    }
+
+    /// Where each child's codes start in `codes` (all of them below one
+    /// node at `depth`, more than [`LARGE`] of them, and a run of the
+    /// batch's codes), in `bounds[child]`, `codes.len()` for a child
+    /// without codes, and the children with codes.
+    fn find(&mut self, depth: u8, codes: &[u64], bounds: &mut [usize; 9]) -> u8 {
+        let shift = 3 * (15 - u32::from(depth));
+        let child_of = |c: u64| ((c >> shift) & 7) as usize;
+        let list = &self.splits.at[usize::from(depth)];
+        let first = (codes.as_ptr() as usize - self.base) / std::mem::size_of::<u64>();
+        let last = first + codes.len() - 1;
+        // the list's first entry at or after `first`: usually the next one,
+        // unless the walk skipped nodes (or started in the middle)
+        let mut k = self.next[usize::from(depth)];
+        if list.get(k).is_some_and(|&p| (p as usize) < first) {
+            k += list[k..].partition_point(|&p| (p as usize) < first);
+        }
+        let mut needed = 0u8;
+        let mut start = 0;
+        loop {
+            let pos = child_of(codes[start]);
+            bounds[pos] = start;
+            needed |= 1 << pos;
+            match list.get(k) {
+                Some(&p) if (p as usize) < last => {
+                    start = p as usize + 1 - first;
+                    k += 1;
+                }
+                _ => break,
+            }
+        }
+        self.next[usize::from(depth)] = k;
+        for pos in (0..8).rev() {
+            bounds[pos] = bounds[pos].min(bounds[pos + 1]);
+        }
+        needed
+    }
 }
 
 impl<S: NodeStore> Batch<'_, S> {
@@ -49,38 +151,17 @@ impl<S: NodeStore> Batch<'_, S> {
             for &c in codes {
                 needed |= 1 << (c & 7);
             }
-        } else {
-            if codes.len() <= 64 {
-                // a linear pass: stores only, no mispredicted search branches
-                for (i, &c) in codes.iter().enumerate().rev() {
-                    bounds[child_of(c)] = i;
-                }
-                for pos in (0..8).rev() {
-                    bounds[pos] = bounds[pos].min(bounds[pos + 1]);
-                }
-            } else {
-                // each child's range ends where the next begins: gallop
-                // forwards from its start (the memory just read) instead of
-                // binary searches over the whole list
-                let n = codes.len();
-                let mut start = 0;
-                for (pos, b) in bounds.iter_mut().enumerate().take(8) {
-                    *b = start;
-                    if start == n || child_of(codes[start]) != pos {
-                        continue;
-                    }
-                    let (mut last, mut step) = (start, 1);
-                    while last + step < n && child_of(codes[last + step]) == pos {
-                        last += step;
-                        step *= 2;
-                    }
-                    let limit = (last + step).min(n);
-                    start = last + 1 + codes[last + 1..limit].partition_point(|&c| child_of(c) == pos);
-                }
+        } else if codes.len() <= LARGE {
+            // a pass over the codes: stores only, no mispredicted branches
+            for (i, &c) in codes.iter().enumerate().rev() {
+                bounds[child_of(c)] = i;
             }
-            for pos in 0..8 {
+            for pos in (0..8).rev() {
+                bounds[pos] = bounds[pos].min(bounds[pos + 1]);
                 needed |= u8::from(bounds[pos] < bounds[pos + 1]) << pos;
             }
+        } else {
+            needed = self.ranges.find(depth, codes, &mut bounds);
         }
         let a = &mut *self.arena;
         let mask = a.mask(n);

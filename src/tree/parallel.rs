@@ -119,7 +119,7 @@ pub(super) fn apply(
     let total = tasks.iter().fold((0, 0), |(i, l), t| (i + t.bound.0, l + t.bound.1));
     let largest = tasks.iter().fold((0, 0), |(i, l), t| (i.max(t.bound.0), l.max(t.bound.1)));
 
-    let (rules, sensor, delta, lazy) = (batch.rules, batch.sensor, batch.delta, batch.lazy);
+    let (rules, sensor, delta, lazy, ranges) = (batch.rules, batch.sensor, batch.delta, batch.lazy, batch.ranges);
     // per task: changed, or `None` when the spare slots could not be
     // promised to it (applied afterwards, by this thread)
     let run = |shared: &SharedArena<'_>, tasks: &[Task], free: ArenaFree| {
@@ -131,7 +131,17 @@ pub(super) fn apply(
                 changed.push(None);
                 continue;
             }
-            let mut b = Batch { arena: &mut worker, rules, sensor, delta, lazy, size: 0, changes: None, split: None };
+            let mut b = Batch {
+                arena: &mut worker,
+                rules,
+                sensor,
+                delta,
+                lazy,
+                size: 0,
+                changes: None,
+                split: None,
+                ranges: ranges.restart(),
+            };
             changed.push(Some(b.apply(t.node, t.depth, &codes[t.start..t.end], t.created)));
             size += b.size;
             worker.release();
@@ -203,6 +213,7 @@ fn on_arena<'b>(batch: &'b mut Batch<'_, NodeArena>, split: Option<&'b mut Split
         size: 0,
         changes: None,
         split,
+        ranges: batch.ranges.restart(),
     }
 }
 

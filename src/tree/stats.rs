@@ -52,28 +52,23 @@ impl OccupancyTree {
         self.arena.as_ref().map_or(0, |a| count(a, ROOT))
     }
 
-    /// Metric bounds of all leaves (zero for an empty tree).
+    /// Metric bounds of all leaves (zero for an empty tree): the extremes
+    /// of their corners, each computed as OctoMap computes a leaf's. One
+    /// descent per face of the box, trying the children on its side first
+    /// and skipping a subtree whose own box lies more than a voxel inside
+    /// the best bound found so far (the corners of the leaves below it,
+    /// computed in doubles, differ from its box by far less than a voxel):
+    /// a large map costs the nodes along the faces instead of every leaf.
     pub fn bounds(&self, rule: BoundsRule) -> Bounds {
-        if self.arena.is_none() {
+        let Some(arena) = self.arena.as_ref() else {
             return Bounds { min: [0.0; 3], max: [0.0; 3] };
-        }
+        };
         let mut b = Bounds { min: [f64::MAX; 3], max: [-f64::MAX; 3] };
-        for leaf in self.leaves(0) {
-            let size = self.keys.node_size(leaf.depth);
-            let half = size / 2.0;
-            for axis in 0..3 {
-                let c = self.keys.key_to_coord_at_depth(leaf.key.0[axis], leaf.depth);
-                let lo = c - half;
-                let hi = match rule {
-                    BoundsRule::CenterHalfSize => c + half,
-                    BoundsRule::MinPlusSize => lo + size,
-                };
-                if lo < b.min[axis] {
-                    b.min[axis] = lo;
-                }
-                if hi > b.max[axis] {
-                    b.max[axis] = hi;
-                }
+        for axis in 0..3 {
+            for upper in [false, true] {
+                let face = Face { tree: self, arena, rule, axis, upper };
+                let best = if upper { &mut b.max[axis] } else { &mut b.min[axis] };
+                face.descend(ROOT, 0, 0, best);
             }
         }
         b
@@ -118,10 +113,120 @@ impl OccupancyTree {
     }
 }
 
+/// One face of [`OccupancyTree::bounds`]: the lowest (or, `upper`, the
+/// highest) leaf corner along `axis`.
+struct Face<'a> {
+    tree: &'a OccupancyTree,
+    arena: &'a NodeArena,
+    rule: BoundsRule,
+    axis: usize,
+    upper: bool,
+}
+
+impl Face<'_> {
+    /// The node's extent along the axis, as OctoMap computes a leaf's:
+    /// `key` is the key along the axis of any voxel below the node.
+    fn extent(&self, key: u16, depth: u8) -> (f64, f64) {
+        let keys = &self.tree.keys;
+        let size = keys.node_size(depth);
+        let c = keys.key_to_coord_at_depth(key, depth);
+        let lo = c - size / 2.0;
+        let hi = match self.rule {
+            BoundsRule::CenterHalfSize => c + size / 2.0,
+            BoundsRule::MinPlusSize => lo + size,
+        };
+        (lo, hi)
+    }
+
+    /// Moves `best` out to the leaves below `n` (at `depth`, with `key`
+    /// along the axis, lower bits zero).
+    fn descend(&self, n: NodeId, depth: u8, key: u16, best: &mut f64) {
+        let (lo, hi) = self.extent(key, depth);
+        let a = self.arena;
+        if !a.has_children(n) {
+            if self.upper && hi > *best {
+                *best = hi;
+            } else if !self.upper && lo < *best {
+                *best = lo;
+            }
+            return;
+        }
+        let margin = self.tree.resolution();
+        if (self.upper && hi + margin < *best) || (!self.upper && lo - margin > *best) {
+            return;
+        }
+        let (mask, first) = (a.mask(n), a.first_child(n));
+        // the children on the face's side first
+        for side in [u8::from(!self.upper), u8::from(self.upper)] {
+            let bit = 1u8 << self.axis;
+            for pos in (0..8u8).filter(|&pos| mask & (1 << pos) != 0 && ((pos & bit) != 0) == (side == 1)) {
+                let child = first + crate::arch::count_ones(u32::from(mask) & ((1 << pos) - 1));
+                let key = key | (u16::from(side) << (15 - depth));
+                self.descend(child, depth + 1, key, best);
+            }
+        }
+    }
+}
+
 fn count_leaves(a: &NodeArena, n: NodeId) -> usize {
     if !a.has_children(n) {
         return 1;
     }
     let first = a.first_child(n);
     (0..crate::arch::count_ones(a.mask(n))).map(|i| count_leaves(a, first + i)).sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Point3;
+    use crate::{InnerNodes, ScanOptions};
+
+    /// [`OccupancyTree::bounds`] as every leaf's corners give it.
+    fn bounds_of_every_leaf(tree: &OccupancyTree, rule: BoundsRule) -> Bounds {
+        let mut b = Bounds { min: [f64::MAX; 3], max: [-f64::MAX; 3] };
+        for leaf in tree.leaves(0) {
+            let size = tree.keys.node_size(leaf.depth);
+            for axis in 0..3 {
+                let c = tree.keys.key_to_coord_at_depth(leaf.key.0[axis], leaf.depth);
+                let lo = c - size / 2.0;
+                let hi = if rule == BoundsRule::CenterHalfSize { c + size / 2.0 } else { lo + size };
+                b.min[axis] = b.min[axis].min(lo);
+                b.max[axis] = b.max[axis].max(hi);
+            }
+        }
+        b
+    }
+
+    /// The descents along the faces give every leaf's bounds to the bit:
+    /// scans at several resolutions (leaves at depth 16 and pruned ones
+    /// above), a single voxel, and eight leaves just below the root.
+    #[test]
+    fn bounds_are_those_of_every_leaf() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/samples/indoor.graph");
+        let graph = crate::formats::graph::read_file(path).unwrap();
+        let mut trees = Vec::new();
+        for res in [0.05, 0.2, 1.0, 3.7] {
+            let mut t = OccupancyTree::new(res).unwrap();
+            for node in &graph.nodes[..3] {
+                let (cloud, origin) = node.graph2tree();
+                t.insert_point_cloud(&cloud.points, origin, &ScanOptions::default()).unwrap();
+            }
+            trees.push(t);
+        }
+        let mut one = OccupancyTree::new(0.1).unwrap();
+        one.update_point(Point3::new(-3.0, 2.0, 0.5), true, InnerNodes::Update).unwrap();
+        trees.push(one);
+        let mut bt = b"# Octomap OcTree binary file\n#\n#\nid OcTree\nsize 9\nres 0.1\ndata\n".to_vec();
+        bt.extend([0x55, 0x55]); // the root's eight children: free leaves
+        trees.push(crate::formats::bt::read(&bt[..]).unwrap());
+        for t in &trees {
+            assert!(t.num_leaves() > 0);
+            for rule in [BoundsRule::CenterHalfSize, BoundsRule::MinPlusSize] {
+                let (got, want) = (t.bounds(rule), bounds_of_every_leaf(t, rule));
+                let bits = |b: Bounds| [b.min, b.max].map(|v| v.map(f64::to_bits));
+                assert_eq!(bits(got), bits(want), "{rule:?}, res {}", t.resolution());
+            }
+        }
+    }
 }

@@ -1,7 +1,7 @@
 //! Occupancy updates: one voxel at a time, in sorted batches, deferred
 //! inner-node updates, and the max-likelihood rewrite.
 
-use super::batch::Batch;
+use super::batch::{Batch, ChildRanges, Splits};
 use super::rules::{average_child_color, prune_node, update_from_children};
 use super::{parallel, Compaction, InnerNodes, NodeArena, NodeId, NodeKind, OccupancyTree, Rules, ROOT};
 use crate::geometry::Point3;
@@ -153,6 +153,7 @@ impl OccupancyTree {
         }
         let rules = self.rules();
         self.forget_trunks();
+        let splits = Splits::new(codes);
         let mut batch = Batch {
             arena: self.arena.as_mut().expect("root exists"),
             rules,
@@ -162,6 +163,7 @@ impl OccupancyTree {
             size: self.size as isize,
             changes: self.changes.as_mut(),
             split: None,
+            ranges: ChildRanges::new(&splits, codes),
         };
         if workers > 1 && codes.len() >= parallel::MIN_CODES && batch.changes.is_none() {
             parallel::apply(&mut batch, codes, created, workers, announce);

@@ -1,25 +1,31 @@
 //! Scan insertion under a profiler: `cargo run --release -p
-//! octolinear-probes --bin insert_profile -- indoor|outdoor RES THREADS
-//! [SCANS]` builds the bench's simulated scans, then times their insertion
-//! into a fresh tree.
+//! octolinear-probes --bin insert_profile -- indoor|outdoor|FILE.graph RES
+//! THREADS [SCANS]` builds the bench's simulated scans (or reads the first
+//! SCANS scans of a `.graph` file, such as `octolinear simulate` writes for
+//! the full-size sequences), then times their insertion into a fresh tree.
 //! Meant for `valgrind --tool=callgrind` or `perf record`.
 
+use octolinear::internals::TreeInternals;
 use octolinear::{OccupancyTree, ScanOptions};
 use octolinear_sim::{simulate, LidarConfig, SceneKind};
 use std::time::Instant;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let kind = match args.first().map(String::as_str) {
-        Some("outdoor") => SceneKind::Outdoor,
-        _ => SceneKind::Indoor,
-    };
+    let first = args.first().map_or("indoor", String::as_str);
+    let kind = if first == "outdoor" { SceneKind::Outdoor } else { SceneKind::Indoor };
     let res: f64 = args.get(1).map_or(0.1, |s| s.parse().expect("RES"));
     let threads: usize = args.get(2).map_or(1, |s| s.parse().expect("THREADS"));
-    let default_scans = if kind == SceneKind::Indoor { 24 } else { 6 };
-    let n: usize = args.get(3).map_or(default_scans, |s| s.parse().expect("SCANS"));
-    let cfg = if kind == SceneKind::Indoor { LidarConfig::indoor() } else { LidarConfig::outdoor() };
-    let graph = simulate(kind, n, 7, &cfg).expect("simulate");
+    let scans: Option<usize> = args.get(3).map(|s| s.parse().expect("SCANS"));
+    let graph = if first.ends_with(".graph") {
+        let mut graph = octolinear::formats::graph::read_file(first).expect("read the .graph file");
+        graph.nodes.truncate(scans.unwrap_or(usize::MAX));
+        graph
+    } else {
+        let n = scans.unwrap_or(if kind == SceneKind::Indoor { 24 } else { 6 });
+        let cfg = if kind == SceneKind::Indoor { LidarConfig::indoor() } else { LidarConfig::outdoor() };
+        simulate(kind, n, 7, &cfg).expect("simulate")
+    };
     let scans: Vec<_> = graph.nodes.iter().map(|node| node.graph2tree()).collect();
     let points: usize = scans.iter().map(|(c, _)| c.points.len()).sum();
     let opts = ScanOptions { threads: Some(threads), ..ScanOptions::default() };
@@ -50,6 +56,11 @@ fn main() {
         points as f64 / secs / 1e6,
         updates as f64 / secs / 1e6
     );
+    // STEPS=1: the rays' voxel visits (repeats included), outside the timing
+    if std::env::var_os("STEPS").is_some() {
+        let visits: usize = scans.iter().map(|(cloud, origin)| tree.cast_codes(&cloud.points, *origin).0.len()).sum();
+        println!("{visits} voxel visits by rays: {:.2} ns each", secs * 1e9 / visits as f64);
+    }
 }
 
 /// CPU time of the whole process (all threads), in seconds: less disturbed

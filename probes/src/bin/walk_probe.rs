@@ -5,8 +5,10 @@
 //! (no key lists, no filter, no sort, no tree). Prints the ray set-up cost
 //! per ray and the walk cost per step, and the cost per step of the whole
 //! casting as insertion runs it (`compute_update`: on AVX-512 processors
-//! the vector set-up and walk, with the scan's sets). A probe, not a
-//! benchmark of record.
+//! the vector set-up and walk, with the scan's sets), against what one
+//! double compare and one add that depends on it cost in a chain (a
+//! step's least work, one after the other). A probe, not a benchmark of
+//! record.
 
 #[path = "../../../benches/common/mod.rs"]
 mod common;
@@ -116,4 +118,16 @@ fn main() {
         two * 1e3,
         ns(two, steps)
     );
+    // a chain of compares, each choosing what the next add adds
+    let n = 100_000_000u64;
+    let chain = best(&|| {
+        // (opaque values, in registers)
+        let (a, b, limit) = (black_box(1.0e-9f64), black_box(2.0e-9f64), black_box(0.5f64));
+        let mut t = black_box(0.0f64);
+        for _ in 0..n {
+            t += std::hint::select_unpredictable(t < limit, a, b);
+        }
+        t.to_bits()
+    });
+    println!("a dependent double compare and add, in a chain: {:.2} ns", ns(chain, n));
 }
