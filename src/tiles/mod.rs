@@ -43,12 +43,14 @@
 //! # Modules
 //!
 //! * `id`: [`TileId`], tile addressing (keys, codes, metric bounds, file names);
-//! * `top`: the levels above the tiles derived from the tile roots, and the merge;
+//! * `top`: the levels above the tiles derived from the tile roots;
 //! * `map`: [`TiledMap`], updates, queries, merge and [`TiledMap::flush`];
 //! * `budget`: [`MemoryBudget`], tiles spilled to disk and read back;
 //! * `file`: a tile's `.olm` file, written, described and checked;
 //! * `manifest`: the tile set's manifest ([`Manifest`]), `formats/tiles.md`;
 //! * `set`: [`TileSet`], a tile set on disk, mapped tile by tile;
+//! * `stream`: the single tree walked in pre-order across the tiles, one
+//!   tile read at a time, for the file writers and the merge;
 //! * `query`: ray casting across tiles;
 //! * `error`: [`TileError`], the one error type.
 
@@ -60,6 +62,7 @@ mod manifest;
 mod map;
 mod query;
 mod set;
+mod stream;
 mod top;
 
 pub use budget::MemoryBudget;

@@ -38,7 +38,7 @@ pub use kind::{NodeKind, TreeKind};
 use level_index::LevelSlot;
 #[cfg(test)]
 pub(crate) use parallel::MIN_CODES as PARALLEL_MIN_CODES;
-pub use preorder::{ChildGroup, NodeRef, PreorderBuilder, PreorderNode, PreorderVisitor, TooDeep};
+pub use preorder::{ChildGroup, NodeRef, PreorderBuilder, PreorderNode, PreorderSource, PreorderVisitor, Tee, TooDeep};
 use search::descend_to;
 pub(crate) use search::search_target;
 pub(crate) use search_index::LevelTables;
