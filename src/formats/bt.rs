@@ -9,9 +9,10 @@
 
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, BT_FIRST_LINE};
 use super::TreeFileError;
+use crate::key::KeySpace;
 use crate::sensor::SensorModel;
 use crate::tree::{default_extra, ChildGroup, LabelFill, NodeKind, OccupancyTree};
-use crate::tree::{PreorderNode, PreorderSource, PreorderVisitor, Tee};
+use crate::tree::{PreorderNode, PreorderSource, PreorderVisitor, Tee, TreeSummary};
 use std::convert::Infallible;
 use std::io::{self, BufRead, Write};
 use std::ops::ControlFlow;
@@ -168,6 +169,42 @@ pub struct MlRecordStream {
     pub records: Vec<u8>,
     /// Nodes of the maximum-likelihood tree (`size()`, the header's).
     pub nodes: u64,
+}
+
+impl MlRecordStream {
+    /// The [`TreeSummary`] of the maximum-likelihood tree the records
+    /// describe, of `map`'s kind and resolution: read from the records
+    /// alone. Its every node holds a clamping bound, so all count as at
+    /// the threshold.
+    pub fn summary(&self, map: &impl PreorderSource) -> TreeSummary {
+        let keys = KeySpace::new(map.resolution());
+        let mut s = TreeSummary::empty(map.node_kind(), map.resolution());
+        let mut records = self.records.chunks_exact(2).map(|r| u16::from_le_bytes([r[0], r[1]]));
+        if let Some(root) = records.next() {
+            s.nodes = 1;
+            if root == 0 {
+                s.add_leaf(&keys, 0, 0);
+            }
+            // (Morton prefix, depth, labels, next child) of each open node
+            let mut path = vec![(0u64, 0u8, root, 0u32)];
+            while let Some(open) = path.last_mut() {
+                if open.3 == 8 {
+                    path.pop();
+                    continue;
+                }
+                let (code, depth, pos) = (open.0 << 3 | u64::from(open.3), open.1 + 1, open.3);
+                open.3 += 1;
+                match (open.2 >> (2 * pos)) & 3 {
+                    0 => continue,
+                    3 => path.push((code, depth, records.next().unwrap_or(0), 0)),
+                    _ => s.add_leaf(&keys, code, depth),
+                }
+                s.nodes += 1;
+            }
+        }
+        s.at_threshold = s.nodes;
+        s.finish()
+    }
 }
 
 /// Appends to `out` the node stream `toMaxLikelihood()` then `prune()`

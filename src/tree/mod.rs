@@ -43,6 +43,7 @@ use search::descend_to;
 pub(crate) use search::search_target;
 pub(crate) use search_index::LevelTables;
 pub use search_index::SearchIndex;
+pub use stats::{Summarize, TreeSummary};
 pub(crate) use trunk::{Trunks, GRID_NODES_PER_CELL};
 
 use crate::geometry::Point3;
