@@ -2210,7 +2210,8 @@ fn build_statistics(f: &Fixture, out: &str, flags: &[&str]) -> serde_json::Value
 #[test]
 fn tiled_builds_to_ot_and_bt_are_written_tile_by_tile_with_the_plain_bytes_and_statistics() {
     let f = Fixture::new();
-    let runs = [(&["--res", "0.1"][..], &[("1", "5"), ("64M", "9"), ("4K", "13")][..]), (&["--res", "0.2"], &[("1", "2")])];
+    let runs =
+        [(&["--res", "0.1"][..], &[("1", "5"), ("64M", "9"), ("4K", "13")][..]), (&["--res", "0.2"], &[("1", "2")])];
     for (flags, caps) in runs {
         for ext in ["ot", "bt"] {
             let plain = f.p(&format!("plain.{ext}"));
