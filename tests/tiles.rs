@@ -1,5 +1,6 @@
 //! Tiled maps against the untiled build: random scans, tile depths and
-//! memory budgets give the same map; a tile set's queries answer as the
+//! memory budgets give the same map, and the same `.ot` and `.bt` bytes and
+//! statistics written tile by tile; a tile set's queries answer as the
 //! merged map; damaged, missing and mismatched files are errors naming the
 //! tile or the manifest line, never a panic (and the manifest's fuzz
 //! target holds on every damaged manifest).

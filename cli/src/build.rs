@@ -60,7 +60,9 @@ use std::time::{Duration, Instant};
 /// manifest. --memory-cap keeps the map's tiles in memory up to that size
 /// and writes the others out (into the tile set, or beside OUT in a
 /// temporary directory), reading them back when scans reach them again:
-/// the map is the same. Tiles cannot hold colour maps, and --compress-ml
+/// the map is the same. An .ot or .bt output is then written tile by tile,
+/// never as one tree; an .olm output, laid out as a whole, merges the
+/// tiles into one tree in memory at the end. Tiles cannot hold colour maps, and --compress-ml
 /// (OctoMap's prune() stops at the first level where nothing merged, a
 /// decision over the whole map) is not offered with them.
 ///
@@ -138,7 +140,8 @@ pub struct Args {
     #[arg(long, value_name = "K/N")]
     task: Option<String>,
     /// Keep at most SIZE bytes of tiles in memory (e.g. 512M, 2G; K, M, G
-    /// are powers of 1024); the others wait on disk. The output is the same.
+    /// are powers of 1024); the others wait on disk. The output is the same
+    /// (.ot and .bt written tile by tile; .olm merged in memory).
     #[arg(long, value_name = "SIZE")]
     memory_cap: Option<String>,
 }

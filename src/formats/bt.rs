@@ -152,9 +152,11 @@ pub fn write_map_observed(
     mut w: impl Write,
     observer: &mut impl PreorderVisitor<Break = Infallible>,
 ) -> io::Result<MlRecordStream> {
-    let mut ml = MaxLikelihood::new(map);
-    let ControlFlow::Continue(()) = map.visit_preorder(&mut Tee(observer, &mut ml))?;
-    let ml = ml.finish(map)?;
+    let ml = if map.node_kind() == NodeKind::Stamped {
+        ml_records::<true>(map, observer)?
+    } else {
+        ml_records::<false>(map, observer)?
+    };
     let size = usize::try_from(ml.nodes).map_err(io::Error::other)?;
     write_header(&mut w, BT_FIRST_LINE, super::ot::TreeKind::of(map.node_kind()).id(), size, map.resolution())?;
     w.write_all(&ml.records)?;
@@ -211,16 +213,25 @@ impl MlRecordStream {
 /// would leave, without copying or changing the tree; returns the node
 /// count (`size()`) that tree would have.
 pub(crate) fn write_ml_data(tree: &OccupancyTree, out: &mut Vec<u8>) -> usize {
-    let mut ml = MaxLikelihood::new(tree);
-    let ControlFlow::Continue(()) = tree.visit_preorder(&mut ml).expect("a tree's walk cannot fail");
-    let ml = ml.finish(tree).expect("a tree's walk cannot fail");
+    let ml = write_map(tree, io::sink()).expect("a tree's walk cannot fail");
     out.extend_from_slice(&ml.records);
     ml.nodes as usize
 }
 
+/// The maximum-likelihood records of `map`, from a walk that `observer`
+/// watches too (see [`MaxLikelihood`]).
+fn ml_records<const STAMPED: bool>(
+    map: &impl PreorderSource,
+    observer: &mut impl PreorderVisitor<Break = Infallible>,
+) -> io::Result<MlRecordStream> {
+    let mut records = MlRecords::<STAMPED>::new(map.sensor(), 1, records_hint(map.node_count()));
+    let ControlFlow::Continue(()) = map.visit_preorder(&mut Tee(observer, &mut records))?;
+    records.complete(map)
+}
+
 /// Gathers the records of the maximum-likelihood tree from a walk of the
 /// map, as a visitor (so that it can watch a walk that writes another
-/// format), then [`Self::finish`] completes them.
+/// format, `.ot` say), then [`Self::finish`] completes them.
 ///
 /// `prune` merges level by level from depth 15 up and stops after the
 /// first level that merged nothing. One read-only pass writes the records
@@ -228,12 +239,9 @@ pub(crate) fn write_ml_data(tree: &OccupancyTree, out: &mut Vec<u8>) -> usize {
 /// counts the merges per depth. That is the answer unless a level above
 /// the one where `prune` stops would merge something; then a second walk
 /// writes the records with merges below that level only.
-pub struct MaxLikelihood {
-    records: MlPass,
-    nodes: u64,
-}
+pub struct MaxLikelihood(MlPass);
 
-/// One pass of [`MlRecords`], by whether stamps take part.
+/// The records being gathered, by whether stamps take part.
 enum MlPass {
     Plain(MlRecords<false>),
     Stamped(MlRecords<true>),
@@ -242,49 +250,21 @@ enum MlPass {
 impl MaxLikelihood {
     /// Ready for a walk of `map`.
     pub fn new(map: &impl PreorderSource) -> Self {
-        MaxLikelihood { records: MlPass::new(map, 1), nodes: map.node_count() }
+        let (sensor, hint) = (map.sensor(), records_hint(map.node_count()));
+        MaxLikelihood(if map.node_kind() == NodeKind::Stamped {
+            MlPass::Stamped(MlRecords::new(sensor, 1, hint))
+        } else {
+            MlPass::Plain(MlRecords::new(sensor, 1, hint))
+        })
     }
 
     /// The records and node count of the maximum-likelihood tree, after
     /// the walk of `map` this visitor watched (walking it again in the
     /// rare case described above).
     pub fn finish(self, map: &impl PreorderSource) -> io::Result<MlRecordStream> {
-        let counts = self.records.counts();
-        // as `OccupancyTree::prune`: the deepest level that merges nothing
-        // stops it; only the levels below that one merge
-        let stop = (1..16).rev().find(|&d| counts[d] == 0).unwrap_or(0);
-        let lowest = stop.max(1);
-        let mut records = self.records;
-        if counts[1..lowest].iter().any(|&c| c > 0) {
-            records = MlPass::new(map, lowest);
-            let ControlFlow::Continue(()) = map.visit_preorder(&mut records)?;
-        }
-        let merged = 8 * counts[lowest..].iter().sum::<usize>() as u64;
-        Ok(MlRecordStream { records: records.into_records(), nodes: self.nodes - merged })
-    }
-}
-
-impl MlPass {
-    fn new(map: &impl PreorderSource, lowest: usize) -> Self {
-        let hint = records_hint(map.node_count());
-        if map.node_kind() == NodeKind::Stamped {
-            MlPass::Stamped(MlRecords::new(map.sensor(), lowest, hint))
-        } else {
-            MlPass::Plain(MlRecords::new(map.sensor(), lowest, hint))
-        }
-    }
-
-    fn counts(&self) -> [usize; 16] {
-        match self {
-            MlPass::Plain(r) => r.counts,
-            MlPass::Stamped(r) => r.counts,
-        }
-    }
-
-    fn into_records(self) -> Vec<u8> {
-        match self {
-            MlPass::Plain(r) => r.out,
-            MlPass::Stamped(r) => r.out,
+        match self.0 {
+            MlPass::Plain(r) => r.complete(map),
+            MlPass::Stamped(r) => r.complete(map),
         }
     }
 }
@@ -294,26 +274,7 @@ impl PreorderVisitor for MaxLikelihood {
 
     #[inline(always)]
     fn enter(&mut self, node: &PreorderNode, children: &ChildGroup<'_>) -> ControlFlow<Infallible> {
-        self.records.enter(node, children)
-    }
-
-    #[inline(always)]
-    fn leaf(&mut self, node: &PreorderNode) -> ControlFlow<Infallible> {
-        self.records.leaf(node)
-    }
-
-    #[inline(always)]
-    fn leave(&mut self, node: &PreorderNode) -> ControlFlow<Infallible> {
-        self.records.leave(node)
-    }
-}
-
-impl PreorderVisitor for MlPass {
-    type Break = Infallible;
-
-    #[inline(always)]
-    fn enter(&mut self, node: &PreorderNode, children: &ChildGroup<'_>) -> ControlFlow<Infallible> {
-        match self {
+        match &mut self.0 {
             MlPass::Plain(r) => r.enter(node, children),
             MlPass::Stamped(r) => r.enter(node, children),
         }
@@ -321,7 +282,7 @@ impl PreorderVisitor for MlPass {
 
     #[inline(always)]
     fn leaf(&mut self, node: &PreorderNode) -> ControlFlow<Infallible> {
-        match self {
+        match &mut self.0 {
             MlPass::Plain(r) => r.leaf(node),
             MlPass::Stamped(r) => r.leaf(node),
         }
@@ -329,7 +290,7 @@ impl PreorderVisitor for MlPass {
 
     #[inline(always)]
     fn leave(&mut self, node: &PreorderNode) -> ControlFlow<Infallible> {
-        match self {
+        match &mut self.0 {
             MlPass::Plain(r) => r.leave(node),
             MlPass::Stamped(r) => r.leave(node),
         }
@@ -408,6 +369,23 @@ impl<const STAMPED: bool> MlRecords<STAMPED> {
             path: [Open::default(); 16],
             stamps: [[0; 8]; 16],
         }
+    }
+
+    /// The records and node count of the maximum-likelihood tree after a
+    /// walk of `map` with merges at every depth (see [`MaxLikelihood`]).
+    fn complete(self, map: &impl PreorderSource) -> io::Result<MlRecordStream> {
+        // as `OccupancyTree::prune`: the deepest level that merges nothing
+        // stops it; only the levels below that one merge
+        let stop = (1..16).rev().find(|&d| self.counts[d] == 0).unwrap_or(0);
+        let lowest = stop.max(1);
+        let mut records = self.out;
+        if self.counts[1..lowest].iter().any(|&c| c > 0) {
+            let mut again = MlRecords::<STAMPED>::new(map.sensor(), lowest, records.len());
+            let ControlFlow::Continue(()) = map.visit_preorder(&mut again)?;
+            records = again.out;
+        }
+        let merged = 8 * self.counts[lowest..].iter().sum::<usize>() as u64;
+        Ok(MlRecordStream { records, nodes: map.node_count() - merged })
     }
 
     /// A child at `pos` of the open node at `depth` that is a leaf of

@@ -122,7 +122,9 @@ impl TileSet {
         };
         let mask = |i: usize| {
             let entry = &manifest.tiles[i];
-            Ok(root_mask_in_view(open_tile(self.dir(), entry)?.view(), entry.id))
+            let map = open_tile(self.dir(), entry)?;
+            check_tile(&map, entry, manifest, TileCheck::Header).map_err(|reason| damaged(i, reason))?;
+            Ok(root_mask_in_view(map.view(), entry.id))
         };
         self.top().visit(visitor, &mask, &mut |i, visitor| {
             let entry = &manifest.tiles[i];

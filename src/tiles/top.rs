@@ -49,6 +49,10 @@ pub(crate) enum TopAnswer {
     Tile(usize),
 }
 
+/// What walks tile `i`'s subtree for [`Top::visit`].
+pub(crate) type TileWalk<'w, V> =
+    dyn FnMut(usize, &mut V) -> Result<ControlFlow<<V as PreorderVisitor>::Break>, TileError> + 'w;
+
 /// The derived levels 0..=tile depth; level `depth` holds the tile roots.
 #[derive(Clone, Debug)]
 pub(crate) struct Top {
@@ -159,7 +163,7 @@ impl Top {
         &self,
         visitor: &mut V,
         tile_mask: &dyn Fn(usize) -> Result<u8, TileError>,
-        tile: &mut dyn FnMut(usize, &mut V) -> Result<ControlFlow<V::Break>, TileError>,
+        tile: &mut TileWalk<'_, V>,
     ) -> Result<ControlFlow<V::Break>, TileError> {
         if self.is_empty() {
             return Ok(ControlFlow::Continue(()));
@@ -173,7 +177,7 @@ impl Top {
         i: usize,
         visitor: &mut V,
         tile_mask: &dyn Fn(usize) -> Result<u8, TileError>,
-        tile: &mut dyn FnMut(usize, &mut V) -> Result<ControlFlow<V::Break>, TileError>,
+        tile: &mut TileWalk<'_, V>,
     ) -> Result<ControlFlow<V::Break>, TileError> {
         let n = self.levels[usize::from(d)][i];
         if n.is_leaf {
