@@ -501,24 +501,33 @@ pub(crate) fn write_data(tree: &OccupancyTree, w: impl Write) -> io::Result<()> 
 }
 
 /// [`write_data`] of any map.
-fn write_const_data(map: &impl PreorderSource, mut w: impl Write) -> io::Result<()> {
-    let mut records = ConstRecords { sensor: map.sensor(), out: Vec::with_capacity(records_hint(map.node_count())) };
-    let ControlFlow::Continue(()) = map.visit_preorder(&mut records)?;
-    w.write_all(&records.out)
+fn write_const_data(map: &impl PreorderSource, w: impl Write) -> io::Result<()> {
+    let hint = records_hint(map.node_count()).min(FLUSH_AT + 2);
+    let mut records = ConstRecords { sensor: map.sensor(), out: Vec::with_capacity(hint), w };
+    if let ControlFlow::Break(e) = map.visit_preorder(&mut records)? {
+        return Err(e);
+    }
+    records.w.write_all(&records.out)
 }
+
+/// Bytes of records gathered before they go to the writer.
+const FLUSH_AT: usize = 1 << 16;
 
 /// The records of the tree as it is: per node with children, children with
-/// children labelled 3, leaves 2 when occupied, else 1.
-struct ConstRecords<'s> {
+/// children labelled 3, leaves 2 when occupied, else 1; gathered in `out`
+/// and written to `w` in pieces of about [`FLUSH_AT`] bytes (no record
+/// changes once made).
+struct ConstRecords<'s, W> {
     sensor: &'s SensorModel,
     out: Vec<u8>,
+    w: W,
 }
 
-impl PreorderVisitor for ConstRecords<'_> {
-    type Break = Infallible;
+impl<W: Write> PreorderVisitor for ConstRecords<'_, W> {
+    type Break = io::Error;
 
     #[inline(always)]
-    fn leaf(&mut self, node: &PreorderNode) -> ControlFlow<Infallible> {
+    fn leaf(&mut self, node: &PreorderNode) -> ControlFlow<io::Error> {
         if node.depth == 0 {
             // a lone root: a record without children
             self.out.extend_from_slice(&[0, 0]);
@@ -527,7 +536,18 @@ impl PreorderVisitor for ConstRecords<'_> {
     }
 
     #[inline(always)]
-    fn enter(&mut self, _: &PreorderNode, children: &ChildGroup<'_>) -> ControlFlow<Infallible> {
+    fn leave(&mut self, _: &PreorderNode) -> ControlFlow<io::Error> {
+        if self.out.len() >= FLUSH_AT {
+            if let Err(e) = self.w.write_all(&self.out) {
+                return ControlFlow::Break(e);
+            }
+            self.out.clear();
+        }
+        ControlFlow::Continue(())
+    }
+
+    #[inline(always)]
+    fn enter(&mut self, _: &PreorderNode, children: &ChildGroup<'_>) -> ControlFlow<io::Error> {
         let (masks, values) = (children.child_masks(), children.values());
         let mut labels = 0u16;
         for (rank, pos) in children.positions() {
