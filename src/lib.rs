@@ -56,5 +56,5 @@ pub use scan::{OutOfMap, ScanError, ScanOptions, ScanReport, UpdateBox};
 pub use sensor::{SensorError, SensorModel, SensorProbabilities};
 pub use tree::{
     Bounds, BoundsRule, Clock, Compaction, CountingTree, Found, InnerNodes, KeyBox, NodeItem, NodeKind, OccupancyTree,
-    SearchIndex, TreeError, TreeKind,
+    SearchIndex, Summarize, TreeError, TreeKind, TreeSummary,
 };

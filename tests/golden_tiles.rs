@@ -2,9 +2,10 @@
 //! (tiles of half the map) to fine (2 voxels a side, pruned whole and merged
 //! above), and under a memory budget so small that every tile is written
 //! out and read back after each group of updates (the constants say which
-//! cases get which depths), the merged map is
-//! OctoMap's `.ot` and `.bt` to the byte; queries on the tile set written
-//! from it answer as the merged map.
+//! cases get which depths), the `.ot` and `.bt` written tile by tile from
+//! the tiled map are OctoMap's to the byte; the tile set written from it
+//! writes them too, merges to the same tree, and its queries answer as
+//! that merged map.
 
 mod common;
 #[path = "common/scans.rs"]
@@ -13,6 +14,7 @@ mod scans;
 use common::*;
 use octolinear::formats::{bt, ot};
 use octolinear::tiles::{MemoryBudget, TileSet, TiledMap};
+use octolinear::tree::PreorderSource;
 use octolinear::{CastOptions, InnerNodes, NodeKind, OccupancyTree, Point3, ScanOptions, UpdateBox};
 use rayon::prelude::*;
 use scans::{case_scans, Scan};
@@ -30,10 +32,12 @@ const CAPPED_DEPTHS: [u8; 2] = [5, 12];
 /// case, the second for every third.
 const SET_DEPTHS: [u8; 2] = [3, 13];
 
-fn bytes(tree: &OccupancyTree) -> (Vec<u8>, Vec<u8>) {
+/// The `.ot` and `.bt` bytes of a map walked as one tree (a tree, a
+/// tiled map, a tile set).
+fn bytes(map: &impl PreorderSource) -> (Vec<u8>, Vec<u8>) {
     let (mut o, mut b) = (Vec::new(), Vec::new());
-    ot::write(tree, &mut o).unwrap();
-    bt::write(tree, &mut b).unwrap();
+    ot::write_map(map, &mut o).unwrap();
+    bt::write_map(map, &mut b).unwrap();
     (o, b)
 }
 
@@ -119,8 +123,7 @@ fn run_case(g: &Golden, (index, case): (usize, &Value)) -> Vec<String> {
         if spill.is_some() {
             f.check(map.stats().live_tiles == 0, || format!("{id}: tiles stayed in memory under a 1-byte budget"));
         }
-        let merged = map.merge().unwrap();
-        let (o, b) = bytes(&merged);
+        let (o, b) = bytes(&map);
         let what = if capped { "capped " } else { "" };
         let before = f.0.len();
         f.check_digest(g, case, "tree.ot", &o);
@@ -132,8 +135,10 @@ fn run_case(g: &Golden, (index, case): (usize, &Value)) -> Vec<String> {
             let set_dir = dir.path().join(format!("d{depth}.tiles"));
             map.flush(&set_dir).unwrap();
             let set = TileSet::open(&set_dir).unwrap();
+            let merged = map.merge().unwrap();
             check_queries(&mut f, g, case, &set, &merged, depth);
-            f.check(set.merge().unwrap().size() == merged.size(), || format!("{id}: the set merges to another tree"));
+            f.check(bytes(&merged) == (o.clone(), b.clone()), || format!("{id} depth {depth}: the merge differs"));
+            f.check(bytes(&set) == (o, b), || format!("{id} depth {depth}: the set writes other bytes"));
         }
     }
     f.0

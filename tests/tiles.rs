@@ -1,5 +1,6 @@
 //! Tiled maps against the untiled build: random scans, tile depths and
-//! memory budgets give the same map; a tile set's queries answer as the
+//! memory budgets give the same map, and the same `.ot` and `.bt` bytes and
+//! statistics written tile by tile; a tile set's queries answer as the
 //! merged map; damaged, missing and mismatched files are errors naming the
 //! tile or the manifest line, never a panic (and the manifest's fuzz
 //! target holds on every damaged manifest).
@@ -7,9 +8,12 @@
 // the fuzz target below tests `cfg(fuzzing)`, which cargo-fuzz sets
 #![allow(unexpected_cfgs)]
 
-use octolinear::formats::ot;
+use octolinear::formats::{bt, ot};
 use octolinear::tiles::{MemoryBudget, TileCheck, TileError, TileSet, TiledMap};
-use octolinear::{CastOptions, Clock, InnerNodes, NodeKind, OccupancyTree, Point3, ScanOptions, SensorModel};
+use octolinear::tree::{PreorderSource, Summarize, TreeSummary};
+use octolinear::{
+    BoundsRule, CastOptions, Clock, InnerNodes, NodeKind, OccupancyTree, Point3, ScanOptions, SensorModel,
+};
 use proptest::prelude::*;
 use std::path::Path;
 
@@ -20,6 +24,33 @@ fn ot_bytes(tree: &OccupancyTree) -> Vec<u8> {
     let mut v = Vec::new();
     ot::write(tree, &mut v).unwrap();
     v
+}
+
+/// What a map walked as one tree writes: `.ot`, `.bt` (maximum
+/// likelihood, with the records' summary) and `.bt` as it is, and the
+/// summary of the walk.
+fn streamed(map: &impl PreorderSource) -> (Vec<u8>, Vec<u8>, Vec<u8>, TreeSummary, TreeSummary) {
+    let (mut o, mut b, mut c) = (Vec::new(), Vec::new(), Vec::new());
+    let mut full = Summarize::new(map);
+    ot::write_map_observed(map, &mut o, &mut full).unwrap();
+    let ml = bt::write_map(map, &mut b).unwrap();
+    bt::write_const_map(map, &mut c).unwrap();
+    (o, b, c, full.finish(), ml.summary(map))
+}
+
+/// The numbers a [`TreeSummary`] holds, as `tree` (compacted) has them.
+fn summary_of(tree: &OccupancyTree) -> (u64, u64, u64, [f64; 3], [f64; 3], usize, usize, u64) {
+    let mut t = tree.clone();
+    t.compact();
+    let at = t.nodes(0).filter(|n| t.sensor().is_at_threshold(n.value)).count() as u64;
+    let b = t.bounds(BoundsRule::CenterHalfSize);
+    let grid = t.memory_full_grid(BoundsRule::CenterHalfSize);
+    (t.size() as u64, t.num_leaves() as u64, at, b.min, b.max, t.octomap_memory_usage(), t.memory_usage(), grid)
+}
+
+fn summary_numbers(s: &TreeSummary) -> (u64, u64, u64, [f64; 3], [f64; 3], usize, usize, u64) {
+    let (b, grid) = (s.bounds, s.memory_full_grid());
+    (s.nodes, s.leaves, s.at_threshold, b.min, b.max, s.octomap_memory_usage(), s.compacted_memory_usage(), grid)
 }
 
 /// A scan: points and origin, in a few metres around the map's centre (so
@@ -111,6 +142,45 @@ proptest! {
             for d in [0, leaf.depth.saturating_sub(1)] {
                 prop_assert_eq!(map.search(leaf.key, d).unwrap(), want.search(leaf.key, d));
             }
+        }
+    }
+
+    /// The writers walk a tiled map (with or without a budget) and the
+    /// tile set written from it tile by tile: `.ot`, `.bt` and `.bt` as it
+    /// is come out byte for byte the untiled tree's, and the statistics of
+    /// the walk and of the `.bt` records are those of the tree and of its
+    /// maximum-likelihood, pruned form.
+    #[test]
+    fn tiled_maps_and_tile_sets_write_the_untiled_bytes_tile_by_tile(
+        scans in prop::collection::vec(scan(), 1..5),
+        depth in 1u8..=15,
+        cap in prop::option::of(prop_oneof![Just(1usize), 1usize..200_000]),
+        opts in options(),
+        stamped in any::<bool>(),
+    ) {
+        let kind = if stamped && opts.inner == InnerNodes::Update { NodeKind::Stamped } else { NodeKind::Plain };
+        let want = build_single(kind, 0.1, &scans, &opts);
+        let (mut o, mut b, mut c) = (Vec::new(), Vec::new(), Vec::new());
+        ot::write(&want, &mut o).unwrap();
+        bt::write(&want, &mut b).unwrap();
+        bt::write_const(&want, &mut c).unwrap();
+        let mut ml = want.clone();
+        ml.to_max_likelihood();
+        ml.prune();
+        let dir = tempfile::tempdir().unwrap();
+        let budget = cap.map(|bytes| MemoryBudget { bytes, dir: dir.path().join("spill") });
+        let mut map = build_tiled(kind, 0.1, depth, budget, &scans, &opts);
+        let live = map.stats().live_tiles;
+        let from_map = streamed(&map);
+        prop_assert_eq!(map.stats().live_tiles, live);
+        map.flush(&dir.path().join("m.tiles")).unwrap();
+        let from_set = streamed(&TileSet::open(&dir.path().join("m.tiles")).unwrap());
+        for (what, (so, sb, sc, full, ml_summary)) in [("map", from_map), ("set", from_set)] {
+            prop_assert!(so == o, "{} .ot", what);
+            prop_assert!(sb == b, "{} .bt", what);
+            prop_assert!(sc == c, "{} .bt as it is", what);
+            prop_assert_eq!(summary_numbers(&full), summary_of(&want), "{}", what);
+            prop_assert_eq!(summary_numbers(&ml_summary), summary_of(&ml), "{} maximum likelihood", what);
         }
     }
 

@@ -5,15 +5,18 @@ use super::common::{format_g6, progress, save_map, spinner, MapFormat};
 use super::input;
 use super::tiles;
 use anyhow::{bail, Context, Result};
+use octolinear::formats::bt::MaxLikelihood;
 use octolinear::formats::{bt, ot, write_atomically};
 use octolinear::geometry::graph2tree_transform;
 use octolinear::scan::OutOfMap;
 use octolinear::sensor::{SensorModel, SensorProbabilities};
 use octolinear::tiles::{Beyond, MemoryBudget, TaskPart, TiledMap, Window};
+use octolinear::tree::{Summarize, Tee, TreeSummary};
 use octolinear::{
     BoundsRule, InnerNodes, KeySpace, NodeKind, OccupancyTree, Point3, PointCloud, Pose6D, ScanOptions, ScanReport,
 };
-use std::path::PathBuf;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 /// Build a map from a `.graph` file (like OctoMap's graph2tree) or point cloud files.
@@ -57,7 +60,9 @@ use std::time::{Duration, Instant};
 /// manifest. --memory-cap keeps the map's tiles in memory up to that size
 /// and writes the others out (into the tile set, or beside OUT in a
 /// temporary directory), reading them back when scans reach them again:
-/// the map is the same. Tiles cannot hold colour maps, and --compress-ml
+/// the map is the same. An .ot or .bt output is then written tile by tile,
+/// never as one tree; an .olm output, laid out as a whole, merges the
+/// tiles into one tree in memory at the end. Tiles cannot hold colour maps, and --compress-ml
 /// (OctoMap's prune() stops at the first level where nothing merged, a
 /// decision over the whole map) is not offered with them.
 ///
@@ -136,7 +141,8 @@ pub struct Args {
     #[arg(long, value_name = "K/N")]
     task: Option<String>,
     /// Keep at most SIZE bytes of tiles in memory (e.g. 512M, 2G; K, M, G
-    /// are powers of 1024); the others wait on disk. The output is the same.
+    /// are powers of 1024); the others wait on disk. The output is the same
+    /// (.ot and .bt written tile by tile; .olm merged in memory).
     #[arg(long, value_name = "SIZE")]
     memory_cap: Option<String>,
     /// After each scan, forget the tiles lying wholly farther than METRES
@@ -230,6 +236,75 @@ fn sensor_model(a: &Args) -> Result<SensorModel> {
 }
 
 /// graph2tree's `outputStatistics`, as numbers.
+/// Writes the map `tree` to `output` in `format`, and returns the
+/// statistics of the full and of the maximum-likelihood tree.
+fn write_tree(mut tree: OccupancyTree, format: MapFormat, output: &Path) -> Result<(Value, Value)> {
+    // one tree throughout (no copies): peak memory is the tree, compacted
+    // in place, plus a scan's key sets
+    let phase = spinner("compacting the tree");
+    tree.compact();
+    phase.set_message("counting nodes");
+    let full = statistics(&tree);
+    if format != MapFormat::Bt {
+        phase.set_message(format!("writing {}", output.display()));
+        save_map(&tree, output)?;
+    }
+    phase.set_message("converting to maximum likelihood");
+    tree.to_max_likelihood();
+    phase.set_message("pruning");
+    tree.prune();
+    phase.set_message("compacting the tree");
+    tree.compact();
+    phase.set_message("counting nodes");
+    let ml_stats = statistics(&tree);
+    if format == MapFormat::Bt {
+        // already maximum likelihood and pruned: what writeBinary writes
+        phase.set_message(format!("writing {}", output.display()));
+        write_atomically(output, |w| bt::write_const(&tree, w))
+            .with_context(|| format!("cannot write {}", output.display()))?;
+    }
+    phase.finish_and_clear();
+    Ok((full, ml_stats))
+}
+
+/// Writes a tiled map to `output` (`.ot` or `.bt`) without merging it: one
+/// walk across the tiles writes the file and gathers the full tree's
+/// statistics, and the maximum-likelihood tree's come from its `.bt`
+/// records; they equal [`write_tree`]'s of the merged tree.
+fn write_tiled(map: &TiledMap, format: MapFormat, output: &Path) -> Result<(Value, Value)> {
+    let mut full = Summarize::new(map);
+    let mut ml = None;
+    let written = match format {
+        MapFormat::Ot => {
+            let mut records = MaxLikelihood::new(map);
+            write_atomically(output, |w| ot::write_map_observed(map, w, &mut Tee(&mut full, &mut records)))
+                .and_then(|()| records.finish(map))
+        }
+        _ => write_atomically(output, |w| {
+            ml = Some(bt::write_map_observed(map, w, &mut full)?);
+            Ok(())
+        })
+        .map(|()| ml.take().expect("written")),
+    };
+    let ml = written.with_context(|| format!("cannot write {}", output.display()))?;
+    Ok((summary_statistics(&full.finish()), summary_statistics(&ml.summary(map))))
+}
+
+/// [`statistics`] from a [`TreeSummary`]: the same numbers, with memory as
+/// the tree would hold it once compacted.
+fn summary_statistics(s: &TreeSummary) -> Value {
+    serde_json::json!({
+        "nodes": s.nodes,
+        "leaves": s.leaves,
+        "nodes_thresholded": s.at_threshold,
+        "nodes_other": s.nodes - s.at_threshold,
+        "octomap_memory_bytes": s.octomap_memory_usage(),
+        "memory_bytes": s.compacted_memory_usage(),
+        "full_grid_bytes": s.memory_full_grid(),
+        "metric_size": s.bounds.size(),
+    })
+}
+
 fn statistics(tree: &OccupancyTree) -> serde_json::Value {
     let sensor = tree.sensor();
     let thresholded = tree.nodes(0).filter(|n| sensor.is_at_threshold(n.value)).count();
@@ -672,41 +747,29 @@ pub fn run(a: Args) -> Result<()> {
     let (seconds, read_seconds) = (start.elapsed().as_secs_f64(), reading.as_secs_f64());
     tally.warn(&a, &input, announced);
     let (scans, points) = (tally.ids.len(), tally.points);
-    if let Some(mut map) = tiled {
-        if tile_output {
-            return finish_tile_set(&a, &mut map, &input, (scans, points, seconds));
+    let (full, ml_stats) = match tiled {
+        Some(mut map) if tile_output => return finish_tile_set(&a, &mut map, &input, (scans, points, seconds)),
+        Some(map) if format != MapFormat::Olm => {
+            // the tiles walked one at a time, straight into the file
+            let phase = spinner(&format!("writing {} from the tiles", a.output.display()));
+            let stats = write_tiled(&map, format, &a.output)?;
+            phase.finish_and_clear();
+            drop(map);
+            drop(spill_dir);
+            stats
         }
-        let phase = spinner("merging the tiles");
-        tree = map.merge()?;
-        phase.finish_and_clear();
-        drop(map);
-        drop(spill_dir);
-    }
-    // one tree throughout (no copies): peak memory is the tree, compacted
-    // in place, plus a scan's key sets
-    let phase = spinner("compacting the tree");
-    tree.compact();
-    phase.set_message("counting nodes");
-    let full = statistics(&tree);
-    if format != MapFormat::Bt {
-        phase.set_message(format!("writing {}", a.output.display()));
-        save_map(&tree, &a.output)?;
-    }
-    phase.set_message("converting to maximum likelihood");
-    tree.to_max_likelihood();
-    phase.set_message("pruning");
-    tree.prune();
-    phase.set_message("compacting the tree");
-    tree.compact();
-    phase.set_message("counting nodes");
-    let ml_stats = statistics(&tree);
-    if format == MapFormat::Bt {
-        // already maximum likelihood and pruned: what writeBinary writes
-        phase.set_message(format!("writing {}", a.output.display()));
-        write_atomically(&a.output, |w| bt::write_const(&tree, w))
-            .with_context(|| format!("cannot write {}", a.output.display()))?;
-    }
-    phase.finish_and_clear();
+        Some(map) => {
+            // .olm lays out the whole tree (its levels and counts ahead of
+            // the nodes): the tiles are merged first
+            let phase = spinner("merging the tiles");
+            tree = map.merge()?;
+            phase.finish_and_clear();
+            drop(map);
+            drop(spill_dir);
+            write_tree(tree, format, &a.output)?
+        }
+        None => write_tree(tree, format, &a.output)?,
+    };
     if a.json {
         let out = serde_json::json!({
             "input": input, "output": a.output, "tree_type": ot::TreeKind::of(kind).id(),

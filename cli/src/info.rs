@@ -6,7 +6,7 @@ use super::common::{
 };
 use super::tiles;
 use anyhow::{bail, Context, Result};
-use octolinear::formats::xyz;
+use octolinear::formats::{bt, ot, write_atomically, xyz};
 use octolinear::mapped::{Index, MappedMap, SectionKind, TreeKind, Variant};
 use octolinear::sensor::probability;
 use octolinear::{BoundsRule, Key, KeySpace, NodeKind, OccupancyTree, Point3};
@@ -116,8 +116,10 @@ pub fn run(a: Args) -> Result<()> {
 /// Example: octolinear convert map.ot map.bt
 #[derive(clap::Args)]
 pub struct ConvertArgs {
-    /// The map to read (.bt, .ot or .olm), or a tile set (NAME.tiles),
-    /// merged into one map with every tile verified.
+    /// The map to read (.bt, .ot or .olm), or a tile set (NAME.tiles):
+    /// written to .ot or .bt tile by tile, one tile in memory at a time;
+    /// merged into one map in memory for .olm, whose layout needs the
+    /// whole tree.
     input: PathBuf,
     #[command(flatten)]
     output: OutputArg,
@@ -141,22 +143,36 @@ pub fn convert(a: ConvertArgs) -> Result<()> {
         octolinear::mapped::write_file_with(tree, a.output.path(), opts)
             .with_context(|| format!("cannot write {}", a.output.path().display()))
     };
-    let (kind, nodes) = match load_any(&a.input)? {
-        AnyMap::Occupancy(m) => {
-            if a.ml {
-                write_olm(&m.tree, octolinear::mapped::WriteOptions::max_likelihood())?;
-            } else if a.search_blocks {
-                let search_blocks = octolinear::mapped::SearchBlocksSection::Always;
-                write_olm(&m.tree, octolinear::mapped::WriteOptions { search_blocks, ..Default::default() })?;
-            } else {
-                save_map(&m.tree, a.output.path())?;
+    let streamed = super::tiles::is_tile_set(&a.input) && format != MapFormat::Olm;
+    let (kind, nodes) = if streamed {
+        // the tiles walked one at a time, straight into the file
+        let set = super::tiles::open(&a.input)?;
+        write_atomically(a.output.path(), |w| match format {
+            MapFormat::Bt => bt::write_map(&set, w).map(|_| ()),
+            _ => ot::write_map(&set, w),
+        })
+        .with_context(|| format!("cannot write {}", a.output.path().display()))?;
+        (set.manifest().kind, set.node_count() as usize)
+    } else {
+        match load_any(&a.input)? {
+            AnyMap::Occupancy(m) => {
+                if a.ml {
+                    write_olm(&m.tree, octolinear::mapped::WriteOptions::max_likelihood())?;
+                } else if a.search_blocks {
+                    let search_blocks = octolinear::mapped::SearchBlocksSection::Always;
+                    write_olm(&m.tree, octolinear::mapped::WriteOptions { search_blocks, ..Default::default() })?;
+                } else {
+                    save_map(&m.tree, a.output.path())?;
+                }
+                (TreeKind::of(m.tree.kind()), m.tree.size())
             }
-            (TreeKind::of(m.tree.kind()), m.tree.size())
-        }
-        AnyMap::Counting(_) if a.ml => bail!("{}: a counting tree has no maximum-likelihood form", a.input.display()),
-        AnyMap::Counting(t) => {
-            save_counting(&t, a.output.path())?;
-            (TreeKind::CountingOcTree, t.size())
+            AnyMap::Counting(_) if a.ml => {
+                bail!("{}: a counting tree has no maximum-likelihood form", a.input.display())
+            }
+            AnyMap::Counting(t) => {
+                save_counting(&t, a.output.path())?;
+                (TreeKind::CountingOcTree, t.size())
+            }
         }
     };
     let what = match format {

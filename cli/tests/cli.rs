@@ -2235,3 +2235,69 @@ fn simulate_takes_an_unlimited_range() {
     assert!(far("unlimited.graph") > 0);
     fail(&["simulate", "--range", "NaN", "-o", f.p("nan.graph")], "max_range = NaN");
 }
+
+// ---- tiled maps written to .ot and .bt tile by tile ----
+
+/// `build --json` of `s.graph` to `out`, without the timings and the output name.
+fn build_statistics(f: &Fixture, out: &str, flags: &[&str]) -> serde_json::Value {
+    let mut args = vec!["build", f.p("s.graph"), "-o", out, "--json"];
+    args.extend(flags);
+    let mut v = json(&ok(&args));
+    for k in ["insert_seconds", "read_seconds", "points_per_second", "output"] {
+        v.as_object_mut().unwrap().remove(k);
+    }
+    v
+}
+
+#[test]
+fn tiled_builds_to_ot_and_bt_are_written_tile_by_tile_with_the_plain_bytes_and_statistics() {
+    let f = Fixture::new();
+    let runs =
+        [(&["--res", "0.1"][..], &[("1", "5"), ("64M", "9"), ("4K", "13")][..]), (&["--res", "0.2"], &[("1", "2")])];
+    for (flags, caps) in runs {
+        for ext in ["ot", "bt"] {
+            let plain = f.p(&format!("plain.{ext}"));
+            let want = build_statistics(&f, plain, flags);
+            let want_bytes = std::fs::read(plain).unwrap();
+            for &(cap, depth) in caps {
+                let out = f.p(&format!("c{cap}-{depth}.{ext}"));
+                let capped = [flags, &["--memory-cap", cap, "--tile-depth", depth]].concat();
+                assert_eq!(build_statistics(&f, out, &capped), want, "{flags:?} {cap} {depth} .{ext}");
+                assert!(std::fs::read(out).unwrap() == want_bytes, "{flags:?} {cap} {depth} .{ext}");
+                // tiled without a cap: every tile in memory, the same walk
+                let tiled = [flags, &["--tile-depth", depth]].concat();
+                assert_eq!(build_statistics(&f, out, &tiled), want, "{flags:?} depth {depth} .{ext}");
+                assert!(std::fs::read(out).unwrap() == want_bytes, "{flags:?} depth {depth} .{ext}");
+            }
+        }
+        // a tile set converts to .ot and .bt tile by tile, and to .olm merged
+        let set = f.p("streamed.tiles");
+        let _ = std::fs::remove_dir_all(set);
+        let mut args = vec!["build", f.p("s.graph"), "-o", set, "--tile-depth", "7"];
+        args.extend(flags);
+        ok(&args);
+        for ext in ["ot", "bt", "olm"] {
+            let plain = f.p(&format!("plain.{ext}"));
+            let mut args = vec!["build", f.p("s.graph"), "-o", plain];
+            args.extend(flags);
+            ok(&args);
+            let want = std::fs::read(plain).unwrap();
+            assert!(converted(&f, set, &format!("set.{ext}")) == want, "{flags:?} convert to .{ext}");
+        }
+    }
+}
+
+#[test]
+fn a_tile_set_with_a_missing_tile_is_an_error_naming_it_and_leaves_no_output() {
+    let f = Fixture::new();
+    let set = f.p("gone.tiles");
+    ok(&["build", f.p("s.graph"), "-o", set, "--tile-depth", "6"]);
+    let manifest = octolinear::tiles::read_manifest(&f.path("gone.tiles/manifest")).unwrap();
+    let tile = manifest.tiles.iter().max_by_key(|t| t.bytes).unwrap().id;
+    std::fs::remove_file(f.path(&format!("gone.tiles/{}", tile.file_name()))).unwrap();
+    for ext in ["ot", "bt"] {
+        let out = f.p(&format!("gone.{ext}"));
+        fail(&["convert", set, out], &format!("tile {tile}"));
+        assert!(!std::path::Path::new(out).exists(), ".{ext} written half");
+    }
+}

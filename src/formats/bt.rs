@@ -9,9 +9,10 @@
 
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, BT_FIRST_LINE};
 use super::TreeFileError;
+use crate::key::KeySpace;
 use crate::sensor::SensorModel;
-use crate::tree::{default_extra, ChildGroup, LabelFill, NodeKind, NodeRef, OccupancyTree};
-use crate::tree::{PreorderNode, PreorderVisitor};
+use crate::tree::{default_extra, ChildGroup, LabelFill, NodeKind, OccupancyTree};
+use crate::tree::{PreorderNode, PreorderSource, PreorderVisitor, Tee, TreeSummary};
 use std::convert::Infallible;
 use std::io::{self, BufRead, Write};
 use std::ops::ControlFlow;
@@ -133,56 +134,174 @@ fn read_legacy_header<R: BufRead>(r: &mut CountingReader<R>) -> Result<(u64, f64
 
 /// Writes what OctoMap's `writeBinary` writes: the tree converted to
 /// maximum likelihood and pruned. The caller's tree is left unchanged.
-pub fn write(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
-    let id = super::ot::TreeKind::of(tree.kind()).id();
-    let mut out = Vec::new();
-    let size = write_ml_data(tree, &mut out);
-    write_header(&mut w, BT_FIRST_LINE, id, size, tree.resolution())?;
-    w.write_all(&out)
+pub fn write(tree: &OccupancyTree, w: impl Write) -> io::Result<()> {
+    write_map(tree, w).map(|_| ())
+}
+
+/// Writes any map walked as one tree (a tree, a tiled map or a tile set)
+/// as [`write()`] writes that tree: the same bytes. Returns the records
+/// written, which describe the maximum-likelihood tree.
+pub fn write_map(map: &impl PreorderSource, w: impl Write) -> io::Result<MlRecordStream> {
+    write_map_observed(map, w, &mut ())
+}
+
+/// [`write_map`], showing every node of the map to `observer` as well,
+/// once (statistics gathered while writing, without a second walk).
+pub fn write_map_observed(
+    map: &impl PreorderSource,
+    mut w: impl Write,
+    observer: &mut impl PreorderVisitor<Break = Infallible>,
+) -> io::Result<MlRecordStream> {
+    let ml = if map.node_kind() == NodeKind::Stamped {
+        ml_records::<true>(map, observer)?
+    } else {
+        ml_records::<false>(map, observer)?
+    };
+    let size = usize::try_from(ml.nodes).map_err(io::Error::other)?;
+    write_header(&mut w, BT_FIRST_LINE, super::ot::TreeKind::of(map.node_kind()).id(), size, map.resolution())?;
+    w.write_all(&ml.records)?;
+    Ok(ml)
+}
+
+/// The node stream of the maximum-likelihood tree (`toMaxLikelihood()`
+/// then `prune()`), as `.bt` records, with its node count.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct MlRecordStream {
+    /// The `.bt` records, in pre-order (what follows the header).
+    pub records: Vec<u8>,
+    /// Nodes of the maximum-likelihood tree (`size()`, the header's).
+    pub nodes: u64,
+}
+
+impl MlRecordStream {
+    /// The [`TreeSummary`] of the maximum-likelihood tree the records
+    /// describe, of `map`'s kind and resolution: read from the records
+    /// alone. Its every node holds a clamping bound, so all count as at
+    /// the threshold.
+    pub fn summary(&self, map: &impl PreorderSource) -> TreeSummary {
+        let keys = KeySpace::new(map.resolution());
+        let mut s = TreeSummary::empty(map.node_kind(), map.resolution());
+        let mut records = self.records.chunks_exact(2).map(|r| u16::from_le_bytes([r[0], r[1]]));
+        if let Some(root) = records.next() {
+            s.nodes = 1;
+            if root == 0 {
+                s.add_leaf(&keys, 0, 0);
+            }
+            // (Morton prefix, depth, labels, next child) of each open node
+            let mut path = vec![(0u64, 0u8, root, 0u32)];
+            while let Some(open) = path.last_mut() {
+                if open.3 == 8 {
+                    path.pop();
+                    continue;
+                }
+                let (code, depth, pos) = (open.0 << 3 | u64::from(open.3), open.1 + 1, open.3);
+                open.3 += 1;
+                match (open.2 >> (2 * pos)) & 3 {
+                    0 => continue,
+                    3 => path.push((code, depth, records.next().unwrap_or(0), 0)),
+                    _ => s.add_leaf(&keys, code, depth),
+                }
+                s.nodes += 1;
+            }
+        }
+        s.at_threshold = s.nodes;
+        s.finish()
+    }
 }
 
 /// Appends to `out` the node stream `toMaxLikelihood()` then `prune()`
 /// would leave, without copying or changing the tree; returns the node
 /// count (`size()`) that tree would have.
+pub(crate) fn write_ml_data(tree: &OccupancyTree, out: &mut Vec<u8>) -> usize {
+    let ml = write_map(tree, io::sink()).expect("a tree's walk cannot fail");
+    out.extend_from_slice(&ml.records);
+    ml.nodes as usize
+}
+
+/// The maximum-likelihood records of `map`, from a walk that `observer`
+/// watches too (see [`MaxLikelihood`]).
+fn ml_records<const STAMPED: bool>(
+    map: &impl PreorderSource,
+    observer: &mut impl PreorderVisitor<Break = Infallible>,
+) -> io::Result<MlRecordStream> {
+    let mut records = MlRecords::<STAMPED>::new(map.sensor(), 1, records_hint(map.node_count()));
+    let ControlFlow::Continue(()) = map.visit_preorder(&mut Tee(observer, &mut records))?;
+    records.complete(map)
+}
+
+/// Gathers the records of the maximum-likelihood tree from a walk of the
+/// map, as a visitor (so that it can watch a walk that writes another
+/// format, `.ot` say), then [`Self::finish`] completes them.
 ///
 /// `prune` merges level by level from depth 15 up and stops after the
 /// first level that merged nothing. One read-only pass writes the records
 /// as if pruning went all the way up, dropping the subtrees that merge, and
 /// counts the merges per depth. That is the answer unless a level above
-/// the one where `prune` stops would merge something; then a second pass
+/// the one where `prune` stops would merge something; then a second walk
 /// writes the records with merges below that level only.
-pub(crate) fn write_ml_data(tree: &OccupancyTree, out: &mut Vec<u8>) -> usize {
-    let Some(root) = tree.root() else {
-        return tree.size();
-    };
-    let stamped = tree.kind() == NodeKind::Stamped;
-    let sensor = tree.sensor();
-    let emit = |lowest: usize, out: &mut Vec<u8>| {
-        if stamped {
-            MlRecords::<true>::write(root, sensor, lowest, out)
+pub struct MaxLikelihood(MlPass);
+
+/// The records being gathered, by whether stamps take part.
+enum MlPass {
+    Plain(MlRecords<false>),
+    Stamped(MlRecords<true>),
+}
+
+impl MaxLikelihood {
+    /// Ready for a walk of `map`.
+    pub fn new(map: &impl PreorderSource) -> Self {
+        let (sensor, hint) = (map.sensor(), records_hint(map.node_count()));
+        MaxLikelihood(if map.node_kind() == NodeKind::Stamped {
+            MlPass::Stamped(MlRecords::new(sensor, 1, hint))
         } else {
-            MlRecords::<false>::write(root, sensor, lowest, out)
-        }
-    };
-    out.reserve(records_hint(tree));
-    let start = out.len();
-    let counts = emit(1, out);
-    // as `OccupancyTree::prune`: the deepest level that merges nothing
-    // stops it; only the levels below that one merge
-    let stop = (1..16).rev().find(|&d| counts[d] == 0).unwrap_or(0);
-    let lowest = stop.max(1);
-    if counts[1..lowest].iter().any(|&c| c > 0) {
-        out.truncate(start);
-        emit(lowest, out);
+            MlPass::Plain(MlRecords::new(sensor, 1, hint))
+        })
     }
-    tree.size() - 8 * counts[lowest..].iter().sum::<usize>()
+
+    /// The records and node count of the maximum-likelihood tree, after
+    /// the walk of `map` this visitor watched (walking it again in the
+    /// rare case described above).
+    pub fn finish(self, map: &impl PreorderSource) -> io::Result<MlRecordStream> {
+        match self.0 {
+            MlPass::Plain(r) => r.complete(map),
+            MlPass::Stamped(r) => r.complete(map),
+        }
+    }
+}
+
+impl PreorderVisitor for MaxLikelihood {
+    type Break = Infallible;
+
+    #[inline(always)]
+    fn enter(&mut self, node: &PreorderNode, children: &ChildGroup<'_>) -> ControlFlow<Infallible> {
+        match &mut self.0 {
+            MlPass::Plain(r) => r.enter(node, children),
+            MlPass::Stamped(r) => r.enter(node, children),
+        }
+    }
+
+    #[inline(always)]
+    fn leaf(&mut self, node: &PreorderNode) -> ControlFlow<Infallible> {
+        match &mut self.0 {
+            MlPass::Plain(r) => r.leaf(node),
+            MlPass::Stamped(r) => r.leaf(node),
+        }
+    }
+
+    #[inline(always)]
+    fn leave(&mut self, node: &PreorderNode) -> ControlFlow<Infallible> {
+        match &mut self.0 {
+            MlPass::Plain(r) => r.leave(node),
+            MlPass::Stamped(r) => r.leave(node),
+        }
+    }
 }
 
 /// Bytes to reserve for a tree's records: a guess (two bytes per node
 /// with children, about a sixth of the nodes on the simulated maps) that
 /// saves most of the output's regrowth.
-fn records_hint(tree: &OccupancyTree) -> usize {
-    2 * (tree.size() / 6 + 1)
+fn records_hint(nodes: u64) -> usize {
+    2 * (usize::try_from(nodes).unwrap_or(usize::MAX) / 6 + 1)
 }
 
 /// The records of the tree as `toMaxLikelihood()` would leave it, read in
@@ -202,14 +321,14 @@ fn records_hint(tree: &OccupancyTree) -> usize {
 /// `pruneNode` would merge, at depth `lowest` or deeper, once every level
 /// below it is pruned), the label of a leaf of its class, its own records
 /// dropped.
-struct MlRecords<'o, const STAMPED: bool> {
+struct MlRecords<const STAMPED: bool> {
     threshold: f32,
     /// The label of a leaf of each class: 2 when its value is occupied, else 1.
     label: [u16; 2],
     /// `equal[a][b]`: whether values of classes `a` and `b` compare equal.
     equal: [[bool; 2]; 2],
     lowest: usize,
-    out: &'o mut Vec<u8>,
+    out: Vec<u8>,
     /// Merges per depth.
     counts: [usize; 16],
     /// The open record of the node at each depth of the walk's path.
@@ -233,30 +352,40 @@ struct Open {
     pending: u8,
 }
 
-impl<'o, const STAMPED: bool> MlRecords<'o, STAMPED> {
-    /// Appends the records below `root` with merges at depth `lowest` or
-    /// deeper; returns the merges per depth.
-    fn write(root: NodeRef<'_>, s: &SensorModel, lowest: usize, out: &'o mut Vec<u8>) -> [usize; 16] {
-        if !root.has_children() {
-            // a lone root: a record without children
-            out.extend_from_slice(&[0, 0]);
-            return [0; 16];
-        }
+impl<const STAMPED: bool> MlRecords<STAMPED> {
+    /// Ready for a walk, with merges at depth `lowest` or deeper and room
+    /// for about `hint` bytes of records.
+    fn new(s: &SensorModel, lowest: usize, hint: usize) -> Self {
         let value = [s.clamping_min, s.clamping_max];
         let label = value.map(|v| if s.is_occupied(v) { 2 } else { 1 });
         let equal = [0, 1].map(|a| [0, 1].map(|b| value[a] == value[b]));
-        let mut w = MlRecords::<STAMPED> {
+        MlRecords {
             threshold: s.occupancy_threshold,
             label,
             equal,
             lowest,
-            out,
+            out: Vec::with_capacity(hint),
             counts: [0; 16],
             path: [Open::default(); 16],
             stamps: [[0; 8]; 16],
-        };
-        let ControlFlow::Continue(()) = root.visit_preorder(&mut w);
-        w.counts
+        }
+    }
+
+    /// The records and node count of the maximum-likelihood tree after a
+    /// walk of `map` with merges at every depth (see [`MaxLikelihood`]).
+    fn complete(self, map: &impl PreorderSource) -> io::Result<MlRecordStream> {
+        // as `OccupancyTree::prune`: the deepest level that merges nothing
+        // stops it; only the levels below that one merge
+        let stop = (1..16).rev().find(|&d| self.counts[d] == 0).unwrap_or(0);
+        let lowest = stop.max(1);
+        let mut records = self.out;
+        if self.counts[1..lowest].iter().any(|&c| c > 0) {
+            let mut again = MlRecords::<STAMPED>::new(map.sensor(), lowest, records.len());
+            let ControlFlow::Continue(()) = map.visit_preorder(&mut again)?;
+            records = again.out;
+        }
+        let merged = 8 * self.counts[lowest..].iter().sum::<usize>() as u64;
+        Ok(MlRecordStream { records, nodes: map.node_count() - merged })
     }
 
     /// A child at `pos` of the open node at `depth` that is a leaf of
@@ -272,8 +401,17 @@ impl<'o, const STAMPED: bool> MlRecords<'o, STAMPED> {
     }
 }
 
-impl<const STAMPED: bool> PreorderVisitor for MlRecords<'_, STAMPED> {
+impl<const STAMPED: bool> PreorderVisitor for MlRecords<STAMPED> {
     type Break = Infallible;
+
+    #[inline(always)]
+    fn leaf(&mut self, node: &PreorderNode) -> ControlFlow<Infallible> {
+        if node.depth == 0 {
+            // a lone root: a record without children
+            self.out.extend_from_slice(&[0, 0]);
+        }
+        ControlFlow::Continue(())
+    }
 
     #[inline(always)]
     fn enter(&mut self, node: &PreorderNode, children: &ChildGroup<'_>) -> ControlFlow<Infallible> {
@@ -319,7 +457,7 @@ impl<const STAMPED: bool> PreorderVisitor for MlRecords<'_, STAMPED> {
     }
 }
 
-impl<const STAMPED: bool> MlRecords<'_, STAMPED> {
+impl<const STAMPED: bool> MlRecords<STAMPED> {
     /// `pruneNode`'s test on a node whose subtree the walk has left: eight
     /// leaves whose values (and stamps) all equal child 0's. `Some(class)`
     /// of the leaf it becomes.
@@ -343,39 +481,73 @@ impl<const STAMPED: bool> MlRecords<'_, STAMPED> {
 
 /// Writes the tree as it is (`writeBinaryConst`): leaves are labelled
 /// occupied or free by the occupancy threshold.
-pub fn write_const(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
-    let id = super::ot::TreeKind::of(tree.kind()).id();
-    write_header(&mut w, BT_FIRST_LINE, id, tree.size(), tree.resolution())?;
-    write_data(tree, w)
+pub fn write_const(tree: &OccupancyTree, w: impl Write) -> io::Result<()> {
+    write_const_map(tree, w)
+}
+
+/// Writes any map walked as one tree as [`write_const`] writes that tree:
+/// the same bytes.
+pub fn write_const_map(map: &impl PreorderSource, mut w: impl Write) -> io::Result<()> {
+    let id = super::ot::TreeKind::of(map.node_kind()).id();
+    let size = usize::try_from(map.node_count()).map_err(io::Error::other)?;
+    write_header(&mut w, BT_FIRST_LINE, id, size, map.resolution())?;
+    write_const_data(map, w)
 }
 
 /// Writes the binary node stream alone, without header
 /// (`writeBinaryData`): the tree as it is, like [`write_const`].
-pub(crate) fn write_data(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
-    let Some(root) = tree.root() else {
-        return Ok(());
-    };
-    let mut records = ConstRecords { sensor: tree.sensor(), out: Vec::with_capacity(records_hint(tree)) };
-    if !root.has_children() {
-        // a lone root: a record without children
-        records.out.extend_from_slice(&[0, 0]);
-    }
-    let ControlFlow::Continue(()) = root.visit_preorder(&mut records);
-    w.write_all(&records.out)
+pub(crate) fn write_data(tree: &OccupancyTree, w: impl Write) -> io::Result<()> {
+    write_const_data(tree, w)
 }
+
+/// [`write_data`] of any map.
+fn write_const_data(map: &impl PreorderSource, w: impl Write) -> io::Result<()> {
+    let hint = records_hint(map.node_count()).min(FLUSH_AT + 2);
+    let mut records = ConstRecords { sensor: map.sensor(), out: Vec::with_capacity(hint), w };
+    if let ControlFlow::Break(e) = map.visit_preorder(&mut records)? {
+        return Err(e);
+    }
+    records.w.write_all(&records.out)
+}
+
+/// Bytes of records gathered before they go to the writer.
+const FLUSH_AT: usize = 1 << 16;
 
 /// The records of the tree as it is: per node with children, children with
-/// children labelled 3, leaves 2 when occupied, else 1.
-struct ConstRecords<'s> {
+/// children labelled 3, leaves 2 when occupied, else 1; gathered in `out`
+/// and written to `w` in pieces of about [`FLUSH_AT`] bytes (no record
+/// changes once made).
+struct ConstRecords<'s, W> {
     sensor: &'s SensorModel,
     out: Vec<u8>,
+    w: W,
 }
 
-impl PreorderVisitor for ConstRecords<'_> {
-    type Break = Infallible;
+impl<W: Write> PreorderVisitor for ConstRecords<'_, W> {
+    type Break = io::Error;
 
     #[inline(always)]
-    fn enter(&mut self, _: &PreorderNode, children: &ChildGroup<'_>) -> ControlFlow<Infallible> {
+    fn leaf(&mut self, node: &PreorderNode) -> ControlFlow<io::Error> {
+        if node.depth == 0 {
+            // a lone root: a record without children
+            self.out.extend_from_slice(&[0, 0]);
+        }
+        ControlFlow::Continue(())
+    }
+
+    #[inline(always)]
+    fn leave(&mut self, _: &PreorderNode) -> ControlFlow<io::Error> {
+        if self.out.len() >= FLUSH_AT {
+            if let Err(e) = self.w.write_all(&self.out) {
+                return ControlFlow::Break(e);
+            }
+            self.out.clear();
+        }
+        ControlFlow::Continue(())
+    }
+
+    #[inline(always)]
+    fn enter(&mut self, _: &PreorderNode, children: &ChildGroup<'_>) -> ControlFlow<io::Error> {
         let (masks, values) = (children.child_masks(), children.values());
         let mut labels = 0u16;
         for (rank, pos) in children.positions() {

@@ -11,8 +11,9 @@
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, OT_FIRST_LINE};
 use super::TreeFileError;
 use crate::sensor::SensorModel;
-use crate::tree::{ChildGroup, CountingTree, NodeKind, NodeRef, OccupancyTree, PreorderBuilder};
-use crate::tree::{PreorderNode, PreorderVisitor};
+use crate::tree::{ChildGroup, CountingTree, NodeKind, OccupancyTree, PreorderBuilder};
+use crate::tree::{PreorderNode, PreorderSource, PreorderVisitor, Tee};
+use std::convert::Infallible;
 use std::io::{self, BufRead, Write};
 use std::ops::ControlFlow;
 use std::path::Path;
@@ -191,10 +192,40 @@ fn read_nodes<R: BufRead, const N: usize>(
 }
 
 /// Writes `tree` as OctoMap's `write` does, under its type's id.
-pub fn write(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
-    let kind = TreeKind::of(tree.kind());
-    write_header(&mut w, OT_FIRST_LINE, kind.id(), tree.size(), tree.resolution())?;
-    write_data(tree, w)
+pub fn write(tree: &OccupancyTree, w: impl Write) -> io::Result<()> {
+    write_map(tree, w)
+}
+
+/// Writes any map walked as one tree (a tree, a tiled map or a tile set)
+/// as [`write()`] writes that tree: the same bytes.
+pub fn write_map(map: &impl PreorderSource, w: impl Write) -> io::Result<()> {
+    write_map_observed(map, w, &mut ())
+}
+
+/// [`write_map`], showing every node of the walk to `observer` as well
+/// (statistics gathered while writing, without a second walk).
+pub fn write_map_observed(
+    map: &impl PreorderSource,
+    mut w: impl Write,
+    observer: &mut impl PreorderVisitor<Break = Infallible>,
+) -> io::Result<()> {
+    let size = usize::try_from(map.node_count()).map_err(io::Error::other)?;
+    write_header(&mut w, OT_FIRST_LINE, TreeKind::of(map.node_kind()).id(), size, map.resolution())?;
+    write_stream(map, w, observer)
+}
+
+/// The node stream of `map` alone, without header (`writeData`), each
+/// node shown to `observer` too.
+fn write_stream(
+    map: &impl PreorderSource,
+    mut w: impl Write,
+    observer: &mut impl PreorderVisitor<Break = Infallible>,
+) -> io::Result<()> {
+    if TreeKind::of(map.node_kind()) == TreeKind::ColorOcTree {
+        write_nodes(&mut w, |v| map.visit_preorder(&mut Tee(v, observer)), color_payload)
+    } else {
+        write_nodes(&mut w, |v| map.visit_preorder(&mut Tee(v, observer)), |value, _| value.to_le_bytes())
+    }
 }
 
 /// The `.ot` bytes of `tree`, for tests that compare trees.
@@ -205,18 +236,16 @@ pub(crate) fn to_bytes(tree: &OccupancyTree) -> Vec<u8> {
     out
 }
 
+/// A colour tree node's payload: log-odds, then `r, g, b`.
+fn color_payload(value: f32, extra: u32) -> [u8; 7] {
+    let [v0, v1, v2, v3] = value.to_le_bytes();
+    let [r, g, b, _] = extra.to_le_bytes();
+    [v0, v1, v2, v3, r, g, b]
+}
+
 /// Writes the node stream alone, without header (`writeData`).
-pub(crate) fn write_data(tree: &OccupancyTree, mut w: impl Write) -> io::Result<()> {
-    let Some(root) = tree.root() else { return Ok(()) };
-    if TreeKind::of(tree.kind()) == TreeKind::ColorOcTree {
-        write_nodes(root, &mut w, |value, extra| {
-            let [v0, v1, v2, v3] = value.to_le_bytes();
-            let [r, g, b, _] = extra.to_le_bytes();
-            [v0, v1, v2, v3, r, g, b]
-        })
-    } else {
-        write_nodes(root, &mut w, |value, _| value.to_le_bytes())
-    }
+pub(crate) fn write_data(tree: &OccupancyTree, w: impl Write) -> io::Result<()> {
+    write_stream(tree, w, &mut ())
 }
 
 /// Writes a counting tree (`id OcTreeBase`, `u32` counts).
@@ -228,18 +257,18 @@ pub fn write_counting(tree: &CountingTree, mut w: impl Write) -> io::Result<()> 
 /// A counting tree's node stream alone, without header.
 pub(crate) fn write_counting_data(tree: &CountingTree, mut w: impl Write) -> io::Result<()> {
     let Some(root) = tree.root() else { return Ok(()) };
-    write_nodes(root, &mut w, |_, count| count.to_le_bytes())
+    write_nodes(&mut w, |v| Ok(root.visit_preorder(v)), |_, count| count.to_le_bytes())
 }
 
-/// The pre-order node stream below `root`: each node's payload (made from
-/// its value and extra), then its child-existence byte.
-fn write_nodes<const P: usize>(
-    root: NodeRef<'_>,
-    w: &mut impl Write,
-    payload: impl Fn(f32, u32) -> [u8; P],
+/// The pre-order node stream that `walk` drives: each node's payload
+/// (made from its value and extra), then its child-existence byte.
+fn write_nodes<const P: usize, W: Write, F: Fn(f32, u32) -> [u8; P]>(
+    w: &mut W,
+    walk: impl FnOnce(&mut NodeStream<F, &mut W>) -> io::Result<ControlFlow<io::Error>>,
+    payload: F,
 ) -> io::Result<()> {
     let mut out = NodeStream { payload, out: Vec::with_capacity(FLUSH_AT + 64), w };
-    if let ControlFlow::Break(e) = root.visit_preorder(&mut out) {
+    if let ControlFlow::Break(e) = walk(&mut out)? {
         return Err(e);
     }
     out.w.write_all(&out.out)

@@ -4,10 +4,11 @@
 //! entry) and checking one.
 
 use super::error::TileError;
-use super::id::TileId;
+use super::id::{code_shift, TileId};
 use super::manifest::{Manifest, TileEntry};
 use super::top::{root_of, tile_root_node, TileRoot};
 use crate::mapped::{self, MapView, MappedMap, Variant, WriteOptions};
+use crate::morton::MortonCode;
 use crate::tree::OccupancyTree;
 use std::io::Write;
 use std::path::Path;
@@ -61,6 +62,16 @@ fn root_in_view(view: MapView<'_>, id: TileId) -> Result<TileRoot, String> {
     let found = view.search(id.key_range().0, depth).filter(|f| f.depth == depth);
     let f = found.ok_or("the tile root cannot be found")?;
     Ok(TileRoot { value: f.value, extra: f.extra, is_leaf: f.is_leaf })
+}
+
+/// The child mask of the tile root in a mapped tile file (the tile's
+/// children at depth `D + 1`, from the file's pre-order nodes).
+pub(crate) fn root_mask_in_view(view: MapView<'_>, id: TileId) -> u8 {
+    let below = id.depth() + 1;
+    let shift = code_shift(below);
+    view.nodes(below)
+        .filter(|n| n.depth == below)
+        .fold(0, |mask, n| mask | 1 << ((MortonCode::encode(n.key).0 >> shift) & 7))
 }
 
 /// Checks a mapped tile file against its manifest entry and the set's

@@ -7,14 +7,14 @@ use super::file::write_tile;
 use super::forget::Window;
 use super::id::{code_shift, TileId, MAX_TILE_DEPTH};
 use super::manifest::{Manifest, TaskPart, TileEntry, MANIFEST_FILE};
-use super::top::{push_subtree, root_of, tile_root_node, Top, TopAnswer};
+use super::top::{root_of, tile_root_node, Top, TopAnswer};
 use crate::geometry::Point3;
 use crate::key::{Key, KeySpace};
 use crate::mapped::MappedMap;
 use crate::ray::{CastOptions, CastOutcome, RayKeys};
 use crate::scan::{compute_update, ScanOptions, ScanReport, ScanUpdate};
 use crate::sensor::SensorModel;
-use crate::tree::{Clock, Found, InnerNodes, NodeKind, OccupancyTree, PreorderBuilder, TreeError, TreeKind};
+use crate::tree::{Clock, Found, InnerNodes, NodeKind, OccupancyTree, TreeError, TreeKind};
 use rayon::prelude::*;
 use std::cell::RefCell;
 use std::collections::BTreeMap;
@@ -52,7 +52,7 @@ pub struct TiledMap {
     /// The derived levels, built at the first query after a change.
     top: OnceLock<Top>,
     /// Deferred updates left inner nodes stale.
-    stale: bool,
+    pub(super) stale: bool,
     /// Only this task's tiles are updated and kept.
     task: Option<TaskPart>,
     pub(super) budget: Option<Budget>,
@@ -474,7 +474,7 @@ impl TiledMap {
     }
 
     /// The derived levels above the tiles.
-    fn top(&self) -> &Top {
+    pub(super) fn top(&self) -> &Top {
         self.top.get_or_init(|| {
             let roots = self.tiles.iter().map(|(&prefix, tile)| {
                 let root = match &tile.state {
@@ -561,35 +561,6 @@ impl TiledMap {
         TiledStats { tiles: self.tiles.len(), live_tiles: live, live_bytes, nodes }
     }
 
-    /// The single tree: the derived upper levels and every tile's subtree
-    /// (spilled tiles are read one at a time). Its bytes in any format are
-    /// those of the tree [`OccupancyTree`] builds from the same updates.
-    pub fn merge(&self) -> Result<OccupancyTree, TileError> {
-        if self.stale {
-            return Err(TileError::StaleInnerNodes);
-        }
-        let top = self.top();
-        let tiles: Vec<(u64, &Tile)> = self.tiles.iter().map(|(&p, t)| (p, t)).collect();
-        let nodes = self.stats().nodes as usize;
-        let mut builder = PreorderBuilder::with_hint(self.kind, nodes);
-        top.merge(&mut builder, &mut |i, b| {
-            let (prefix, tile) = tiles[i];
-            let id = TileId::from_prefix(self.depth, prefix);
-            match &tile.state {
-                TileState::Live { tree, .. } => push_tile(b, tree, id, self.kind),
-                TileState::Spilled(entry) => {
-                    let budget = self.budget_ref()?;
-                    let tree = budget.load(entry)?;
-                    push_tile(b, &tree, id, self.kind)
-                }
-            }
-        })?;
-        let merged = builder.finish(self.keys.resolution(), self.sensor)?;
-        let mut tree = merged.ok_or(TileError::Internal("the merged node stream is incomplete"))?;
-        tree.set_clock(self.clock);
-        Ok(tree)
-    }
-
     /// Writes the map as a tile set in `dir` (created if needed): each
     /// tile's file atomically, then, once the filesystem has them on disk,
     /// the manifest (or, for a task, its part file), atomically and
@@ -635,13 +606,6 @@ impl TiledMap {
             .map_err(|e| TileError::io(&path, e))?;
         Ok(manifest)
     }
-}
-
-/// Gives tile `id`'s subtree of `tree` to the builder.
-fn push_tile(builder: &mut PreorderBuilder, tree: &OccupancyTree, id: TileId, kind: NodeKind) -> Result<(), TileError> {
-    let root = tree.root().ok_or(TileError::Internal("a tile tree without nodes"))?;
-    let node = tile_root_node(root, id).map_err(|_| TileError::Internal("a tile tree of the wrong shape"))?;
-    push_subtree(builder, node, kind)
 }
 
 /// A rayon pool of `n` threads.

@@ -43,7 +43,7 @@
 //! # Modules
 //!
 //! * `id`: [`TileId`], tile addressing (keys, codes, metric bounds, file names);
-//! * `top`: the levels above the tiles derived from the tile roots, and the merge;
+//! * `top`: the levels above the tiles derived from the tile roots;
 //! * `map`: [`TiledMap`], updates, queries, merge and [`TiledMap::flush`];
 //! * `budget`: [`MemoryBudget`], tiles spilled to disk and read back;
 //! * `file`: a tile's `.olm` file, written, described and checked;
@@ -51,6 +51,8 @@
 //!   stamped maps), departures from OctoMap;
 //! * `manifest`: the tile set's manifest ([`Manifest`]), `formats/tiles.md`;
 //! * `set`: [`TileSet`], a tile set on disk, mapped tile by tile;
+//! * `stream`: the single tree walked in pre-order across the tiles, one
+//!   tile read at a time, for the file writers and the merge;
 //! * `query`: ray casting across tiles;
 //! * `error`: [`TileError`], the one error type.
 
@@ -63,6 +65,7 @@ mod manifest;
 mod map;
 mod query;
 mod set;
+mod stream;
 mod top;
 
 pub use budget::MemoryBudget;

@@ -4,15 +4,15 @@
 //! time a query reaches it, so a query touches only its tiles.
 
 use super::error::TileError;
-use super::file::{check_tile, load_tree, open_tile, TileCheck};
+use super::file::{check_tile, open_tile, TileCheck};
 use super::manifest::{Manifest, TaskPart, MANIFEST_FILE};
-use super::top::{push_subtree, tile_root_node, Top, TopAnswer};
+use super::top::{Top, TopAnswer};
 use crate::geometry::Point3;
 use crate::key::{Key, KeySpace};
 use crate::mapped::MappedMap;
 use crate::ray::{CastOptions, CastOutcome};
 use crate::sensor::SensorModel;
-use crate::tree::{Found, OccupancyTree, PreorderBuilder};
+use crate::tree::Found;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -153,27 +153,9 @@ impl TileSet {
         Ok(TileSetReport { tiles: self.manifest.tiles.len(), bytes, nodes: self.node_count() })
     }
 
-    /// The single tree, each tile read (and verified) in turn.
-    pub fn merge(&self) -> Result<OccupancyTree, TileError> {
-        let kind = self.manifest.node_kind();
-        let mut builder = PreorderBuilder::with_hint(kind, self.node_count() as usize);
-        self.top.merge(&mut builder, &mut |i, b| {
-            let entry = &self.manifest.tiles[i];
-            let path = self.dir.join(entry.id.file_name());
-            let map = open_tile(&self.dir, entry)?;
-            check_tile(&map, entry, &self.manifest, TileCheck::Header)
-                .and_then(|()| load_tree(&map, entry))
-                .map_err(|reason| TileError::damaged(entry.id, &path, reason))
-                .and_then(|tree| {
-                    let root = tree.root().ok_or(TileError::Internal("a loaded tile without nodes"))?;
-                    let node =
-                        tile_root_node(root, entry.id).map_err(|reason| TileError::damaged(entry.id, &path, reason))?;
-                    push_subtree(b, node, kind)
-                })
-        })?;
-        builder
-            .finish(self.manifest.resolution, self.manifest.sensor)?
-            .ok_or(TileError::Internal("the merged node stream is incomplete"))
+    /// The derived levels above the tiles.
+    pub(super) fn top(&self) -> &Top {
+        &self.top
     }
 }
 

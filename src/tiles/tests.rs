@@ -211,3 +211,55 @@ fn colour_maps_and_lazy_stamped_updates_are_refused() {
     m.update_inner_occupancy().unwrap();
     m.merge().unwrap();
 }
+
+/// Counts the nodes a walk reports and, at each, how many tiles read for
+/// the walk exist.
+struct TileCounter {
+    nodes: u64,
+    most_loaded: usize,
+}
+
+impl crate::tree::PreorderVisitor for TileCounter {
+    type Break = std::convert::Infallible;
+
+    fn enter(
+        &mut self,
+        node: &crate::tree::PreorderNode,
+        _: &crate::tree::ChildGroup<'_>,
+    ) -> std::ops::ControlFlow<Self::Break> {
+        self.leaf(node)
+    }
+
+    fn leaf(&mut self, _: &crate::tree::PreorderNode) -> std::ops::ControlFlow<Self::Break> {
+        self.nodes += 1;
+        self.most_loaded = self.most_loaded.max(super::stream::loaded::COUNT.with(|c| c.get().0));
+        std::ops::ControlFlow::Continue(())
+    }
+}
+
+#[test]
+fn a_walk_of_a_spilled_map_or_a_tile_set_holds_one_tile_read_from_disk_at_a_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let scans = test_scans();
+    let want = single(NodeKind::Plain, &scans, &ScanOptions::default());
+    let mut map = TiledMap::new(0.1, SensorModel::default(), NodeKind::Plain, 11).unwrap();
+    map.set_budget(MemoryBudget { bytes: 1, dir: dir.path().join("spill") }).unwrap();
+    for (p, o) in &scans {
+        map.insert_point_cloud(p, *o, &ScanOptions::default()).unwrap();
+    }
+    assert!(map.stats().tiles > 30, "{:?}", map.stats());
+    map.flush(&dir.path().join("set.tiles")).unwrap();
+    let set = TileSet::open(&dir.path().join("set.tiles")).unwrap();
+    let check = |what: &str, walk: &dyn Fn(&mut TileCounter) -> Result<(), TileError>| {
+        super::stream::loaded::COUNT.with(|c| c.set((0, 0)));
+        let mut counter = TileCounter { nodes: 0, most_loaded: 0 };
+        walk(&mut counter).unwrap();
+        assert_eq!(counter.nodes, want.size() as u64, "{what}");
+        // inside the tiles one tile was read, never two at once
+        assert_eq!(counter.most_loaded, 1, "{what}");
+        assert_eq!(super::stream::loaded::COUNT.with(|c| c.get()), (0, 1), "{what}");
+        assert_eq!(map.stats().live_tiles, 0, "{what}: the walk kept tiles in memory");
+    };
+    check("spilled map", &|v| map.visit_preorder(v).map(|_| ()));
+    check("tile set", &|v| set.visit_preorder(v).map(|_| ()));
+}

@@ -2,13 +2,14 @@
 //! single tree has them: each node the maximum of its children, and
 //! pruned when its eight children are leaves of one value (and, in
 //! stamped trees, one stamp). Searches that end above the tiles answer
-//! from here; [`Top::merge`] lays the single tree out in pre-order.
+//! from here; [`Top::visit`] walks the single tree in pre-order.
 
 use super::error::TileError;
 use super::id::{code_shift, TileId};
 use crate::key::{Key, TREE_DEPTH};
 use crate::morton::MortonCode;
-use crate::tree::{Found, NodeKind, NodeRef, PreorderBuilder};
+use crate::tree::{ChildGroup, Found, NodeKind, NodeRef, PreorderNode, PreorderVisitor};
+use std::ops::ControlFlow;
 
 /// A tile's root node (the node at the tile depth) as the single tree
 /// has it: what the levels above need to know of the tile.
@@ -48,11 +49,14 @@ pub(crate) enum TopAnswer {
     Tile(usize),
 }
 
+/// What walks tile `i`'s subtree for [`Top::visit`].
+pub(crate) type TileWalk<'w, V> =
+    dyn FnMut(usize, &mut V) -> Result<ControlFlow<<V as PreorderVisitor>::Break>, TileError> + 'w;
+
 /// The derived levels 0..=tile depth; level `depth` holds the tile roots.
 #[derive(Clone, Debug)]
 pub(crate) struct Top {
     depth: u8,
-    kind: NodeKind,
     levels: Vec<Vec<TopNode>>,
 }
 
@@ -97,7 +101,7 @@ impl Top {
                 n.visible = p.visible && !p.is_leaf;
             }
         }
-        Top { depth, kind, levels }
+        Top { depth, levels }
     }
 
     /// True when there is no tile (the single tree is empty).
@@ -149,44 +153,63 @@ impl Top {
         above + below
     }
 
-    /// Gives the single tree's nodes to `builder` in pre-order: the derived
-    /// nodes, and for each tile whose root is not a leaf (nor below a
-    /// pruned node), `tile(i, builder)`, which gives the tile's nodes from
-    /// its root down.
-    pub(crate) fn merge(
+    /// Walks the single tree in pre-order, telling `visitor` of the
+    /// derived nodes, and, for each tile whose root is not a leaf (nor
+    /// below a pruned node), calling `tile(i, visitor)`, which walks the
+    /// tile's subtree from its root (at the tile depth). The children
+    /// groups of the nodes just above the tiles need the tile roots' child
+    /// masks: `tile_mask(i)`.
+    pub(crate) fn visit<V: PreorderVisitor>(
         &self,
-        builder: &mut PreorderBuilder,
-        tile: &mut dyn FnMut(usize, &mut PreorderBuilder) -> Result<(), TileError>,
-    ) -> Result<(), TileError> {
+        visitor: &mut V,
+        tile_mask: &dyn Fn(usize) -> Result<u8, TileError>,
+        tile: &mut TileWalk<'_, V>,
+    ) -> Result<ControlFlow<V::Break>, TileError> {
         if self.is_empty() {
-            return Ok(());
+            return Ok(ControlFlow::Continue(()));
         }
-        self.merge_node(0, 0, builder, tile)
+        self.visit_node(0, 0, visitor, tile_mask, tile)
     }
 
-    fn merge_node(
+    fn visit_node<V: PreorderVisitor>(
         &self,
         d: u8,
         i: usize,
-        builder: &mut PreorderBuilder,
-        tile: &mut dyn FnMut(usize, &mut PreorderBuilder) -> Result<(), TileError>,
-    ) -> Result<(), TileError> {
+        visitor: &mut V,
+        tile_mask: &dyn Fn(usize) -> Result<u8, TileError>,
+        tile: &mut TileWalk<'_, V>,
+    ) -> Result<ControlFlow<V::Break>, TileError> {
         let n = self.levels[usize::from(d)][i];
-        let extra = (self.kind == NodeKind::Stamped).then_some(n.extra);
         if n.is_leaf {
-            return push(builder, n.value, extra, 0);
+            return Ok(visitor.leaf(&PreorderNode { depth: d, child_mask: 0, value: n.value, extra: n.extra }));
         }
         if d == self.depth {
-            return tile(i, builder);
+            return tile(i, visitor);
         }
-        push(builder, n.value, extra, n.mask)?;
         let below = &self.levels[usize::from(d) + 1];
         let start = below.partition_point(|c| c.prefix >> 3 < n.prefix);
         let end = start + below[start..].partition_point(|c| c.prefix >> 3 == n.prefix);
-        for j in start..end {
-            self.merge_node(d + 1, j, builder, tile)?;
+        let (mut masks, mut values, mut extras) = ([0u8; 8], [0f32; 8], [0u32; 8]);
+        for (k, (j, c)) in (start..end).zip(&below[start..end]).enumerate() {
+            masks[k] = match (c.is_leaf, d + 1 == self.depth) {
+                (true, _) => 0,
+                (false, true) => tile_mask(j)?,
+                (false, false) => c.mask,
+            };
+            (values[k], extras[k]) = (c.value, c.extra);
         }
-        Ok(())
+        let k = end - start;
+        let group = ChildGroup::new(n.mask, &masks[..k], &values[..k], &extras[..k]);
+        let node = PreorderNode { depth: d, child_mask: n.mask, value: n.value, extra: n.extra };
+        if let ControlFlow::Break(b) = visitor.enter(&node, &group) {
+            return Ok(ControlFlow::Break(b));
+        }
+        for j in start..end {
+            if let ControlFlow::Break(b) = self.visit_node(d + 1, j, visitor, tile_mask, tile)? {
+                return Ok(ControlFlow::Break(b));
+            }
+        }
+        Ok(visitor.leave(&node))
     }
 }
 
@@ -212,21 +235,6 @@ fn derive(prefix: u64, children: &[TopNode], kind: NodeKind) -> TopNode {
     // the latest of its children's stamps (the clock never runs back)
     let (value, extra) = if is_leaf { (first.value, first.extra) } else { (max, if stamped { max_extra } else { 0 }) };
     TopNode { prefix, value, extra, mask: if is_leaf { 0 } else { mask }, is_leaf, visible: true }
-}
-
-/// Gives one node to the builder.
-fn push(builder: &mut PreorderBuilder, value: f32, extra: Option<u32>, mask: u8) -> Result<(), TileError> {
-    builder.push_with_extra(value, extra, mask, 0).map_err(|_| TileError::Internal("a merged node lies below depth 16"))
-}
-
-/// Gives `node` and everything below it to the builder in pre-order.
-pub(crate) fn push_subtree(builder: &mut PreorderBuilder, node: NodeRef<'_>, kind: NodeKind) -> Result<(), TileError> {
-    let extra = (kind == NodeKind::Stamped).then(|| node.extra());
-    push(builder, node.value(), extra, node.child_mask())?;
-    for (_, child) in node.children() {
-        push_subtree(builder, child, kind)?;
-    }
-    Ok(())
 }
 
 /// The root node of tile `id` in a tree holding that tile alone: the end

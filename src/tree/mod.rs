@@ -39,11 +39,12 @@ pub use kind::{NodeKind, TreeKind};
 use level_index::LevelSlot;
 #[cfg(test)]
 pub(crate) use parallel::MIN_CODES as PARALLEL_MIN_CODES;
-pub use preorder::{ChildGroup, NodeRef, PreorderBuilder, PreorderNode, PreorderVisitor, TooDeep};
+pub use preorder::{ChildGroup, NodeRef, PreorderBuilder, PreorderNode, PreorderSource, PreorderVisitor, Tee, TooDeep};
 use search::descend_to;
 pub(crate) use search::search_target;
 pub(crate) use search_index::LevelTables;
 pub use search_index::SearchIndex;
+pub use stats::{Summarize, TreeSummary};
 pub(crate) use trunk::{Trunks, GRID_NODES_PER_CELL};
 
 use crate::geometry::Point3;

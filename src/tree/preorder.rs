@@ -6,6 +6,8 @@
 use super::arena::{in_leaf_pool, leaf_index, Parts, PreorderFill};
 use super::{default_extra, NodeArena, NodeId, NodeKind, OccupancyTree, TreeError};
 use crate::sensor::SensorModel;
+use std::convert::Infallible;
+use std::io;
 use std::ops::ControlFlow;
 
 /// A read-only cursor on a node, for structural walks (writers of other
@@ -120,6 +122,14 @@ const NO_MASKS: [u8; 8] = [0; 8];
 const NO_EXTRAS: [u32; 8] = [0; 8];
 
 impl<'a> ChildGroup<'a> {
+    /// A group of `masks.len()` children (one per bit of `mask`, side by
+    /// side in child order), for walks that do not come from an arena.
+    pub(crate) fn new(mask: u8, masks: &'a [u8], values: &'a [f32], extras: &'a [u32]) -> Self {
+        debug_assert!(masks.len() == mask.count_ones() as usize && values.len() == masks.len());
+        debug_assert_eq!(extras.len(), masks.len());
+        ChildGroup { mask, masks, values, extras }
+    }
+
     /// The parent's child mask: bit `i` set when child `i` exists.
     #[inline(always)]
     pub fn mask(&self) -> u8 {
@@ -191,6 +201,90 @@ pub trait PreorderVisitor {
     #[inline(always)]
     fn leave(&mut self, _node: &PreorderNode) -> ControlFlow<Self::Break> {
         ControlFlow::Continue(())
+    }
+}
+
+/// Nothing to see: the visitor of a walk that only one side needs
+/// (see [`Tee`]).
+impl PreorderVisitor for () {
+    type Break = Infallible;
+
+    #[inline(always)]
+    fn enter(&mut self, _: &PreorderNode, _: &ChildGroup<'_>) -> ControlFlow<Infallible> {
+        ControlFlow::Continue(())
+    }
+}
+
+/// Two visitors driven by one walk, so that a writer and whatever watches
+/// the same nodes (statistics, a second format) read the tree once:
+/// `.1` sees each node first and never stops the walk; `.0` may.
+pub struct Tee<'a, A, B>(pub &'a mut A, pub &'a mut B);
+
+impl<A: PreorderVisitor, B: PreorderVisitor<Break = Infallible>> PreorderVisitor for Tee<'_, A, B> {
+    type Break = A::Break;
+
+    #[inline(always)]
+    fn enter(&mut self, node: &PreorderNode, children: &ChildGroup<'_>) -> ControlFlow<A::Break> {
+        let ControlFlow::Continue(()) = self.1.enter(node, children);
+        self.0.enter(node, children)
+    }
+
+    #[inline(always)]
+    fn leaf(&mut self, node: &PreorderNode) -> ControlFlow<A::Break> {
+        let ControlFlow::Continue(()) = self.1.leaf(node);
+        self.0.leaf(node)
+    }
+
+    #[inline(always)]
+    fn leave(&mut self, node: &PreorderNode) -> ControlFlow<A::Break> {
+        let ControlFlow::Continue(()) = self.1.leave(node);
+        self.0.leave(node)
+    }
+}
+
+/// A map the file writers can walk as one tree, in pre-order from the
+/// root: an [`OccupancyTree`], or a tiled map whose tiles are read one at a
+/// time (`crate::tiles`), so that a map larger than memory is written
+/// without ever being one tree.
+pub trait PreorderSource {
+    /// What the nodes carry besides occupancy.
+    fn node_kind(&self) -> NodeKind;
+
+    /// Voxel edge length, metres.
+    fn resolution(&self) -> f64;
+
+    /// The sensor model (the `.bt` writers label leaves by it).
+    fn sensor(&self) -> &SensorModel;
+
+    /// Nodes of the tree (`size()`), known before the walk.
+    fn node_count(&self) -> u64;
+
+    /// Walks the whole tree from the root as [`NodeRef::visit_preorder`]
+    /// does (nothing for an empty tree). `Err` when the walk cannot read a
+    /// part of the map (a tile file); the visitor's own stop is the
+    /// `ControlFlow`.
+    fn visit_preorder<V: PreorderVisitor>(&self, visitor: &mut V) -> io::Result<ControlFlow<V::Break>>;
+}
+
+impl PreorderSource for OccupancyTree {
+    fn node_kind(&self) -> NodeKind {
+        self.kind()
+    }
+
+    fn resolution(&self) -> f64 {
+        OccupancyTree::resolution(self)
+    }
+
+    fn sensor(&self) -> &SensorModel {
+        OccupancyTree::sensor(self)
+    }
+
+    fn node_count(&self) -> u64 {
+        self.size() as u64
+    }
+
+    fn visit_preorder<V: PreorderVisitor>(&self, visitor: &mut V) -> io::Result<ControlFlow<V::Break>> {
+        Ok(self.root().map_or(ControlFlow::Continue(()), |root| root.visit_preorder(visitor)))
     }
 }
 

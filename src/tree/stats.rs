@@ -1,9 +1,15 @@
 //! Whole-tree walks and what they measure: iteration entry points,
 //! node counts, metric bounds and memory usage.
 
-use super::{ArenaUsage, Bounds, BoundsRule, KeyBox, NodeArena, NodeId, NodeIter, NodeRef, OccupancyTree};
-use super::{OCTOMAP_TREE_OBJECT_BYTES, ROOT};
-use crate::key::Key;
+use super::{default_extra, ArenaUsage, Bounds, BoundsRule, KeyBox, NodeArena, NodeId, NodeIter, NodeKind, NodeRef};
+use super::{
+    ChildGroup, OccupancyTree, PreorderNode, PreorderSource, PreorderVisitor, OCTOMAP_TREE_OBJECT_BYTES, ROOT,
+};
+use crate::key::{Key, KeySpace};
+use crate::morton::MortonCode;
+use crate::sensor::SensorModel;
+use std::convert::Infallible;
+use std::ops::ControlFlow;
 
 impl OccupancyTree {
     /// A cursor on the root, `None` for an empty tree.
@@ -174,6 +180,145 @@ fn count_leaves(a: &NodeArena, n: NodeId) -> usize {
     }
     let first = a.first_child(n);
     (0..crate::arch::count_ones(a.mask(n))).map(|i| count_leaves(a, first + i)).sum()
+}
+
+/// What `graph2tree` reports of a tree (node and leaf counts, nodes at a
+/// clamping bound, metric bounds, memory), gathered from a pre-order walk
+/// ([`Summarize`]) or from `.bt` records, so that a map written without
+/// ever being one tree (a tiled map) reports what that tree would.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TreeSummary {
+    /// Nodes (`size()`).
+    pub nodes: u64,
+    /// Leaves (`getNumLeafNodes`).
+    pub leaves: u64,
+    /// Nodes whose value is at a clamping bound (`isNodeAtThreshold`).
+    pub at_threshold: u64,
+    /// Leaves at depth 16 (voxels).
+    pub voxels: u64,
+    /// [`OccupancyTree::bounds`] by [`BoundsRule::CenterHalfSize`].
+    pub bounds: Bounds,
+    kind: NodeKind,
+    resolution: f64,
+}
+
+impl TreeSummary {
+    /// An empty tree's, to be filled leaf by leaf.
+    pub(crate) fn empty(kind: NodeKind, resolution: f64) -> Self {
+        let bounds = Bounds { min: [f64::MAX; 3], max: [-f64::MAX; 3] };
+        TreeSummary { nodes: 0, leaves: 0, at_threshold: 0, voxels: 0, bounds, kind, resolution }
+    }
+
+    /// Counts the leaf of Morton prefix `code` at `depth` into the leaf
+    /// counts and bounds (the node itself is counted by the caller).
+    pub(crate) fn add_leaf(&mut self, keys: &KeySpace, code: u64, depth: u8) {
+        self.leaves += 1;
+        self.voxels += u64::from(depth == 16);
+        let key = MortonCode(code << (3 * u32::from(16 - depth))).decode();
+        let half = keys.node_size(depth) / 2.0;
+        for axis in 0..3 {
+            let c = keys.key_to_coord_at_depth(key.0[axis], depth);
+            self.bounds.min[axis] = self.bounds.min[axis].min(c - half);
+            self.bounds.max[axis] = self.bounds.max[axis].max(c + half);
+        }
+    }
+
+    /// Done: an empty tree's bounds are zero, as [`OccupancyTree::bounds`] says.
+    pub(crate) fn finish(mut self) -> Self {
+        if self.nodes == 0 {
+            self.bounds = Bounds { min: [0.0; 3], max: [0.0; 3] };
+        }
+        self
+    }
+
+    /// [`OccupancyTree::octomap_memory_usage`] of the tree.
+    pub fn octomap_memory_usage(&self) -> usize {
+        let inner = (self.nodes - self.leaves) as usize;
+        OCTOMAP_TREE_OBJECT_BYTES + 16 * self.nodes as usize + 64 * inner
+    }
+
+    /// [`OccupancyTree::memory_usage`] of the tree once compacted
+    /// ([`OccupancyTree::compact`]): voxels in the leaf pool, every other
+    /// node in the inner pool, no spare slots.
+    pub fn compacted_memory_usage(&self) -> usize {
+        let object = std::mem::size_of::<OccupancyTree>();
+        if self.nodes == 0 {
+            return object;
+        }
+        let extra = if default_extra(self.kind).is_some() { 4 } else { 0 };
+        let inner = (self.nodes - self.voxels) as usize;
+        object + inner * (4 + 1 + 4 + extra) + self.voxels as usize * (4 + extra)
+    }
+
+    /// [`OccupancyTree::memory_full_grid`] by [`BoundsRule::CenterHalfSize`].
+    pub fn memory_full_grid(&self) -> u64 {
+        if self.nodes == 0 {
+            return 0;
+        }
+        let (s, r) = (self.bounds.size(), self.resolution);
+        ((s[0] / r) * (s[1] / r) * (s[2] / r) * 4.0) as u64
+    }
+}
+
+/// Gathers a [`TreeSummary`] as a visitor of a pre-order walk (alone, or
+/// beside a writer through [`super::Tee`]).
+pub struct Summarize {
+    keys: KeySpace,
+    sensor: SensorModel,
+    summary: TreeSummary,
+    /// Morton prefix of the open node at each depth of the walk's path.
+    codes: [u64; 17],
+    /// Children of the open node at each depth not reached yet.
+    rest: [u8; 17],
+}
+
+impl Summarize {
+    /// Ready for a walk of `map` from its root.
+    pub fn new(map: &impl PreorderSource) -> Self {
+        Summarize {
+            keys: KeySpace::new(map.resolution()),
+            sensor: *map.sensor(),
+            summary: TreeSummary::empty(map.node_kind(), map.resolution()),
+            codes: [0; 17],
+            rest: [0; 17],
+        }
+    }
+
+    /// The summary of the nodes walked.
+    pub fn finish(self) -> TreeSummary {
+        self.summary.finish()
+    }
+
+    /// Counts `node` and returns its Morton prefix.
+    #[inline(always)]
+    fn reach(&mut self, node: &PreorderNode) -> u64 {
+        self.summary.nodes += 1;
+        self.summary.at_threshold += u64::from(self.sensor.is_at_threshold(node.value));
+        let d = usize::from(node.depth);
+        if d == 0 {
+            return 0;
+        }
+        let pos = self.rest[d - 1].trailing_zeros();
+        self.rest[d - 1] &= self.rest[d - 1].wrapping_sub(1);
+        self.codes[d - 1] << 3 | u64::from(pos)
+    }
+}
+
+impl PreorderVisitor for Summarize {
+    type Break = Infallible;
+
+    fn enter(&mut self, node: &PreorderNode, children: &ChildGroup<'_>) -> ControlFlow<Infallible> {
+        let code = self.reach(node);
+        let d = usize::from(node.depth);
+        (self.codes[d], self.rest[d]) = (code, children.mask());
+        ControlFlow::Continue(())
+    }
+
+    fn leaf(&mut self, node: &PreorderNode) -> ControlFlow<Infallible> {
+        let code = self.reach(node);
+        self.summary.add_leaf(&self.keys, code, node.depth);
+        ControlFlow::Continue(())
+    }
 }
 
 #[cfg(test)]
