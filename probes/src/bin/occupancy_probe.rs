@@ -1,5 +1,6 @@
-//! Random point queries on a map built from a `.graph` file, as the Python
-//! package's `occupancy()` runs them: `occupancy_probe FILE RES [N]`.
+//! Scan insertion (scan by scan) and random point queries on a map built
+//! from a `.graph` file, as the Python package runs them:
+//! `occupancy_probe FILE RES [N]`.
 //! Prints the fastest of several passes in ns per query. A probe for
 //! comparing versions, not a benchmark of record.
 
@@ -32,9 +33,27 @@ fn main() {
     let res: f64 = args.get(1).map_or(0.1, |s| s.parse().expect("RES"));
     let n: usize = args.get(2).map_or(1_000_000, |s| s.parse().expect("N"));
     let g = graph::read_file(path).expect("graph");
+    let scans: Vec<_> = g.nodes.iter().map(|n| n.graph2tree()).collect();
+    // insertion scan by scan (as the Python package's insertPointCloud),
+    // wall time, fastest of 9, one thread and two
+    for threads in [1, 2] {
+        let opts = ScanOptions { threads: Some(threads), ..ScanOptions::default() };
+        let t = (0..9)
+            .map(|_| {
+                let start = std::time::Instant::now();
+                let mut tree = OccupancyTree::new(res).expect("tree");
+                for (cloud, origin) in &scans {
+                    tree.insert_point_cloud(&cloud.points, *origin, &opts).expect("scan");
+                }
+                black_box(&tree);
+                start.elapsed().as_secs_f64()
+            })
+            .fold(f64::MAX, f64::min);
+        println!("insert_point_cloud, {} scans, {threads} thread(s): {:.1} ms (wall)", scans.len(), t * 1e3);
+    }
     let mut tree = OccupancyTree::new(res).expect("tree");
-    for (cloud, origin) in g.nodes.iter().map(|n| n.graph2tree()) {
-        tree.insert_point_cloud(&cloud.points, origin, &ScanOptions::default()).expect("scan");
+    for (cloud, origin) in &scans {
+        tree.insert_point_cloud(&cloud.points, *origin, &ScanOptions::default()).expect("scan");
     }
     let b = tree.bounds(octolinear::BoundsRule::CenterHalfSize);
     // uniform in the bounds, a fixed xorshift
