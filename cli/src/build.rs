@@ -235,7 +235,6 @@ fn sensor_model(a: &Args) -> Result<SensorModel> {
     Ok(SensorModel::from_probabilities(&SensorProbabilities { ..p })?)
 }
 
-/// graph2tree's `outputStatistics`, as numbers.
 /// Writes the map `tree` to `output` in `format`, and returns the
 /// statistics of the full and of the maximum-likelihood tree.
 fn write_tree(mut tree: OccupancyTree, format: MapFormat, output: &Path) -> Result<(Value, Value)> {
@@ -305,6 +304,7 @@ fn summary_statistics(s: &TreeSummary) -> Value {
     })
 }
 
+/// graph2tree's `outputStatistics`, as numbers.
 fn statistics(tree: &OccupancyTree) -> serde_json::Value {
     let sensor = tree.sensor();
     let thresholded = tree.nodes(0).filter(|n| sensor.is_at_threshold(n.value)).count();
