@@ -332,7 +332,7 @@ impl TiledMap {
         Ok(())
     }
 
-    /// Applies a scan's update (from [`compute_update`]), each tile's share
+    /// Applies a scan's update (from [`OccupancyTree::compute_update`]), each tile's share
     /// to its tree; completes `report` with the update counts.
     pub fn apply_update(
         &mut self,
