@@ -12,9 +12,7 @@ use octolinear::scan::OutOfMap;
 use octolinear::sensor::{SensorModel, SensorProbabilities};
 use octolinear::tiles::{Beyond, MemoryBudget, TaskPart, TiledMap, Window};
 use octolinear::tree::{Summarize, Tee, TreeSummary};
-use octolinear::{
-    BoundsRule, InnerNodes, KeySpace, NodeKind, OccupancyTree, Point3, PointCloud, Pose6D, ScanOptions, ScanReport,
-};
+use octolinear::{InnerNodes, KeySpace, NodeKind, OccupancyTree, Point3, PointCloud, Pose6D, ScanOptions, ScanReport};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -304,40 +302,36 @@ fn summary_statistics(s: &TreeSummary) -> Value {
     })
 }
 
-/// graph2tree's `outputStatistics`, as numbers.
+/// graph2tree's `outputStatistics`, as numbers, from one walk of the tree
+/// (the node count is OctoMap's `size()` counter, as graph2tree prints it).
 fn statistics(tree: &OccupancyTree) -> serde_json::Value {
-    let sensor = tree.sensor();
-    let thresholded = tree.nodes(0).filter(|n| sensor.is_at_threshold(n.value)).count();
-    let size = tree.bounds(BoundsRule::CenterHalfSize).size();
-    serde_json::json!({
-        "nodes": tree.size(),
-        "leaves": tree.num_leaves(),
-        "nodes_thresholded": thresholded,
-        "nodes_other": tree.size() - thresholded,
-        "octomap_memory_bytes": tree.octomap_memory_usage(),
-        "memory_bytes": tree.memory_usage(),
-        "full_grid_bytes": tree.memory_full_grid(BoundsRule::CenterHalfSize),
-        "metric_size": size,
-    })
+    let mut summary = Summarize::new(tree);
+    let walked = octolinear::tree::PreorderSource::visit_preorder(tree, &mut summary);
+    debug_assert!(walked.is_ok(), "a tree's walk cannot fail");
+    let mut stats = summary_statistics(&summary.finish());
+    stats["nodes"] = tree.size().into();
+    stats["nodes_other"] = (tree.size() as u64 - stats["nodes_thresholded"].as_u64().unwrap_or(0)).into();
+    stats
 }
 
+/// Prints statistics as graph2tree does (numbers at C++ stream precision 6,
+/// without the binary noise of the full double), with the bytes
+/// octolinear holds beside OctoMap's figure.
 fn print_statistics(title: &str, s: &serde_json::Value) {
-    let mb = |b: &serde_json::Value| b.as_f64().unwrap_or(0.0) / (1024.0 * 1024.0);
+    let mb = |b: &serde_json::Value| format_g6(b.as_f64().unwrap_or(0.0) / (1024.0 * 1024.0));
     println!("{title}\n===========================");
     println!(
         "Tree size: {} nodes ({} leafs). {} nodes thresholded, {} other",
         s["nodes"], s["leaves"], s["nodes_thresholded"], s["nodes_other"]
     );
     println!(
-        "Memory: {} byte ({:.6} MB) as OctoMap counts it; octolinear holds {} byte ({:.6} MB)",
+        "Memory: {} byte ({} MB) as OctoMap counts it; octolinear holds {} byte ({} MB)",
         s["octomap_memory_bytes"],
         mb(&s["octomap_memory_bytes"]),
         s["memory_bytes"],
         mb(&s["memory_bytes"])
     );
-    println!("Full grid: {} byte ({:.6} MB)", s["full_grid_bytes"], mb(&s["full_grid_bytes"]));
-    // as graph2tree prints it (C++ stream precision 6), without the
-    // binary noise of the full double
+    println!("Full grid: {} byte ({} MB)", s["full_grid_bytes"], mb(&s["full_grid_bytes"]));
     let m: Vec<String> = (0..3).map(|i| format_g6(s["metric_size"][i].as_f64().unwrap_or(f64::NAN))).collect();
     println!("Size: {} x {} x {} m^3\n", m[0], m[1], m[2]);
 }

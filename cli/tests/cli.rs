@@ -2301,3 +2301,28 @@ fn a_tile_set_with_a_missing_tile_is_an_error_naming_it_and_leaves_no_output() {
         assert!(!std::path::Path::new(out).exists(), ".{ext} written half");
     }
 }
+
+// ---- build statistics against graph2tree
+
+/// The statistics `build` prints are graph2tree's: node, leaf and
+/// threshold counts, OctoMap's memory figure, the full grid and the size,
+/// for the full and the maximum-likelihood tree, at two resolutions.
+#[test]
+fn build_prints_the_statistics_graph2tree_prints() {
+    let Some(g2t) = tool("graph2tree") else { return };
+    let f = Fixture::new();
+    let pick = |out: &str| -> Vec<String> {
+        out.lines()
+            .filter(|l| ["Tree size:", "Memory:", "Full grid:", "Size:"].iter().any(|p| l.starts_with(p)))
+            // ours adds what octolinear holds after OctoMap's memory figure
+            .map(|l| l.split(" as OctoMap counts it").next().unwrap().to_string())
+            .collect()
+    };
+    for res in ["0.1", "0.05"] {
+        let theirs = oracle(&g2t, &["-i", f.p("s.graph"), "-o", f.p("g.bt"), "-res", res]);
+        let ours = ok(&["build", f.p("s.graph"), "-o", f.p("o.bt"), "--res", res]);
+        let (theirs, ours) = (pick(&theirs), pick(&ours));
+        assert_eq!(theirs.len(), 8, "graph2tree printed {theirs:?}");
+        assert_eq!(ours, theirs, "res {res}");
+    }
+}
