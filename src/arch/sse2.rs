@@ -47,6 +47,13 @@ pub(crate) fn key_and_octant(resolution_factor: f64, p: Point3) -> Option<(Key, 
         };
         (ok, octant as usize, _mm_cvtsi128_si64(floor(xy)) as u64, _mm_cvtsi128_si32(floor(z)) as u32)
     };
+    key_of_floors(ok, octant, xy, z)
+}
+
+/// The key from the floors of the three products (`xy` the x and y lanes
+/// of a 64-bit register, `z` the z lane), when `ok`, with its octant.
+#[inline(always)]
+pub(super) fn key_of_floors(ok: bool, octant: usize, xy: u64, z: u32) -> Option<(Key, usize)> {
     let c = KEY_CENTER;
     ok.then(|| {
         let key = Key([

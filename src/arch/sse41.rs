@@ -28,13 +28,5 @@ pub(crate) fn key_and_octant(resolution_factor: f64, p: Point3) -> Option<(Key, 
         let (xy, z) = (_mm_cvttpd_epi32(xy), _mm_cvttpd_epi32(z));
         (ok, octant as usize, _mm_cvtsi128_si64(xy) as u64, _mm_cvtsi128_si32(z) as u32)
     };
-    let c = KEY_CENTER;
-    ok.then(|| {
-        let key = Key([
-            (xy as u32).wrapping_add(c) as u16,
-            ((xy >> 32) as u32).wrapping_add(c) as u16,
-            z.wrapping_add(c) as u16,
-        ]);
-        (key, octant)
-    })
+    super::sse2::key_of_floors(ok, octant, xy, z)
 }

@@ -8,6 +8,7 @@
 //! not stored: readers restore the clamping bounds. See `formats/bt.md`.
 
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, BT_FIRST_LINE};
+use super::pieces::Pieces;
 use super::TreeFileError;
 use crate::key::KeySpace;
 use crate::sensor::SensorModel;
@@ -502,25 +503,20 @@ pub(crate) fn write_data(tree: &OccupancyTree, w: impl Write) -> io::Result<()> 
 
 /// [`write_data`] of any map.
 fn write_const_data(map: &impl PreorderSource, w: impl Write) -> io::Result<()> {
-    let hint = records_hint(map.node_count()).min(FLUSH_AT + 2);
-    let mut records = ConstRecords { sensor: map.sensor(), out: Vec::with_capacity(hint), w };
+    let hint = records_hint(map.node_count());
+    let mut records = ConstRecords { sensor: map.sensor(), out: Pieces::new(w, hint) };
     if let ControlFlow::Break(e) = map.visit_preorder(&mut records)? {
         return Err(e);
     }
-    records.w.write_all(&records.out)
+    records.out.finish()
 }
 
-/// Bytes of records gathered before they go to the writer.
-const FLUSH_AT: usize = 1 << 16;
-
 /// The records of the tree as it is: per node with children, children with
-/// children labelled 3, leaves 2 when occupied, else 1; gathered in `out`
-/// and written to `w` in pieces of about [`FLUSH_AT`] bytes (no record
-/// changes once made).
+/// children labelled 3, leaves 2 when occupied, else 1; written in pieces
+/// (no record changes once made).
 struct ConstRecords<'s, W> {
     sensor: &'s SensorModel,
-    out: Vec<u8>,
-    w: W,
+    out: Pieces<W>,
 }
 
 impl<W: Write> PreorderVisitor for ConstRecords<'_, W> {
@@ -530,20 +526,14 @@ impl<W: Write> PreorderVisitor for ConstRecords<'_, W> {
     fn leaf(&mut self, node: &PreorderNode) -> ControlFlow<io::Error> {
         if node.depth == 0 {
             // a lone root: a record without children
-            self.out.extend_from_slice(&[0, 0]);
+            self.out.bytes.extend_from_slice(&[0, 0]);
         }
         ControlFlow::Continue(())
     }
 
     #[inline(always)]
     fn leave(&mut self, _: &PreorderNode) -> ControlFlow<io::Error> {
-        if self.out.len() >= FLUSH_AT {
-            if let Err(e) = self.w.write_all(&self.out) {
-                return ControlFlow::Break(e);
-            }
-            self.out.clear();
-        }
-        ControlFlow::Continue(())
+        self.out.flush_if_full()
     }
 
     #[inline(always)]
@@ -560,7 +550,7 @@ impl<W: Write> PreorderVisitor for ConstRecords<'_, W> {
             };
             labels |= label << (2 * pos);
         }
-        self.out.extend_from_slice(&labels.to_le_bytes());
+        self.out.bytes.extend_from_slice(&labels.to_le_bytes());
         ControlFlow::Continue(())
     }
 }

@@ -11,6 +11,7 @@ mod header;
 pub mod log;
 pub mod ot;
 pub mod pcd;
+mod pieces;
 pub mod ply;
 pub mod ros;
 mod scalar;

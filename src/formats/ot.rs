@@ -9,6 +9,7 @@
 //! whose id is `OcTreeBase`, a little-endian `u32` count. See `formats/ot.md`.
 
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, OT_FIRST_LINE};
+use super::pieces::Pieces;
 use super::TreeFileError;
 use crate::sensor::SensorModel;
 use crate::tree::{ChildGroup, CountingTree, NodeKind, OccupancyTree, PreorderBuilder};
@@ -267,29 +268,25 @@ fn write_nodes<const P: usize, W: Write, F: Fn(f32, u32) -> [u8; P]>(
     walk: impl FnOnce(&mut NodeStream<F, &mut W>) -> io::Result<ControlFlow<io::Error>>,
     payload: F,
 ) -> io::Result<()> {
-    let mut out = NodeStream { payload, out: Vec::with_capacity(FLUSH_AT + 64), w };
+    let mut out = NodeStream { payload, out: Pieces::new(w, usize::MAX) };
     if let ControlFlow::Break(e) = walk(&mut out)? {
         return Err(e);
     }
-    out.w.write_all(&out.out)
+    out.out.finish()
 }
 
-/// Bytes gathered before they go to the writer.
-const FLUSH_AT: usize = 1 << 16;
-
-/// The `.ot` records of the nodes a pre-order walk visits, gathered in
-/// `out` and written to `w` in pieces of about [`FLUSH_AT`] bytes.
+/// The `.ot` records of the nodes a pre-order walk visits, written in
+/// pieces.
 struct NodeStream<F, W> {
     payload: F,
-    out: Vec<u8>,
-    w: W,
+    out: Pieces<W>,
 }
 
 impl<const P: usize, F: Fn(f32, u32) -> [u8; P], W: Write> NodeStream<F, W> {
     #[inline(always)]
     fn record(&mut self, node: &PreorderNode) {
-        self.out.extend_from_slice(&(self.payload)(node.value, node.extra));
-        self.out.push(node.child_mask);
+        self.out.bytes.extend_from_slice(&(self.payload)(node.value, node.extra));
+        self.out.bytes.push(node.child_mask);
     }
 }
 
@@ -310,13 +307,7 @@ impl<const P: usize, F: Fn(f32, u32) -> [u8; P], W: Write> PreorderVisitor for N
 
     #[inline(always)]
     fn leave(&mut self, _: &PreorderNode) -> ControlFlow<io::Error> {
-        if self.out.len() >= FLUSH_AT {
-            if let Err(e) = self.w.write_all(&self.out) {
-                return ControlFlow::Break(e);
-            }
-            self.out.clear();
-        }
-        ControlFlow::Continue(())
+        self.out.flush_if_full()
     }
 }
 
