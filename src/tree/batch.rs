@@ -225,19 +225,8 @@ impl<S: NodeStore> Batch<'_, S> {
         }
         if let Some(changes) = self.changes.as_deref_mut() {
             let key = crate::morton::MortonCode(code).decode();
-            if created {
-                changes.insert(key, true);
-            } else if self.sensor.is_occupied(before) != self.sensor.is_occupied(after) {
-                match changes.get(&key) {
-                    None => {
-                        changes.insert(key, false);
-                    }
-                    Some(false) => {
-                        changes.remove(&key);
-                    }
-                    Some(true) => {}
-                }
-            }
+            let (was, is) = (self.sensor.is_occupied(before), self.sensor.is_occupied(after));
+            super::changes::record_change(changes, key, created, was, is);
         }
         true
     }

@@ -29,3 +29,23 @@ impl OccupancyTree {
         }
     }
 }
+
+/// Records that the voxel at `key` was updated: `created`, or its
+/// occupancy went from `was` to `is` (`changedKeys`' bookkeeping: a flip
+/// back removes the entry; a created voxel stays created).
+#[inline]
+pub(super) fn record_change(changes: &mut HashMap<Key, bool>, key: Key, created: bool, was: bool, is: bool) {
+    if created {
+        changes.insert(key, true);
+    } else if was != is {
+        match changes.get(&key) {
+            None => {
+                changes.insert(key, false);
+            }
+            Some(false) => {
+                changes.remove(&key);
+            }
+            Some(true) => {}
+        }
+    }
+}

@@ -82,19 +82,8 @@ impl OccupancyTree {
             arena.set_extra(node, rules.now);
         }
         if let Some(changes) = self.changes.as_mut() {
-            if created {
-                changes.insert(key, true);
-            } else if self.sensor.is_occupied(before) != self.sensor.is_occupied(after) {
-                match changes.get(&key) {
-                    None => {
-                        changes.insert(key, false);
-                    }
-                    Some(false) => {
-                        changes.remove(&key);
-                    }
-                    Some(true) => {}
-                }
-            }
+            let (was, is) = (self.sensor.is_occupied(before), self.sensor.is_occupied(after));
+            super::changes::record_change(changes, key, created, was, is);
         }
         if inner == InnerNodes::Defer {
             return after;
