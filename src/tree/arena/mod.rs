@@ -812,6 +812,16 @@ mod tests {
     }
 
     /// Extends a chain of child 0s from `n` at `depth` down to `to`.
+    #[test]
+    fn a_small_arena_reserves_little_and_a_large_one_grows_by_an_eighth() {
+        // a path to one voxel: 16 inner slots, 1 leaf
+        let mut a = NodeArena::with_root(0.0);
+        chain(&mut a, 16, 0);
+        assert!(a.usage().bytes_reserved < 512, "{:?}", a.usage());
+        assert_eq!(growth(16, 9), 16);
+        assert_eq!(growth(1 << 20, 9), 1 << 17);
+    }
+
     fn chain_below(a: &mut NodeArena, mut n: NodeId, depth: u8, to: u8) -> NodeId {
         for d in depth..to {
             n = a.insert_child(n, 0, 0.0, d);
