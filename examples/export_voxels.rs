@@ -19,7 +19,6 @@
 
 use octolinear::formats::{read_map_file, write_atomically, xyz::format_f32};
 use octolinear::sensor::probability;
-
 use std::io::Write;
 use std::path::Path;
 
