@@ -22,9 +22,8 @@
 //! The first voxel of the path whose cube holds an obstacle is reported,
 //! with the obstacle nearest to it.
 
-use octolinear::formats::{bt, ot, xyz};
-use octolinear::{mapped, Key, OccupancyTree, Point3};
-use std::path::Path;
+use octolinear::formats::{read_map_file, xyz};
+use octolinear::{Key, OccupancyTree, Point3};
 
 type Error = Box<dyn std::error::Error>;
 
@@ -66,7 +65,7 @@ fn main() -> Result<(), Error> {
         _ => return Err("usage: collision_check [--margin M] [--unknown-is-obstacle] [MAP WAYPOINTS.xyz]".into()),
     };
 
-    let tree = read_map(Path::new(&map_file))?;
+    let tree = read_map_file(&map_file).map_err(|e| e.to_string())?;
     let waypoints = xyz::read_file(&path_file).map_err(|e| format!("{path_file}: {e}"))?.points;
     if waypoints.len() < 2 {
         return Err(format!("{path_file}: a path needs at least two waypoints").into());
@@ -158,19 +157,4 @@ fn nearest_obstacle(tree: &OccupancyTree, center: Key, reach: i32, unknown_is_ob
         }
     }
     nearest.map(|(_, key, unknown)| (key, unknown))
-}
-
-/// A map file, by its extension: `.bt`, `.ot` or `.olm` (checked whole,
-/// then loaded into memory).
-fn read_map(path: &Path) -> Result<OccupancyTree, Error> {
-    let name = path.display();
-    Ok(match path.extension().and_then(|e| e.to_str()) {
-        Some("bt") => bt::read_file(path).map_err(|e| format!("{name}: {e}"))?,
-        Some("ot") => ot::read_file(path)
-            .map_err(|e| format!("{name}: {e}"))?
-            .into_occupancy()
-            .ok_or_else(|| format!("{name}: the map holds hit counts, not occupancy"))?,
-        Some("olm") => mapped::read_file(path).map_err(|e| format!("{name}: {e}"))?,
-        _ => return Err(format!("{name}: the map's name must end in .bt, .ot or .olm").into()),
-    })
 }

@@ -17,9 +17,8 @@
 //! vertex (every PLY reader gets the points from it, and CloudCompare shows
 //! the other two as scalar fields).
 
-use octolinear::formats::{bt, ot, write_atomically, xyz::format_f32};
+use octolinear::formats::{read_map_file, write_atomically, xyz::format_f32};
 use octolinear::sensor::probability;
-use octolinear::{mapped, OccupancyTree};
 use std::io::Write;
 use std::path::Path;
 
@@ -38,7 +37,7 @@ fn main() -> Result<(), Error> {
         Some("ply") => true,
         _ => return Err(format!("{output}: the output's name must end in .csv or .ply").into()),
     };
-    let tree = read_map(Path::new(input))?;
+    let tree = read_map_file(input).map_err(|e| e.to_string())?;
 
     // every leaf (depth 0: down to the finest level) that is occupied: its
     // log-odds value is above the sensor model's occupancy threshold
@@ -72,19 +71,4 @@ fn main() -> Result<(), Error> {
     .map_err(|e| format!("{output}: {e}"))?;
     println!("{} occupied voxels of {input} written to {output}", occupied.len());
     Ok(())
-}
-
-/// A map file, by its extension: `.bt`, `.ot` or `.olm` (checked whole,
-/// then loaded into memory).
-fn read_map(path: &Path) -> Result<OccupancyTree, Error> {
-    let name = path.display();
-    Ok(match path.extension().and_then(|e| e.to_str()) {
-        Some("bt") => bt::read_file(path).map_err(|e| format!("{name}: {e}"))?,
-        Some("ot") => ot::read_file(path)
-            .map_err(|e| format!("{name}: {e}"))?
-            .into_occupancy()
-            .ok_or_else(|| format!("{name}: the map holds hit counts, not occupancy"))?,
-        Some("olm") => mapped::read_file(path).map_err(|e| format!("{name}: {e}"))?,
-        _ => return Err(format!("{name}: the map's name must end in .bt, .ot or .olm").into()),
-    })
 }

@@ -9,6 +9,7 @@ pub mod bt;
 pub mod graph;
 mod header;
 pub mod log;
+mod map_file;
 pub mod ot;
 pub mod pcd;
 mod pieces;
@@ -19,6 +20,7 @@ pub mod xyz;
 
 pub use atomic::write_atomically;
 pub use header::{format_double, Header};
+pub use map_file::{read_map_file, MapFileError};
 pub use scalar::ColoredCloud;
 
 use std::io;

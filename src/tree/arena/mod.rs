@@ -105,6 +105,15 @@ pub struct ArenaUsage {
     pub bytes_reserved: usize,
 }
 
+/// Slots to reserve when a pool of `len` slots needs `needed` more: double
+/// a small pool (up to 1024 slots), so that the many small trees of a
+/// finely tiled map hold a few hundred bytes each rather than kilobytes;
+/// grow a large one by an eighth, since large reallocations are remapped in
+/// place by the allocator and peak memory stays low.
+fn growth(len: usize, needed: usize) -> usize {
+    needed.max(len / 8).max(len.min(1024)).max(16)
+}
+
 impl NodeArena {
     /// An arena holding only a root (id 0) with the given value.
     #[cfg(test)]
@@ -318,10 +327,8 @@ impl NodeArena {
     fn push_run_growing(&mut self, len: usize) -> NodeId {
         let start = self.values.len();
         assert!(start + len < LEAF_POOL as usize, "node arena exceeds 2^31 inner slots");
-        // grow by an eighth rather than doubling: large reallocations are
-        // remapped in place by the allocator, and peak memory stays low; keep
-        // room for eight more slots, which the fast path appends
-        let more = (len + 8).max(start / 8).max(1024);
+        // keep room for eight more slots, which the fast path appends
+        let more = growth(start, len + 8);
         if start + len + 8 > self.values.capacity() {
             self.values.reserve_exact(more);
             self.masks.reserve_exact(more);
@@ -359,13 +366,13 @@ impl NodeArena {
         LEAF_POOL | start as NodeId
     }
 
-    /// Makes room for `len` more leaf slots, growing by an eighth.
+    /// Makes room for `len` more leaf slots (see [`growth`]).
     #[cold]
     #[inline(never)]
     fn grow_leaves(&mut self, len: usize) {
         let start = self.leaf_values.len();
         assert!(start + len < LEAF_POOL as usize, "node arena exceeds 2^31 leaf slots");
-        let more = len.max(start / 8).max(1024);
+        let more = growth(start, len);
         self.leaf_values.reserve_exact(more);
         if self.default_extra.is_some() {
             self.leaf_extras.reserve_exact(more);
@@ -805,6 +812,16 @@ mod tests {
     }
 
     /// Extends a chain of child 0s from `n` at `depth` down to `to`.
+    #[test]
+    fn a_small_arena_reserves_little_and_a_large_one_grows_by_an_eighth() {
+        // a path to one voxel: 16 inner slots, 1 leaf
+        let mut a = NodeArena::with_root(0.0);
+        chain(&mut a, 16, 0);
+        assert!(a.usage().bytes_reserved < 512, "{:?}", a.usage());
+        assert_eq!(growth(16, 9), 16);
+        assert_eq!(growth(1 << 20, 9), 1 << 17);
+    }
+
     fn chain_below(a: &mut NodeArena, mut n: NodeId, depth: u8, to: u8) -> NodeId {
         for d in depth..to {
             n = a.insert_child(n, 0, 0.0, d);
