@@ -811,7 +811,6 @@ mod tests {
         assert_eq!(d.usage().live_slots, 1);
     }
 
-    /// Extends a chain of child 0s from `n` at `depth` down to `to`.
     #[test]
     fn a_small_arena_reserves_little_and_a_large_one_grows_by_an_eighth() {
         // a path to one voxel: 16 inner slots, 1 leaf
@@ -822,6 +821,7 @@ mod tests {
         assert_eq!(growth(1 << 20, 9), 1 << 17);
     }
 
+    /// Extends a chain of child 0s from `n` at `depth` down to `to`.
     fn chain_below(a: &mut NodeArena, mut n: NodeId, depth: u8, to: u8) -> NodeId {
         for d in depth..to {
             n = a.insert_child(n, 0, 0.0, d);
