@@ -3,8 +3,10 @@
 
 use super::block_set::BlockSet;
 use super::key_set::KeySet;
-use super::region::{CodeRegion, CODE_SPACE};
+use super::region::{CodeRegion, RayStop, CODE_SPACE};
 use super::{OutOfMap, ScanError, ScanOptions, ScanReport};
+#[cfg(target_arch = "x86_64")]
+use crate::arch::avx512::RayLimits;
 use crate::geometry::Point3;
 use crate::key::{Key, KeySpace};
 use crate::morton::MortonCode;
@@ -14,16 +16,17 @@ use std::ops::Range;
 
 /// What one worker collects: the free and the occupied voxels whose
 /// Morton codes lie in `recorded` (every code unless the update is
-/// restricted to a range).
+/// restricted to a range, whose rays' walks then end at `stop`).
 pub(super) struct Casting {
     free: BlockSet,
     occupied: BlockSet,
     recorded: Range<u64>,
+    stop: Option<RayStop>,
 }
 
 impl Default for Casting {
     fn default() -> Self {
-        Casting::recording(0..u64::MAX)
+        Casting::recording(0..u64::MAX, None)
     }
 }
 
@@ -34,9 +37,10 @@ fn in_range(range: &Range<u64>, code: u64) -> bool {
 }
 
 impl Casting {
-    /// A worker keeping only the codes in `recorded`.
-    fn recording(recorded: Range<u64>) -> Self {
-        Casting { free: BlockSet::default(), occupied: BlockSet::default(), recorded }
+    /// A worker keeping only the codes in `recorded`, its walks ended at
+    /// `stop`.
+    fn recording(recorded: Range<u64>, stop: Option<RayStop>) -> Self {
+        Casting { free: BlockSet::default(), occupied: BlockSet::default(), recorded, stop }
     }
 
     /// Adds a free voxel, if recorded.
@@ -99,7 +103,7 @@ impl Casting {
         };
         #[cfg(target_arch = "x86_64")]
         if let Some(avx512) = crate::arch::avx512::Avx512::detect() {
-            let Casting { free, occupied, recorded } = self;
+            let Casting { free, occupied, recorded, stop } = self;
             let max_range = opts.max_range.unwrap_or(-1.0);
             let everything = recorded.start == 0 && recorded.end == u64::MAX;
             let mut kept = Vec::new();
@@ -118,7 +122,9 @@ impl Casting {
                     free.insert_all(&kept)
                 }
             };
-            if avx512.cast_fan(fan, keys, points, max_range, occupied, free) {
+            let stop_at = |dir| stop.as_ref().map_or(f64::INFINITY, |s| s.length(dir));
+            let limits = RayLimits { max_range, stop: stop.as_ref().map(|_| &stop_at as _) };
+            if avx512.cast_fan(fan, keys, points, limits, occupied, free) {
                 self.insert_free(fan.origin_code());
             }
             return;
@@ -196,7 +202,12 @@ impl Casting {
         for &p in points.take(RayQueue::CAPACITY) {
             let (within, end) = cut_to_range(p, origin, opts);
             let Some(end_code) = self.end_voxel(keys, end, within) else { continue };
-            if let Some(ray) = fan.ray(end, end_code) {
+            if let Some(mut ray) = fan.ray(end, end_code) {
+                if let Some(stop) = &self.stop {
+                    let d = end - origin;
+                    let norm = d.norm();
+                    ray.length = ray.length.min(stop.length([d.x, d.y, d.z].map(|v| f64::from(v) / norm)));
+                }
                 ready.push(ray);
             }
         }
@@ -391,64 +402,69 @@ pub(crate) fn compute_update_in(
     }
     let mut points = if clean { points } else { &cleaned[..] };
     let reaching: Vec<Point3>;
-    if codes.start > 0 || codes.end < CODE_SPACE {
+    let restricted = codes.start > 0 || codes.end < CODE_SPACE;
+    if restricted {
         let region = CodeRegion::new(keys, &codes);
         reaching =
             points.iter().copied().filter(|&p| region.may_touch(origin, cut_to_range(p, origin, opts).1)).collect();
         points = &reaching;
     }
 
+    let stop = restricted.then(|| RayStop::new(keys, &codes, origin));
     let fan = RayFan::new(keys, origin).ok();
-    let run = || cast_scan(keys, points, fan.as_ref(), origin, opts, &codes);
+    let cast = Cast { keys, fan: fan.as_ref(), origin, opts, codes: &codes, stop: stop.as_ref() };
+    let run = || cast.scan(points);
     let update = match opts.threads {
-        Some(1) => cast_serial(keys, points, fan.as_ref(), origin, opts, &codes),
+        Some(1) => cast.serial(points),
         None => run(),
         Some(n) => thread_pool(n)?.install(run),
     };
     Ok((update, report))
 }
 
-fn cast_serial(
-    keys: &KeySpace,
-    points: &[Point3],
-    fan: Option<&RayFan>,
+/// What every worker casting one scan shares.
+struct Cast<'a> {
+    keys: &'a KeySpace,
+    fan: Option<&'a RayFan>,
     origin: Point3,
-    opts: &ScanOptions,
-    codes: &Range<u64>,
-) -> ScanUpdate {
-    let mut c = Casting::recording(codes.clone());
-    c.cast_all(keys, fan, points, origin, opts);
-    c.into_update()
+    opts: &'a ScanOptions,
+    /// The codes recorded.
+    codes: &'a Range<u64>,
+    /// Where walks end, for an update restricted to `codes`.
+    stop: Option<&'a RayStop>,
 }
 
-fn cast_scan(
-    keys: &KeySpace,
-    points: &[Point3],
-    fan: Option<&RayFan>,
-    origin: Point3,
-    opts: &ScanOptions,
-    codes: &Range<u64>,
-) -> ScanUpdate {
-    let threads = rayon::current_num_threads();
-    if threads == 1 {
-        return cast_serial(keys, points, fan, origin, opts, codes);
+impl Cast<'_> {
+    /// One worker casting every ray of `points`.
+    fn serial(&self, points: &[Point3]) -> ScanUpdate {
+        let mut c = Casting::recording(self.codes.clone(), self.stop.cloned());
+        c.cast_all(self.keys, self.fan, points, self.origin, self.opts);
+        c.into_update()
     }
-    let chunk = points.len().div_ceil(2 * threads).max(512);
-    let parts: Vec<(Vec<u64>, Vec<u64>)> = points
-        .par_chunks(chunk)
-        .fold(
-            || Casting::recording(codes.clone()),
-            |mut acc, chunk| {
-                acc.cast_all(keys, fan, chunk, origin, opts);
-                acc
-            },
-        )
-        .map(|c| c.finish())
-        .collect();
-    let (free, occupied): (Vec<_>, Vec<_>) = parts.into_iter().unzip();
-    let (mut free, occupied) = rayon::join(|| merge_sorted(free), || merge_sorted(occupied));
-    dedup_except(&mut free, &occupied);
-    ScanUpdate { free, occupied }
+
+    /// The points shared by the current rayon pool's threads.
+    fn scan(&self, points: &[Point3]) -> ScanUpdate {
+        let threads = rayon::current_num_threads();
+        if threads == 1 {
+            return self.serial(points);
+        }
+        let chunk = points.len().div_ceil(2 * threads).max(512);
+        let parts: Vec<(Vec<u64>, Vec<u64>)> = points
+            .par_chunks(chunk)
+            .fold(
+                || Casting::recording(self.codes.clone(), self.stop.cloned()),
+                |mut acc, chunk| {
+                    acc.cast_all(self.keys, self.fan, chunk, self.origin, self.opts);
+                    acc
+                },
+            )
+            .map(|c| c.finish())
+            .collect();
+        let (free, occupied): (Vec<_>, Vec<_>) = parts.into_iter().unzip();
+        let (mut free, occupied) = rayon::join(|| merge_sorted(free), || merge_sorted(occupied));
+        dedup_except(&mut free, &occupied);
+        ScanUpdate { free, occupied }
+    }
 }
 
 /// The free and occupied voxels of one scan as Morton codes, each list
@@ -577,8 +593,9 @@ mod tests {
         }
     }
 
-    /// The pairwise walk (processors without AVX-512) records only the
-    /// codes in the range, as the vector walk does.
+    /// The pairwise walk (processors without AVX-512), its walks ended
+    /// where they leave the range, records the codes in the range, as the
+    /// vector walk does.
     #[test]
     fn the_pairwise_walk_records_only_the_range() {
         let keys = KeySpace::new(0.1);
@@ -589,7 +606,7 @@ mod tests {
             whole.cast_all_pairs(&keys, &fan, &points, origin, &opts);
             let whole = whole.into_update();
             for range in partitions()[2].windows(2).map(|w| w[0]..w[1]) {
-                let mut part = Casting::recording(range.clone());
+                let mut part = Casting::recording(range.clone(), Some(RayStop::new(&keys, &range, origin)));
                 part.cast_all_pairs(&keys, &fan, &points, origin, &opts);
                 let inside = |codes: &[u64]| codes.iter().copied().filter(|c| range.contains(c)).collect::<Vec<_>>();
                 let part = part.into_update();

@@ -61,6 +61,69 @@ impl CodeRegion {
     }
 }
 
+/// Where the rays of a scan leave a range of Morton codes for good: a
+/// cover of the range by at most [`RayStop::COVER`] aligned cubes (grown
+/// by a voxel), and the rays' common origin. A cube is convex, so once a
+/// ray has left every cube it met it never comes back: the voxels it walks
+/// after that lie outside the range, and the walk can stop there.
+#[derive(Clone)]
+pub(crate) struct RayStop {
+    origin: [f64; 3],
+    cover: Vec<MetricBox>,
+    /// Added to the last exit: more than a voxel's diagonal, for the
+    /// rounding of the walk's distances and of the direction.
+    margin: f64,
+}
+
+impl RayStop {
+    /// Most cubes in the cover.
+    const COVER: u64 = 16;
+
+    /// The stop for rays from `origin` in `keys`' map and the range `codes`.
+    pub(crate) fn new(keys: &KeySpace, codes: &Range<u64>, origin: Point3) -> Self {
+        let res = keys.resolution();
+        let (start, last) = (codes.start, codes.end.min(CODE_SPACE) - 1);
+        // the finest level of aligned blocks at which a few cover the range
+        let level = (0..=u32::from(TREE_DEPTH))
+            .find(|&l| (last >> (3 * l)) - (start >> (3 * l)) < Self::COVER)
+            .unwrap_or(u32::from(TREE_DEPTH));
+        let edge = f64::from(1u32 << level);
+        let cover = ((start >> (3 * level))..=(last >> (3 * level)))
+            .map(|block| {
+                let low = MortonCode(block << (3 * level)).decode().0;
+                let min = low.map(|k| (f64::from(k) - f64::from(KEY_CENTER) - 1.0) * res);
+                let max = low.map(|k| (f64::from(k) - f64::from(KEY_CENTER) + edge + 1.0) * res);
+                (min, max)
+            })
+            .collect();
+        RayStop { origin: [origin.x, origin.y, origin.z].map(f64::from), cover, margin: 4.0 * res }
+    }
+
+    /// The distance (metres along the unit direction `dir` from the origin)
+    /// beyond which the ray meets no cube of the cover: a walk can end there.
+    pub(crate) fn length(&self, dir: [f64; 3]) -> f64 {
+        let mut last = f64::NEG_INFINITY;
+        for (min, max) in &self.cover {
+            let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+            for i in 0..3 {
+                if dir[i] == 0.0 {
+                    if self.origin[i] < min[i] || self.origin[i] > max[i] {
+                        t1 = f64::NEG_INFINITY;
+                    }
+                    continue;
+                }
+                let (ta, tb) = ((min[i] - self.origin[i]) / dir[i], (max[i] - self.origin[i]) / dir[i]);
+                t0 = t0.max(ta.min(tb));
+                t1 = t1.min(ta.max(tb));
+            }
+            if t0 <= t1 {
+                last = last.max(t1);
+            }
+        }
+        last + self.margin
+    }
+}
+
 /// The slab test: whether the segment from `a` to `b` meets the box.
 #[inline]
 fn segment_meets_box(a: Point3, b: Point3, (min, max): &MetricBox) -> bool {
