@@ -4,13 +4,14 @@
 //! tasks by default). Plans the tasks (`TileWork`), then per task times the
 //! scans' casting restricted to the task's range (`compute_update_in`)
 //! and the tiled map's insertion of the task (casting and applying), each
-//! on one thread, in thread CPU time, against the whole map's; REPS=n gives
+//! on one thread, in thread CPU time, against the whole map's and against
+//! the same task under the hash split (which casts every ray); REPS=n gives
 //! the fastest of n runs. A probe, not a benchmark of record.
 
 #[path = "../../../benches/common/mod.rs"]
 mod common;
 
-use octolinear::tiles::{TileWork, TiledMap};
+use octolinear::tiles::{TaskPart, TileWork, TiledMap};
 use octolinear::{NodeKind, OccupancyTree, ScanOptions, SensorModel};
 use std::ops::Range;
 
@@ -39,11 +40,11 @@ fn main() {
             }
         })
     };
-    let insert = |task: Option<u32>| {
+    let insert = |task: Option<TaskPart>| {
         best_of(reps, || {
             let mut map = TiledMap::new(res, SensorModel::default(), NodeKind::Plain, depth).expect("map");
-            if let Some(k) = task {
-                map.set_task(plan.task(k).expect("task"));
+            if let Some(task) = task {
+                map.set_task(task);
             }
             for (points, origin) in &scans {
                 map.insert_point_cloud(points, *origin, &one).expect("scan");
@@ -51,21 +52,26 @@ fn main() {
         })
     };
     let (whole_cast, whole_insert) = (cast(0..u64::MAX), insert(None));
-    println!("| part | estimated work | casting (ms) | casting vs whole | insertion (ms) | insertion vs whole |");
-    println!("| --- | ---: | ---: | ---: | ---: | ---: |");
-    println!("| whole map | 100% | {:.0} | 100% | {:.0} | 100% |", whole_cast * 1e3, whole_insert * 1e3);
+    println!(
+        "| part | estimated work | casting (ms) | casting vs whole | insertion (ms) | insertion vs whole | \
+         hash split task's insertion vs whole |"
+    );
+    println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: |");
+    println!("| whole map | 100% | {:.0} | 100% | {:.0} | 100% | |", whole_cast * 1e3, whole_insert * 1e3);
     for (k, t) in plan.tasks.iter().enumerate() {
         let c = cast((t.prefixes.start << shift)..(t.prefixes.end << shift));
-        let i = insert(Some(k as u32));
+        let i = insert(Some(plan.task(k as u32).expect("task")));
+        let hashed = insert(Some(TaskPart::hashed(k as u32, tasks)));
         println!(
-            "| task {k}/{tasks} (prefixes {}..{}) | {:.0}% | {:.0} | {:.0}% | {:.0} | {:.0}% |",
+            "| task {k}/{tasks} (prefixes {}..{}) | {:.0}% | {:.0} | {:.0}% | {:.0} | {:.0}% | {:.0}% |",
             t.prefixes.start,
             t.prefixes.end,
             100.0 * t.work as f64 / total.max(1) as f64,
             c * 1e3,
             100.0 * c / whole_cast,
             i * 1e3,
-            100.0 * i / whole_insert
+            100.0 * i / whole_insert,
+            100.0 * hashed / whole_insert
         );
     }
 }
