@@ -403,6 +403,10 @@ pub(crate) fn compute_update_in(
     let mut points = if clean { points } else { &cleaned[..] };
     let reaching: Vec<Point3>;
     let restricted = codes.start > 0 || codes.end < CODE_SPACE;
+    if codes.start >= codes.end.min(CODE_SPACE) {
+        // no voxel of the map in the range
+        return Ok((ScanUpdate::default(), report));
+    }
     if restricted {
         let region = CodeRegion::new(keys, &codes);
         reaching =
@@ -588,6 +592,9 @@ mod tests {
                         joined.occupied.extend(part.occupied);
                     }
                     assert!(joined == whole, "{cuts:x?} {threads:?} {max_range:?}");
+                }
+                for empty in [5..5, CODE_SPACE..u64::MAX] {
+                    assert!(compute_update_in(&keys, points, *origin, &opts, empty).unwrap().0.is_empty());
                 }
             }
         }
