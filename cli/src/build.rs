@@ -55,13 +55,14 @@ use std::time::{Duration, Instant};
 /// file each, and a manifest. `octolinear convert NAME.tiles OUT` gives the
 /// bytes a plain build to OUT gives. --task K/N builds only some tiles so
 /// that N processes can share the work: with --plan PLAN (from `octolinear
-/// plan`) task K builds a range of tiles of about an N-th of the work and
-/// casts only the rays reaching it; without, tiles are shared by a hash
-/// and each task casts every scan. Once all have finished, `octolinear
-/// tiles manifest NAME.tiles` writes the manifest. --memory-cap keeps the map's tiles in memory up to that size
-/// and writes the others out (into the tile set, or beside OUT in a
-/// temporary directory), reading them back when scans reach them again:
-/// the map is the same. An .ot or .bt output is then written tile by tile,
+/// plan`) task K builds a range of tiles of about an N-th of the estimated
+/// work and casts only the rays reaching it; without, tiles are shared by
+/// a hash and each task casts every scan. Once all have finished, `octolinear
+/// tiles manifest NAME.tiles` writes the manifest. --memory-cap keeps the
+/// map's tiles in memory up to that size and writes the others out (into
+/// the tile set, or beside OUT in a temporary directory), reading them
+/// back when scans reach them again: the map is the same. An .ot or .bt
+/// output is then written tile by tile,
 /// never as one tree; an .olm output, laid out as a whole, merges the
 /// tiles into one tree in memory at the end. Tiles cannot hold colour maps, and --compress-ml
 /// (OctoMap's prune() stops at the first level where nothing merged, a

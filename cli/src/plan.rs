@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 /// sampled), then cuts the tiles, in Morton order, into --tasks contiguous
 /// ranges of about equal work. Each task of a `build --task K/N --plan
 /// PLAN` builds the tiles of its range and casts only the rays that reach
-/// them, so N machines each cast about a share of the rays. The ranges
+/// them, so the rays are shared rather than each cast N times. The ranges
 /// cover every tile, whatever the estimate saw, so the map is exact; the
 /// estimate only decides how even the tasks are. Give the options of the
 /// build that change the rays (--res, --max-range, --discretize,
