@@ -3,6 +3,7 @@
 
 use super::common::{format_g6, progress, save_map, spinner, MapFormat};
 use super::input;
+use super::plan;
 use super::tiles;
 use anyhow::{bail, Context, Result};
 use octolinear::formats::bt::MaxLikelihood;
@@ -53,12 +54,15 @@ use std::time::{Duration, Instant};
 /// set (formats/tiles.md): the octree's subtrees at --tile-depth, one .olm
 /// file each, and a manifest. `octolinear convert NAME.tiles OUT` gives the
 /// bytes a plain build to OUT gives. --task K/N builds only some tiles so
-/// that N processes can share the work (each casts every scan); once all
-/// have finished, `octolinear tiles manifest NAME.tiles` writes the
-/// manifest. --memory-cap keeps the map's tiles in memory up to that size
-/// and writes the others out (into the tile set, or beside OUT in a
-/// temporary directory), reading them back when scans reach them again:
-/// the map is the same. An .ot or .bt output is then written tile by tile,
+/// that N processes can share the work: with --plan PLAN (from `octolinear
+/// plan`) task K builds a range of tiles of about an N-th of the estimated
+/// work and casts only the rays reaching it; without, tiles are shared by
+/// a hash and each task casts every scan. Once all have finished, `octolinear
+/// tiles manifest NAME.tiles` writes the manifest. --memory-cap keeps the
+/// map's tiles in memory up to that size and writes the others out (into
+/// the tile set, or beside OUT in a temporary directory), reading them
+/// back when scans reach them again: the map is the same. An .ot or .bt
+/// output is then written tile by tile,
 /// never as one tree; an .olm output, laid out as a whole, merges the
 /// tiles into one tree in memory at the end. Tiles cannot hold colour maps, and --compress-ml
 /// (OctoMap's prune() stops at the first level where nothing merged, a
@@ -67,6 +71,8 @@ use std::time::{Duration, Instant};
 /// Example: octolinear build --points room.ply --color -o room.ot
 ///
 /// Example: octolinear build scans.graph -o map.tiles --tile-depth 8 --memory-cap 2G
+///
+/// Example: octolinear build scans.graph -o map.tiles --tile-depth 8 --task 0/4 --plan map.plan
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
 pub struct Args {
@@ -138,6 +144,11 @@ pub struct Args {
     /// output; `octolinear tiles manifest` combines the tasks' parts.
     #[arg(long, value_name = "K/N")]
     task: Option<String>,
+    /// With --task: build the range of tiles the plan file (from
+    /// `octolinear plan`) gives task K, casting only the rays that reach
+    /// it; the plan's resolution, tile depth and task count must match.
+    #[arg(long, value_name = "PLAN", requires = "task")]
+    plan: Option<PathBuf>,
     /// Keep at most SIZE bytes of tiles in memory (e.g. 512M, 2G; K, M, G
     /// are powers of 1024); the others wait on disk. The output is the same
     /// (.ot and .bt written tile by tile; .olm merged in memory).
@@ -171,7 +182,14 @@ fn tiling(a: &Args, tile_output: bool) -> Result<Option<Tiling>> {
         }
         return Ok(None);
     }
-    let depth = a.tile_depth.unwrap_or(DEFAULT_TILE_DEPTH);
+    let plan = a.plan.as_deref().map(plan::read_plan).transpose()?;
+    let depth = match (&plan, a.tile_depth) {
+        (Some(p), Some(d)) if d != p.depth => {
+            bail!("--tile-depth {d} does not match the plan's tile depth {} ({})", p.depth, plan_name(a))
+        }
+        (Some(p), _) => p.depth,
+        (None, d) => d.unwrap_or(DEFAULT_TILE_DEPTH),
+    };
     if !(1..=octolinear::tiles::MAX_TILE_DEPTH).contains(&depth) {
         bail!("--tile-depth must be between 1 and 15, got {depth}");
     }
@@ -181,7 +199,22 @@ fn tiling(a: &Args, tile_output: bool) -> Result<Option<Tiling>> {
     if a.compress_ml {
         bail!("--compress-ml cannot be tiled: OctoMap's prune() decides level by level over the whole map");
     }
-    let task = a.task.as_deref().map(tiles::task_arg).transpose()?;
+    let mut task = a.task.as_deref().map(tiles::task_arg).transpose()?;
+    if let (Some(p), Some(t)) = (&plan, task) {
+        if p.resolution != a.res {
+            bail!("--res {:?} does not match the plan's resolution {:?} ({})", a.res, p.resolution, plan_name(a));
+        }
+        if p.tasks.len() != t.count as usize {
+            bail!(
+                "--task {}/{} does not match the plan's {} tasks ({})",
+                t.index,
+                t.count,
+                p.tasks.len(),
+                plan_name(a)
+            );
+        }
+        task = Some(p.task(t.index)?);
+    }
     if task.is_some() && !tile_output {
         bail!("--task builds part of a tile set: the output must be NAME.tiles");
     }
@@ -194,6 +227,11 @@ fn tiling(a: &Args, tile_output: bool) -> Result<Option<Tiling>> {
         None => None,
     };
     Ok(Some(Tiling { depth, task, memory_cap, window }))
+}
+
+/// The --plan file as messages name it.
+fn plan_name(a: &Args) -> String {
+    a.plan.as_deref().map_or_else(String::new, |p| p.display().to_string())
 }
 
 /// A temporary directory for the tiles a capped build writes out, removed

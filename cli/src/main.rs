@@ -11,6 +11,7 @@ mod info;
 mod input;
 mod log2graph;
 mod mesh;
+mod plan;
 mod points;
 mod raycast;
 mod render;
@@ -46,6 +47,7 @@ enum Command {
     Render(render::Args),
     Mesh(mesh::Args),
     Tiles(tiles::Args),
+    Plan(plan::Args),
 }
 
 /// Restores the default SIGPIPE action so that `octolinear ... | head`
@@ -125,6 +127,7 @@ fn run() -> i32 {
         Command::Render(a) => render::run(a),
         Command::Mesh(a) => mesh::run(a),
         Command::Tiles(a) => tiles::run(a),
+        Command::Plan(a) => plan::run(a),
     };
     match result {
         Ok(()) => 0,

@@ -153,7 +153,7 @@ pub fn search_all(set: &TileSet, keys: &[Key]) -> Result<Vec<Option<octolinear::
 pub fn task_arg(s: &str) -> Result<TaskPart> {
     let parsed = s.split_once('/').and_then(|(k, n)| Some((k.parse::<u32>().ok()?, n.parse::<u32>().ok()?)));
     match parsed {
-        Some((index, count)) if count >= 1 && index < count => Ok(TaskPart { index, count }),
+        Some((index, count)) if count >= 1 && index < count => Ok(TaskPart::hashed(index, count)),
         _ => bail!("--task must be K/N with 0 <= K < N, got {s:?}"),
     }
 }
@@ -211,7 +211,7 @@ mod tests {
         for bad in ["", "M", "0", "-1M", "1T", "1.5G", "12X"] {
             assert!(size_arg(bad).is_err(), "{bad}");
         }
-        assert_eq!(task_arg("2/3").unwrap(), TaskPart { index: 2, count: 3 });
+        assert_eq!(task_arg("2/3").unwrap(), TaskPart::hashed(2, 3));
         for bad in ["3/3", "1/0", "1", "a/b", "-1/2"] {
             assert!(task_arg(bad).is_err(), "{bad}");
         }

@@ -2326,3 +2326,70 @@ fn build_prints_the_statistics_graph2tree_prints() {
         assert_eq!(ours, theirs, "res {res}");
     }
 }
+
+// ---- planned tile tasks: plan, build --task K/N --plan, tiles manifest
+
+/// Tasks built from a plan combine into the plain build's .ot and .bt
+/// bytes; `plan` prints its table and JSON and writes the plan file.
+#[test]
+fn planned_tasks_combine_to_the_plain_build() {
+    let f = Fixture::new();
+    let flags = ["--res", "0.1", "--max-range", "6"];
+    let want_ot = tiled_build_bytes(&f, f.p("plain.ot"), &flags);
+    let want_bt = tiled_build_bytes(&f, f.p("plain.bt"), &flags);
+    let plan = f.p("map.plan");
+    let mut args = vec!["plan", f.p("s.graph"), "--tile-depth", "10", "--tasks", "3", "-o", plan];
+    args.extend(flags);
+    let table = ok(&args);
+    assert!(table.contains("3 tasks over the tiles of depth 10") && table.contains("Plan written to"), "{table}");
+    let text = std::fs::read_to_string(plan).unwrap();
+    assert!(text.starts_with("octolinear-tile-plan 1\nresolution 0.1\ntile_depth 10\ntasks 3\ntask 0 0 "), "{text}");
+    args.push("--json");
+    let json = json(&ok(&args));
+    assert_eq!(json["tasks"].as_array().unwrap().len(), 3);
+    assert_eq!(json["tasks"][2]["prefix_end"], 1u64 << 30);
+    let set = f.p("planned.tiles");
+    for k in 0..3 {
+        let task = format!("{k}/3");
+        let mut args = vec!["build", f.p("s.graph"), "-o", set, "--task", &task, "--plan", plan];
+        args.extend(flags);
+        assert!(ok(&args).contains(&format!("task {k} of 3")));
+    }
+    let part = std::fs::read_to_string(f.path("planned.tiles/task-1-of-3.manifest")).unwrap();
+    assert!(part.starts_with("octolinear-tiles 1\ntask 1 3 prefixes "), "{part}");
+    ok(&["tiles", "manifest", set]);
+    assert!(converted(&f, set, "planned.ot") == want_ot);
+    assert!(converted(&f, set, "planned.bt") == want_bt);
+    assert!(ok(&["plan", "--help"]).contains("Example: octolinear plan scans.graph"));
+    assert!(ok(&["build", "--help"]).contains("--plan <PLAN>"));
+}
+
+/// A plan that does not fit the build, a damaged plan file, and parts of
+/// different splits are refused with the file and the reason.
+#[test]
+fn bad_and_mismatched_plans_are_refused() {
+    let f = Fixture::new();
+    let g = f.p("s.graph");
+    let plan = f.p("p.plan");
+    ok(&["plan", g, "--tile-depth", "6", "--tasks", "2", "-o", plan]);
+    let set = f.p("m.tiles");
+    fail(&["build", g, "-o", set, "--task", "0/3", "--plan", plan], "--task 0/3 does not match the plan's 2 tasks");
+    fail(
+        &["build", g, "-o", set, "--task", "0/2", "--plan", plan, "--res", "0.05"],
+        "does not match the plan's resolution 0.1",
+    );
+    fail(
+        &["build", g, "-o", set, "--task", "0/2", "--plan", plan, "--tile-depth", "7"],
+        "--tile-depth 7 does not match the plan's tile depth 6",
+    );
+    fail_usage(&["build", g, "-o", set, "--plan", plan], "--task");
+    let text = std::fs::read_to_string(plan).unwrap();
+    let bad = f.write("bad.plan", text.replace("task 1 ", "task 2 "));
+    fail(&["build", g, "-o", set, "--task", "0/2", "--plan", bad], "line 6: task 2 where task 1 comes");
+    fail(&["build", g, "-o", set, "--task", "0/2", "--plan", f.p("none.plan")], "cannot read the plan");
+    fail(&["plan", g, "--tile-depth", "2", "--tasks", "65"], "--tasks must be between 1 and 64");
+    // a planned part beside a hashed one
+    ok(&["build", g, "-o", set, "--task", "0/2", "--plan", plan]);
+    ok(&["build", g, "-o", set, "--task", "1/2", "--tile-depth", "6"]);
+    fail(&["tiles", "manifest", set], "task-1-of-2.manifest shares the tiles by hash");
+}

@@ -70,14 +70,23 @@ impl Avx512 {
         fan: &RayFan,
         keys: &KeySpace,
         points: &[Point3],
-        max_range: f64,
+        limits: RayLimits<'_>,
         occupied: impl FnMut(u64),
         free: impl FnMut(&[u64]),
     ) -> bool {
         // SAFETY: an `Avx512` exists only on a processor with AVX-512F,
         // BMI2 and POPCNT.
-        unsafe { cast_fan_lanes(fan, keys, points, max_range, occupied, free) }
+        unsafe { cast_fan_lanes(fan, keys, points, limits, occupied, free) }
     }
+}
+
+/// Where [`Avx512::cast_fan`]'s rays end.
+pub(crate) struct RayLimits<'a> {
+    /// Rays longer are cut there (`cut_to_range`); negative: no limit.
+    pub(crate) max_range: f64,
+    /// Given a ray's unit direction, the distance from the origin after
+    /// which its voxels are not wanted: its walk ends there.
+    pub(crate) stop: Option<&'a dyn Fn([f64; 3]) -> f64>,
 }
 
 /// [`Avx512::cast_fan`].
@@ -86,7 +95,7 @@ fn cast_fan_lanes(
     fan: &RayFan,
     keys: &KeySpace,
     points: &[Point3],
-    max_range: f64,
+    RayLimits { max_range, stop }: RayLimits<'_>,
     mut occupied: impl FnMut(u64),
     mut free: impl FnMut(&[u64]),
 ) -> bool {
@@ -98,6 +107,9 @@ fn cast_fan_lanes(
         rays.clear();
         set_up(&mut rays, fan, keys, chunk, max_range, &mut occupied);
         any |= rays.len() > 0;
+        if let Some(stop) = stop {
+            rays.shorten(fan.resolution, stop);
+        }
         rays.pad();
         let last = chunks.peek().is_none();
         walk(&mut lanes, &rays, fan.origin_code(), last, &mut free);
@@ -162,6 +174,25 @@ impl LaneRays {
             self.write(n, &finished);
         }
         self.padded = true;
+    }
+
+    /// Ends each ray's walk at `stop` of its direction when that comes
+    /// before its length: the direction from the distances between
+    /// borders (`resolution / |dir|`, `f64::MAX` along an axis it does not
+    /// move on) and the axes that step up.
+    fn shorten(&mut self, resolution: f64, stop: &dyn Fn([f64; 3]) -> f64) {
+        for n in 0..self.len {
+            let dir = std::array::from_fn(|i| {
+                let dt = self.dt[i][n];
+                let up = self.step[n] & AXIS_MASKS[i] & !0b111 != 0;
+                match dt {
+                    f64::MAX => 0.0,
+                    dt if up => resolution / dt,
+                    dt => -resolution / dt,
+                }
+            });
+            self.length[n] = self.length[n].min(stop(dir));
+        }
     }
 
     /// `ray` at position `n` of the arrays.

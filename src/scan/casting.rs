@@ -3,21 +3,62 @@
 
 use super::block_set::BlockSet;
 use super::key_set::KeySet;
+use super::region::{CodeRegion, RayStop, CODE_SPACE};
 use super::{OutOfMap, ScanError, ScanOptions, ScanReport};
+#[cfg(target_arch = "x86_64")]
+use crate::arch::avx512::RayLimits;
 use crate::geometry::Point3;
 use crate::key::{Key, KeySpace};
 use crate::morton::MortonCode;
 use crate::ray::{FanRay, RayFan, RayKeys};
 use rayon::prelude::*;
+use std::ops::Range;
 
-/// What one worker collects: the free and the occupied voxels.
-#[derive(Default)]
+/// What one worker collects: the free and the occupied voxels whose
+/// Morton codes lie in `recorded` (every code unless the update is
+/// restricted to a range, whose rays' walks then end at `stop`).
 pub(super) struct Casting {
     free: BlockSet,
     occupied: BlockSet,
+    recorded: Range<u64>,
+    stop: Option<RayStop>,
+}
+
+impl Default for Casting {
+    fn default() -> Self {
+        Casting::recording(0..u64::MAX, None)
+    }
+}
+
+/// True when `code` lies in `range` (one comparison).
+#[inline(always)]
+fn in_range(range: &Range<u64>, code: u64) -> bool {
+    code.wrapping_sub(range.start) < range.end.wrapping_sub(range.start)
 }
 
 impl Casting {
+    /// A worker keeping only the codes in `recorded`, its walks ended at
+    /// `stop`.
+    fn recording(recorded: Range<u64>, stop: Option<RayStop>) -> Self {
+        Casting { free: BlockSet::default(), occupied: BlockSet::default(), recorded, stop }
+    }
+
+    /// Adds a free voxel, if recorded.
+    #[inline(always)]
+    fn insert_free(&mut self, code: u64) {
+        if in_range(&self.recorded, code) {
+            self.free.insert(code);
+        }
+    }
+
+    /// Adds an occupied voxel, if recorded.
+    #[inline(always)]
+    fn insert_occupied(&mut self, code: u64) {
+        if in_range(&self.recorded, code) {
+            self.occupied.insert(code);
+        }
+    }
+
     /// `computeUpdate`'s work for one end point. `fan` holds the rays'
     /// common origin; `None` when it lies outside the map (no rays then).
     #[inline]
@@ -26,18 +67,18 @@ impl Casting {
         let Some(bbx) = opts.bbx else {
             let Some(end_code) = self.end_voxel(keys, end, within) else { return };
             if let Some(fan) = fan {
-                fan.for_each_code(end, end_code, |c| self.free.insert(c));
+                fan.for_each_code(end, end_code, |c| self.insert_free(c));
             }
             return;
         };
         if within && bbx.contains_point(p) {
             if let Ok(k) = keys.key(p) {
-                self.occupied.insert(MortonCode::encode(k).0);
+                self.insert_occupied(MortonCode::encode(k).0);
             }
         }
         if let Ok(ray) = RayKeys::new(keys, origin, end) {
             for k in ray.take_while(|&k| bbx.contains_key(k)) {
-                self.free.insert(MortonCode::encode(k).0);
+                self.insert_free(MortonCode::encode(k).0);
             }
         }
     }
@@ -62,10 +103,29 @@ impl Casting {
         };
         #[cfg(target_arch = "x86_64")]
         if let Some(avx512) = crate::arch::avx512::Avx512::detect() {
-            let Casting { free, occupied } = self;
+            let Casting { free, occupied, recorded, stop } = self;
             let max_range = opts.max_range.unwrap_or(-1.0);
-            if avx512.cast_fan(fan, keys, points, max_range, |c| occupied.insert(c), |codes| free.insert_all(codes)) {
-                self.free.insert(fan.origin_code());
+            let everything = recorded.start == 0 && recorded.end == u64::MAX;
+            let mut kept = Vec::new();
+            let occupied = |c| {
+                if in_range(recorded, c) {
+                    occupied.insert(c)
+                }
+            };
+            // a restricted update filters each batch of codes before the set
+            let free = |codes: &[u64]| {
+                if everything {
+                    free.insert_all(codes)
+                } else {
+                    kept.clear();
+                    kept.extend(codes.iter().copied().filter(|&c| in_range(recorded, c)));
+                    free.insert_all(&kept)
+                }
+            };
+            let stop_at = |dir| stop.as_ref().map_or(f64::INFINITY, |s| s.length(dir));
+            let limits = RayLimits { max_range, stop: stop.as_ref().map(|_| &stop_at as _) };
+            if avx512.cast_fan(fan, keys, points, limits, occupied, free) {
+                self.insert_free(fan.origin_code());
             }
             return;
         }
@@ -84,11 +144,11 @@ impl Casting {
         loop {
             let (ca, cb) = (a.next_code(&a_steps), b.next_code(&b_steps));
             match ca {
-                Some(c) => self.free.insert(c),
+                Some(c) => self.insert_free(c),
                 None => (a, a_steps) = self.next_ray(fan, keys, &mut points, &mut ready, origin, opts).split(),
             }
             match cb {
-                Some(c) => self.free.insert(c),
+                Some(c) => self.insert_free(c),
                 None => {
                     (b, b_steps) = self.next_ray(fan, keys, &mut points, &mut ready, origin, opts).split();
                     if ca.is_none() && points.len() == 0 && ready.is_empty() {
@@ -99,10 +159,10 @@ impl Casting {
         }
         // the last rays
         while let Some(c) = a.next_code(&a_steps) {
-            self.free.insert(c);
+            self.insert_free(c);
         }
         while let Some(c) = b.next_code(&b_steps) {
-            self.free.insert(c);
+            self.insert_free(c);
         }
     }
 
@@ -142,12 +202,17 @@ impl Casting {
         for &p in points.take(RayQueue::CAPACITY) {
             let (within, end) = cut_to_range(p, origin, opts);
             let Some(end_code) = self.end_voxel(keys, end, within) else { continue };
-            if let Some(ray) = fan.ray(end, end_code) {
+            if let Some(mut ray) = fan.ray(end, end_code) {
+                if let Some(stop) = &self.stop {
+                    let d = end - origin;
+                    let norm = d.norm();
+                    ray.length = ray.length.min(stop.length([d.x, d.y, d.z].map(|v| f64::from(v) / norm)));
+                }
                 ready.push(ray);
             }
         }
         if !ready.is_empty() {
-            self.free.insert(fan.origin_code());
+            self.insert_free(fan.origin_code());
         }
     }
 
@@ -157,7 +222,7 @@ impl Casting {
     fn end_voxel(&mut self, keys: &KeySpace, end: Point3, within: bool) -> Option<u64> {
         let end_code = MortonCode::encode(keys.key(end).ok()?).0;
         if within {
-            self.occupied.insert(end_code);
+            self.insert_occupied(end_code);
         }
         Some(end_code)
     }
@@ -283,6 +348,20 @@ pub(crate) fn compute_update(
     origin: Point3,
     opts: &ScanOptions,
 ) -> Result<(ScanUpdate, ScanReport), ScanError> {
+    compute_update_in(keys, points, origin, opts, 0..u64::MAX)
+}
+
+/// [`compute_update`] restricted to the voxels whose Morton codes lie in
+/// `codes`: the same codes inside, none outside. Rays are still walked
+/// from the origin (their steps depend on it), but only those whose
+/// segment can reach the range's cubes.
+pub(crate) fn compute_update_in(
+    keys: &KeySpace,
+    points: &[Point3],
+    origin: Point3,
+    opts: &ScanOptions,
+    codes: Range<u64>,
+) -> Result<(ScanUpdate, ScanReport), ScanError> {
     let mut report = ScanReport { points: points.len(), ..Default::default() };
     let origin_key = keys.key(origin);
     if let Err(source) = origin_key {
@@ -321,54 +400,75 @@ pub(crate) fn compute_update(
         cleaned.retain(|&p| seen.insert(MortonCode::encode(keys.key_unchecked(p))));
         cleaned.iter_mut().for_each(|p| *p = keys.key_to_point(keys.key_unchecked(*p)));
     }
-    let points = if clean { points } else { &cleaned[..] };
+    let mut points = if clean { points } else { &cleaned[..] };
+    let reaching: Vec<Point3>;
+    let restricted = codes.start > 0 || codes.end < CODE_SPACE;
+    if codes.start >= codes.end.min(CODE_SPACE) {
+        // no voxel of the map in the range
+        return Ok((ScanUpdate::default(), report));
+    }
+    if restricted {
+        let region = CodeRegion::new(keys, &codes);
+        reaching =
+            points.iter().copied().filter(|&p| region.may_touch(origin, cut_to_range(p, origin, opts).1)).collect();
+        points = &reaching;
+    }
 
+    let stop = restricted.then(|| RayStop::new(keys, &codes, origin));
     let fan = RayFan::new(keys, origin).ok();
-    let run = || cast_scan(keys, points, fan.as_ref(), origin, opts);
+    let cast = Cast { keys, fan: fan.as_ref(), origin, opts, codes: &codes, stop: stop.as_ref() };
+    let run = || cast.scan(points);
     let update = match opts.threads {
-        Some(1) => cast_serial(keys, points, fan.as_ref(), origin, opts),
+        Some(1) => cast.serial(points),
         None => run(),
         Some(n) => thread_pool(n)?.install(run),
     };
     Ok((update, report))
 }
 
-fn cast_serial(
-    keys: &KeySpace,
-    points: &[Point3],
-    fan: Option<&RayFan>,
+/// What every worker casting one scan shares.
+struct Cast<'a> {
+    keys: &'a KeySpace,
+    fan: Option<&'a RayFan>,
     origin: Point3,
-    opts: &ScanOptions,
-) -> ScanUpdate {
-    let mut c = Casting::default();
-    c.cast_all(keys, fan, points, origin, opts);
-    c.into_update()
+    opts: &'a ScanOptions,
+    /// The codes recorded.
+    codes: &'a Range<u64>,
+    /// Where walks end, for an update restricted to `codes`.
+    stop: Option<&'a RayStop>,
 }
 
-fn cast_scan(
-    keys: &KeySpace,
-    points: &[Point3],
-    fan: Option<&RayFan>,
-    origin: Point3,
-    opts: &ScanOptions,
-) -> ScanUpdate {
-    let threads = rayon::current_num_threads();
-    if threads == 1 {
-        return cast_serial(keys, points, fan, origin, opts);
+impl Cast<'_> {
+    /// One worker casting every ray of `points`.
+    fn serial(&self, points: &[Point3]) -> ScanUpdate {
+        let mut c = Casting::recording(self.codes.clone(), self.stop.cloned());
+        c.cast_all(self.keys, self.fan, points, self.origin, self.opts);
+        c.into_update()
     }
-    let chunk = points.len().div_ceil(2 * threads).max(512);
-    let parts: Vec<(Vec<u64>, Vec<u64>)> = points
-        .par_chunks(chunk)
-        .fold(Casting::default, |mut acc, chunk| {
-            acc.cast_all(keys, fan, chunk, origin, opts);
-            acc
-        })
-        .map(|c| c.finish())
-        .collect();
-    let (free, occupied): (Vec<_>, Vec<_>) = parts.into_iter().unzip();
-    let (mut free, occupied) = rayon::join(|| merge_sorted(free), || merge_sorted(occupied));
-    dedup_except(&mut free, &occupied);
-    ScanUpdate { free, occupied }
+
+    /// The points shared by the current rayon pool's threads.
+    fn scan(&self, points: &[Point3]) -> ScanUpdate {
+        let threads = rayon::current_num_threads();
+        if threads == 1 {
+            return self.serial(points);
+        }
+        let chunk = points.len().div_ceil(2 * threads).max(512);
+        let parts: Vec<(Vec<u64>, Vec<u64>)> = points
+            .par_chunks(chunk)
+            .fold(
+                || Casting::recording(self.codes.clone(), self.stop.cloned()),
+                |mut acc, chunk| {
+                    acc.cast_all(self.keys, self.fan, chunk, self.origin, self.opts);
+                    acc
+                },
+            )
+            .map(|c| c.finish())
+            .collect();
+        let (free, occupied): (Vec<_>, Vec<_>) = parts.into_iter().unzip();
+        let (mut free, occupied) = rayon::join(|| merge_sorted(free), || merge_sorted(occupied));
+        dedup_except(&mut free, &occupied);
+        ScanUpdate { free, occupied }
+    }
 }
 
 /// The free and occupied voxels of one scan as Morton codes, each list
@@ -435,5 +535,91 @@ mod tests {
             return;
         }
         eprintln!("skipped: no AVX-512F (only the pairwise walk runs here)");
+    }
+
+    /// Random points around a random origin, some far, some beyond the map.
+    fn random_scan(seed: u64, count: usize) -> (Vec<Point3>, Point3) {
+        let mut s = seed;
+        let mut next = move || {
+            s = s.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let origin = Point3::new((next() * 8.0) as f32, (next() * 8.0) as f32, (next() * 2.0) as f32);
+        let points = (0..count)
+            .map(|i| {
+                let scale = if i % 50 == 0 { 2000.0 } else { 30.0 };
+                origin + Point3::new((next() * scale) as f32, (next() * scale) as f32, (next() * scale / 4.0) as f32)
+            })
+            .collect();
+        (points, origin)
+    }
+
+    /// Cut points splitting the code space into ranges: tile-aligned ones
+    /// at two depths and arbitrary codes.
+    fn partitions() -> Vec<Vec<u64>> {
+        let all = CODE_SPACE;
+        vec![
+            vec![0, all],
+            vec![0, 4 << 45, all],
+            vec![0, 3 << 45, (3 << 45) + (5 << 39) + (1 << 36), 6 << 45, all],
+            vec![0, 0x8000_1234_5678 & (all - 1), 0xa000_0000_0001 & (all - 1), all],
+        ]
+    }
+
+    /// The updates of a partition's ranges: each inside its range, and
+    /// together the unrestricted update, on one thread and on several,
+    /// with and without a maximum range, with the end points discretized.
+    #[test]
+    fn updates_in_a_partition_of_ranges_add_up_to_the_whole_update() {
+        let keys = KeySpace::new(0.1);
+        let mut scans = super::super::tests::sample_scans().into_iter().take(2).collect::<Vec<_>>();
+        scans.extend((0..3).map(|seed| random_scan(seed, 3000)));
+        for (points, origin) in &scans {
+            for (threads, max_range, discretize) in
+                [(Some(1), None, false), (Some(2), Some(5.0), false), (None, None, true)]
+            {
+                let opts = ScanOptions { threads, max_range, discretize, ..Default::default() };
+                let (whole, report) = compute_update(&keys, points, *origin, &opts).unwrap();
+                assert!(whole.free.len() > 100);
+                for cuts in partitions() {
+                    let mut joined = ScanUpdate::default();
+                    for range in cuts.windows(2).map(|w| w[0]..w[1]) {
+                        let (part, part_report) =
+                            compute_update_in(&keys, points, *origin, &opts, range.clone()).unwrap();
+                        assert_eq!(part_report, report);
+                        assert!(part.free.iter().chain(&part.occupied).all(|c| range.contains(c)));
+                        joined.free.extend(part.free);
+                        joined.occupied.extend(part.occupied);
+                    }
+                    assert!(joined == whole, "{cuts:x?} {threads:?} {max_range:?}");
+                }
+                for empty in [5..5, CODE_SPACE..u64::MAX] {
+                    assert!(compute_update_in(&keys, points, *origin, &opts, empty).unwrap().0.is_empty());
+                }
+            }
+        }
+    }
+
+    /// The pairwise walk (processors without AVX-512), its walks ended
+    /// where they leave the range, records the codes in the range, as the
+    /// vector walk does.
+    #[test]
+    fn the_pairwise_walk_records_only_the_range() {
+        let keys = KeySpace::new(0.1);
+        for (points, origin) in (5..8).map(|seed| random_scan(seed, 2000)) {
+            let fan = RayFan::new(&keys, origin).unwrap();
+            let opts = ScanOptions::default();
+            let mut whole = Casting::default();
+            whole.cast_all_pairs(&keys, &fan, &points, origin, &opts);
+            let whole = whole.into_update();
+            for range in partitions()[2].windows(2).map(|w| w[0]..w[1]) {
+                let mut part = Casting::recording(range.clone(), Some(RayStop::new(&keys, &range, origin)));
+                part.cast_all_pairs(&keys, &fan, &points, origin, &opts);
+                let inside = |codes: &[u64]| codes.iter().copied().filter(|c| range.contains(c)).collect::<Vec<_>>();
+                let part = part.into_update();
+                assert_eq!(part.free, inside(&whole.free));
+                assert_eq!(part.occupied, inside(&whole.occupied));
+            }
+        }
     }
 }

@@ -29,6 +29,7 @@ use crate::key::{Key, KeyError};
 use crate::ray::{point_along, RayKeys};
 use crate::tree::{InnerNodes, OccupancyTree};
 use pipeline::{Job, Pipeline, StdMonitor};
+use std::ops::Range;
 use std::sync::Mutex;
 
 // its insertion loop writes through a raw pointer
@@ -38,10 +39,11 @@ mod casting;
 pub(crate) mod key_set;
 mod options;
 mod pipeline;
+mod region;
 
-pub(crate) use casting::compute_update;
 use casting::thread_pool;
 pub use casting::ScanUpdate;
+pub(crate) use casting::{compute_update, compute_update_in};
 pub use options::{OutOfMap, ScanError, ScanOptions, ScanReport, UpdateBox};
 
 impl OccupancyTree {
@@ -242,6 +244,20 @@ impl OccupancyTree {
         opts: &ScanOptions,
     ) -> Result<(ScanUpdate, ScanReport), ScanError> {
         compute_update(self.key_space(), points, origin, opts)
+    }
+
+    /// [`Self::compute_update`] restricted to the voxels whose Morton codes
+    /// lie in `codes`: bit for bit the unrestricted update's codes inside
+    /// the range and none outside, so that processes each owning a range
+    /// of tiles cast only the rays that reach their tiles.
+    pub fn compute_update_in(
+        &self,
+        points: &[Point3],
+        origin: Point3,
+        opts: &ScanOptions,
+        codes: Range<u64>,
+    ) -> Result<(ScanUpdate, ScanReport), ScanError> {
+        compute_update_in(self.key_space(), points, origin, opts, codes)
     }
 
     /// OctoMap's `insertPointCloudRays` ("simple" mode): ray by ray, each

@@ -77,6 +77,15 @@ pub enum TileError {
         /// What is wrong.
         reason: String,
     },
+    /// A tile plan is malformed or cannot be made (line 0: not about a
+    /// line of a plan file).
+    #[error("tile plan{}: {reason}", at_line(*.line))]
+    Plan {
+        /// Line number (1-based) of the fault in the plan file; 0 for none.
+        line: usize,
+        /// What is wrong.
+        reason: String,
+    },
     /// Inner nodes are stale after deferred updates: the single tree's
     /// upper levels cannot be derived until they are updated.
     #[error("inner nodes are stale after deferred (lazy) updates: call update_inner_occupancy first")]
@@ -84,6 +93,15 @@ pub enum TileError {
     /// A broken invariant of this crate (a bug), named.
     #[error("internal error: {0}")]
     Internal(&'static str),
+}
+
+/// `, line N` for a line of a file, nothing for line 0.
+fn at_line(line: usize) -> String {
+    if line == 0 {
+        String::new()
+    } else {
+        format!(", line {line}")
+    }
 }
 
 impl TileError {

@@ -10,6 +10,7 @@ use crate::mapped::HEADER_LEN;
 use crate::sensor::SensorModel;
 use crate::tree::{NodeKind, TreeKind};
 use std::fmt::Write as _;
+use std::ops::Range;
 
 /// First line of every manifest, before the version number.
 pub const MAGIC: &str = "octolinear-tiles";
@@ -34,19 +35,54 @@ pub struct TileEntry {
 }
 
 /// A task's share of a tile set built by several processes: task `index`
-/// of `count` builds the tiles [`task_of`] gives it.
+/// of `count` builds the tiles `tiles` says.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TaskPart {
     /// This task, `0..count`.
     pub index: u32,
     /// How many tasks share the tiles.
     pub count: u32,
+    /// Which tiles are this task's.
+    pub tiles: TaskTiles,
+}
+
+/// How the tiles are shared among the tasks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TaskTiles {
+    /// By [`task_of`], a hash of the tile's Morton prefix: no plan needed,
+    /// but every task casts every ray.
+    Hashed,
+    /// The tiles whose Morton prefixes lie in `start..end` (from a
+    /// [`TilePlan`](super::TilePlan)): a compact region, so that a task
+    /// casts only the rays reaching it.
+    Prefixes {
+        /// First prefix owned.
+        start: u64,
+        /// First prefix past the task's.
+        end: u64,
+    },
 }
 
 impl TaskPart {
+    /// Task `index` of `count` under the hash split ([`task_of`]).
+    pub fn hashed(index: u32, count: u32) -> Self {
+        TaskPart { index, count, tiles: TaskTiles::Hashed }
+    }
+
     /// True when the tile belongs to this task.
     pub fn owns(self, id: TileId) -> bool {
-        task_of(id, self.count) == self.index
+        match self.tiles {
+            TaskTiles::Hashed => task_of(id, self.count) == self.index,
+            TaskTiles::Prefixes { start, end } => (start..end).contains(&id.prefix()),
+        }
+    }
+
+    /// The range of tile prefixes owned, when the task owns a range.
+    pub fn prefixes(self) -> Option<Range<u64>> {
+        match self.tiles {
+            TaskTiles::Hashed => None,
+            TaskTiles::Prefixes { start, end } => Some(start..end),
+        }
     }
 
     /// The part file this task writes in the tile set's directory.
@@ -99,7 +135,12 @@ impl Manifest {
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut s = format!("{MAGIC} {VERSION}\n");
         if let Some(t) = self.task {
-            let _ = writeln!(s, "task {} {}", t.index, t.count);
+            let _ = match t.tiles {
+                TaskTiles::Hashed => writeln!(s, "task {} {}", t.index, t.count),
+                TaskTiles::Prefixes { start, end } => {
+                    writeln!(s, "task {} {} prefixes {start} {end}", t.index, t.count)
+                }
+            };
         }
         let sensor = &self.sensor;
         let _ = writeln!(s, "resolution {:016x}", self.resolution.to_bits());
@@ -166,13 +207,14 @@ impl Manifest {
         let mut next = lines.next()?;
         let task = match next.strip_prefix("task ") {
             Some(rest) => {
-                let (index, count) = rest
-                    .split_once(' ')
-                    .and_then(|(i, c)| Some((decimal(i)?, decimal(c)?)))
-                    .filter(|&(i, c)| c >= 1 && i < c && c <= u64::from(u32::MAX))
-                    .ok_or_else(|| lines.fault(format!("expected `task K N` with K < N, found `{}`", clip(next))))?;
+                let task = parse_task(rest).ok_or_else(|| {
+                    lines.fault(format!(
+                        "expected `task K N` or `task K N prefixes START END` with K < N and START < END, found `{}`",
+                        clip(next)
+                    ))
+                })?;
                 next = lines.next()?;
-                Some(TaskPart { index: index as u32, count: count as u32 })
+                Some(task)
             }
             None => None,
         };
@@ -181,6 +223,17 @@ impl Manifest {
         let depth = lines.field("tile_depth", |v| {
             decimal(v).filter(|d| (1..=u64::from(MAX_TILE_DEPTH)).contains(d)).map(|d| d as u8)
         })?;
+        if let Some(range) = task.and_then(TaskPart::prefixes).filter(|r| r.end > 1 << (3 * u32::from(depth))) {
+            return Err(ManifestError {
+                line: 2,
+                reason: format!(
+                    "prefix range {}..{} exceeds the {} tiles of depth {depth}",
+                    range.start,
+                    range.end,
+                    1u64 << (3 * u32::from(depth))
+                ),
+            });
+        }
         let kind = lines.field("tree_kind", |v| {
             TreeKind::from_id(v).filter(|k| matches!(k, TreeKind::OcTree | TreeKind::OcTreeStamped))
         })?;
@@ -245,6 +298,24 @@ impl<'a> Lines<'a> {
     }
 }
 
+/// A `task` line's fields after `task `.
+fn parse_task(rest: &str) -> Option<TaskPart> {
+    let fields: Vec<&str> = rest.split(' ').collect();
+    let (index, count, tiles) = match fields[..] {
+        [i, c] => (decimal(i)?, decimal(c)?, TaskTiles::Hashed),
+        [i, c, "prefixes", start, end] => {
+            let (start, end) = (decimal(start)?, decimal(end)?);
+            (decimal(i)?, decimal(c)?, TaskTiles::Prefixes { start, end })
+        }
+        _ => return None,
+    };
+    if count == 0 || index >= count || count > u64::from(u32::MAX) {
+        return None;
+    }
+    let task = TaskPart { index: index as u32, count: count as u32, tiles };
+    task.prefixes().is_none_or(|r| r.start < r.end).then_some(task)
+}
+
 /// One `tile` line.
 fn parse_tile(line: &str, depth: u8, kind: TreeKind) -> Result<TileEntry, String> {
     let fields: Vec<&str> = line.split(' ').collect();
@@ -289,7 +360,7 @@ fn parse_tile(line: &str, depth: u8, kind: TreeKind) -> Result<TileEntry, String
 }
 
 /// A decimal number as the writer spells it (no sign, no leading zero).
-fn decimal(s: &str) -> Option<u64> {
+pub(super) fn decimal(s: &str) -> Option<u64> {
     canonical(s).then(|| s.parse().ok()).flatten()
 }
 
@@ -358,8 +429,13 @@ mod tests {
         assert_eq!(Manifest::parse(&bytes), Ok(m.clone()));
         let text = String::from_utf8(bytes).unwrap();
         assert!(text.starts_with("octolinear-tiles 1\nresolution 3fb999999999999a\ntile_depth 3\ntree_kind OcTree\n"));
-        let part = Manifest { task: Some(TaskPart { index: 0, count: 1 }), ..m };
+        let part = Manifest { task: Some(TaskPart::hashed(0, 1)), ..m.clone() };
         assert_eq!(Manifest::parse(&part.to_bytes()), Ok(part));
+        let range = TaskPart { index: 1, count: 2, tiles: TaskTiles::Prefixes { start: 53, end: 512 } };
+        let part = Manifest { task: Some(range), ..m };
+        let bytes = part.to_bytes();
+        assert!(String::from_utf8_lossy(&bytes).contains("\ntask 1 2 prefixes 53 512\n"));
+        assert_eq!(Manifest::parse(&bytes), Ok(part));
     }
 
     #[test]
@@ -404,6 +480,30 @@ mod tests {
         assert!(with(12, "tile d3-7-7-7.olm 4 512 00000001 7fc00000 0 leaf").reason.contains("finite"));
     }
 
+    /// A part's task line: its range checked against the tile depth and
+    /// its tiles against the range.
+    #[test]
+    fn a_range_part_holds_only_its_tiles() {
+        let part = |task: &str| {
+            let text = String::from_utf8(sample().to_bytes()).unwrap();
+            let mut body: Vec<&str> = text.lines().filter(|l| !l.starts_with("crc32")).collect();
+            body.insert(1, task);
+            let mut s = body.join("\n") + "\n";
+            s += &format!("crc32 {:08x}\n", crc32fast::hash(s.as_bytes()));
+            Manifest::parse(s.as_bytes())
+        };
+        // the sample's tiles have prefixes 53 (d3-1-2-3) and 511 (d3-7-7-7)
+        assert!(part("task 0 1 prefixes 0 512").is_ok());
+        assert!(part("task 1 2 prefixes 53 512").is_ok());
+        let e = part("task 0 2 prefixes 0 53").unwrap_err();
+        assert!(e.line == 12 && e.reason.contains("d3-1-2-3 is not one of task 0 of 2"), "{e:?}");
+        let e = part("task 0 2 prefixes 0 513").unwrap_err();
+        assert!(e.line == 2 && e.reason.contains("exceeds the 512 tiles"), "{e:?}");
+        for bad in ["task 0 2 prefixes 5 5", "task 0 2 prefixes 1", "task 0 2 range 0 512", "task 2 2"] {
+            assert_eq!(part(bad).unwrap_err().line, 2, "{bad}");
+        }
+    }
+
     #[test]
     fn tasks_share_the_tiles() {
         for count in [1, 2, 3, 7] {
@@ -412,7 +512,7 @@ mod tests {
                 let id = TileId::from_prefix(3, p);
                 let k = task_of(id, count);
                 per_task[k as usize] += 1;
-                assert!(TaskPart { index: k, count }.owns(id));
+                assert!(TaskPart::hashed(k, count).owns(id));
             }
             assert!(per_task.iter().all(|&n| n > 0), "{per_task:?}");
         }

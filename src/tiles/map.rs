@@ -12,7 +12,7 @@ use crate::geometry::Point3;
 use crate::key::{Key, KeySpace};
 use crate::mapped::MappedMap;
 use crate::ray::{CastOptions, CastOutcome, RayKeys};
-use crate::scan::{compute_update, ScanOptions, ScanReport, ScanUpdate};
+use crate::scan::{compute_update_in, ScanOptions, ScanReport, ScanUpdate};
 use crate::sensor::SensorModel;
 use crate::tree::{Clock, Found, InnerNodes, NodeKind, OccupancyTree, TreeError, TreeKind};
 use rayon::prelude::*;
@@ -24,8 +24,9 @@ use std::sync::OnceLock;
 
 /// A map split into the octree's subtrees at a fixed depth (tiles), each
 /// held as its own tree with nodes only on its path from the root and
-/// below. Scans are cast once for the whole map and each tile receives the
-/// updates that fall into it, so the tiles together are the single tree
+/// below. Scans are cast once for the whole map (or, for a task owning a
+/// range of tiles, for those tiles) and each tile receives the updates
+/// that fall into it, so the tiles together are the single tree
 /// [`OccupancyTree`] builds from the same calls: [`Self::merge`] gives it
 /// node for node (hence OctoMap's bytes), and the queries answer as it
 /// does. The levels above the tiles are derived from the tiles' root
@@ -149,9 +150,22 @@ impl TiledMap {
 
     /// Updates and keeps only the tiles of `task`: one of several processes
     /// building parts of one tile set ([`Self::flush`] then writes the
-    /// task's part of the manifest).
+    /// task's part of the manifest). A task owning a range of tile
+    /// prefixes casts only the rays that can reach its tiles.
     pub fn set_task(&mut self, task: TaskPart) {
         self.task = Some(task);
+    }
+
+    /// The Morton codes a scan's casting records: the task's tiles' when it
+    /// owns a range of them, else every code.
+    fn cast_codes(&self) -> Range<u64> {
+        match self.task.and_then(TaskPart::prefixes) {
+            Some(r) => {
+                let shift = code_shift(self.depth);
+                (r.start << shift)..(r.end << shift)
+            }
+            None => 0..u64::MAX,
+        }
     }
 
     /// The clock stamped maps read when updating.
@@ -215,7 +229,7 @@ impl TiledMap {
         opts: &ScanOptions,
     ) -> Result<ScanReport, TileError> {
         self.check_inner(opts.inner)?;
-        let (update, report) = compute_update(&self.keys, points, origin, opts)?;
+        let (update, report) = compute_update_in(&self.keys, points, origin, opts, self.cast_codes())?;
         let report = match opts.threads {
             Some(1) => self.apply_update_on(&update, report, opts.inner, 1),
             None => self.apply_update_on(&update, report, opts.inner, rayon::current_num_threads()),
@@ -252,7 +266,10 @@ impl TiledMap {
         let mut run = |map: &mut Self| -> Result<(), (usize, TileError)> {
             let keys = map.keys.clone();
             let cast_opts = ScanOptions { threads: None, ..*opts };
-            let cast = |(points, origin): (P, Point3)| compute_update(&keys, points.as_ref(), origin, &cast_opts);
+            let codes = map.cast_codes();
+            let cast = |(points, origin): (P, Point3)| {
+                compute_update_in(&keys, points.as_ref(), origin, &cast_opts, codes.clone())
+            };
             let workers = rayon::current_num_threads();
             let Some((mut i, first)) = scans.next() else { return Ok(()) };
             let mut origin = first.1;

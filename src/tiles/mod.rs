@@ -50,6 +50,8 @@
 //! * `forget`: opt-in forgetting (a rolling [`Window`] of tiles, old voxels of
 //!   stamped maps), departures from OctoMap;
 //! * `manifest`: the tile set's manifest ([`Manifest`]), `formats/tiles.md`;
+//! * `plan`: [`TileWork`] and [`TilePlan`], tasks owning balanced ranges of
+//!   tiles for builds on several machines;
 //! * `set`: [`TileSet`], a tile set on disk, mapped tile by tile;
 //! * `stream`: the single tree walked in pre-order across the tiles, one
 //!   tile read at a time, for the file writers and the merge;
@@ -63,6 +65,7 @@ mod forget;
 mod id;
 mod manifest;
 mod map;
+mod plan;
 mod query;
 mod set;
 mod stream;
@@ -73,8 +76,9 @@ pub use error::TileError;
 pub use file::TileCheck;
 pub use forget::{Beyond, Window};
 pub use id::{TileId, MAX_TILE_DEPTH};
-pub use manifest::{task_of, Manifest, ManifestError, TaskPart, TileEntry, MAGIC, MANIFEST_FILE, VERSION};
+pub use manifest::{task_of, Manifest, ManifestError, TaskPart, TaskTiles, TileEntry, MAGIC, MANIFEST_FILE, VERSION};
 pub use map::{TiledMap, TiledStats};
+pub use plan::{PlannedTask, TilePlan, TileWork, PLAN_MAGIC, PLAN_VERSION, SAMPLE_ABOVE, SAMPLE_STRIDE};
 pub use set::{combine_parts, read_manifest, TileSet, TileSetReport};
 pub use top::TileRoot;
 

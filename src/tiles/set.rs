@@ -169,10 +169,54 @@ pub fn read_manifest(path: &Path) -> Result<Manifest, TileError> {
     })
 }
 
+/// Checks that the parts share the tiles one way: all by the hash split,
+/// or by prefix ranges that cover the `8^depth` tile prefixes exactly once
+/// (no gap, no overlap), so that every tile of the map was built.
+fn check_ranges(parts: &[(PathBuf, Manifest)], depth: u8) -> Result<(), String> {
+    let name = |m: &Manifest| m.task.map(TaskPart::file_name).unwrap_or_default();
+    let mut ranges: Vec<(std::ops::Range<u64>, String)> = Vec::new();
+    let mut hashed = None;
+    for (_, m) in parts {
+        match m.task.and_then(TaskPart::prefixes) {
+            Some(r) => ranges.push((r, name(m))),
+            None => hashed = Some(name(m)),
+        }
+    }
+    let Some((_, ranged)) = ranges.first() else { return Ok(()) };
+    if let Some(h) = hashed {
+        return Err(format!("{h} shares the tiles by hash, {ranged} by a prefix range (parts of different plans)"));
+    }
+    ranges.sort_by_key(|(r, _)| (r.start, r.end));
+    let tiles = 1u64 << (3 * u32::from(depth));
+    let mut covered = (0, String::from("the start of the prefixes"));
+    for (r, part) in ranges {
+        match r.start.cmp(&covered.0) {
+            std::cmp::Ordering::Greater => {
+                return Err(format!(
+                    "no part holds the tile prefixes {}..{} (a gap between {} and {part})",
+                    covered.0, r.start, covered.1
+                ))
+            }
+            std::cmp::Ordering::Less => {
+                return Err(format!(
+                    "{part} (prefixes {}..{}) overlaps {} (up to {})",
+                    r.start, r.end, covered.1, covered.0
+                ))
+            }
+            std::cmp::Ordering::Equal => covered = (r.end, part),
+        }
+    }
+    if covered.0 != tiles {
+        return Err(format!("no part holds the tile prefixes {}..{tiles} (after {})", covered.0, covered.1));
+    }
+    Ok(())
+}
+
 /// Combines the task parts in `dir` (`task-K-of-N.manifest`, written by
 /// [`super::TiledMap::flush`] of each task) into the set's manifest, written
 /// atomically; the parts are then removed. Every part of one count must be
-/// there, with the same parameters.
+/// there, with the same parameters, and prefix ranges must cover every
+/// tile exactly once.
 pub fn combine_parts(dir: &Path) -> Result<Manifest, TileError> {
     let parts_error = |reason: String| TileError::Parts { dir: dir.to_path_buf(), reason };
     let mut parts = Vec::new();
@@ -215,6 +259,7 @@ pub fn combine_parts(dir: &Path) -> Result<Manifest, TileError> {
     if let Some(missing) = seen.iter().position(|s| !s) {
         return Err(parts_error(format!("the part of task {missing} of {count} is missing")));
     }
+    check_ranges(&parts, first.depth).map_err(parts_error)?;
     let mut tiles: Vec<_> = parts.iter().flat_map(|(_, m)| m.tiles.iter().copied()).collect();
     tiles.sort_by_key(|t| t.id.prefix());
     let manifest = Manifest { task: None, tiles, ..first.clone() };

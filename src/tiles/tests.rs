@@ -183,7 +183,7 @@ fn tasks_build_parts_that_combine_into_the_set() {
     let set_dir = dir.path().join("m.tiles");
     for index in 0..3 {
         let mut map = TiledMap::new(0.1, SensorModel::default(), NodeKind::Plain, 6).unwrap();
-        map.set_task(TaskPart { index, count: 3 });
+        map.set_task(TaskPart::hashed(index, 3));
         for (p, o) in &scans {
             map.insert_point_cloud(p, *o, &ScanOptions::default()).unwrap();
         }
@@ -195,6 +195,69 @@ fn tasks_build_parts_that_combine_into_the_set() {
     combine_parts(&set_dir).unwrap();
     let set = TileSet::open(&set_dir).unwrap();
     assert!(ot(&set.merge().unwrap()) == ot(&want));
+}
+
+/// Tasks owning the ranges of a plan, each casting only the rays that
+/// reach its range, on one thread and pipelined: their parts combine into
+/// the single tree's set.
+#[test]
+fn planned_tasks_build_parts_that_combine_into_the_set() {
+    let dir = tempfile::tempdir().unwrap();
+    let scans = test_scans();
+    let want = single(NodeKind::Plain, &scans, &ScanOptions::default());
+    let mut work = TileWork::new(0.1, 6).unwrap();
+    for (p, o) in &scans {
+        work.add_scan(p, *o, None);
+    }
+    let plan = work.split(3).unwrap();
+    assert!(plan.tasks.iter().all(|t| t.work > 0), "{plan:?}");
+    let set_dir = dir.path().join("m.tiles");
+    for index in 0..3 {
+        let mut map = TiledMap::new(0.1, SensorModel::default(), NodeKind::Plain, 6).unwrap();
+        map.set_task(plan.task(index).unwrap());
+        if index == 1 {
+            let opts = ScanOptions { threads: Some(2), ..Default::default() };
+            map.insert_point_clouds(scans.iter().map(|(p, o)| (p, *o)), &opts, |_, _| ()).unwrap();
+        } else {
+            for (p, o) in &scans {
+                map.insert_point_cloud(p, *o, &ScanOptions::default()).unwrap();
+            }
+        }
+        map.flush(&set_dir).unwrap();
+    }
+    combine_parts(&set_dir).unwrap();
+    let set = TileSet::open(&set_dir).unwrap();
+    assert!(ot(&set.merge().unwrap()) == ot(&want));
+}
+
+/// Parts whose ranges leave a gap, overlap, or mix with the hash split
+/// are refused, naming the parts.
+#[test]
+fn parts_must_tile_the_prefixes_exactly() {
+    let scans = test_scans();
+    let part = |dir: &std::path::Path, task: TaskPart| {
+        let mut map = TiledMap::new(0.1, SensorModel::default(), NodeKind::Plain, 2).unwrap();
+        map.set_task(task);
+        map.insert_point_cloud(&scans[0].0, scans[0].1, &ScanOptions::default()).unwrap();
+        map.flush(dir).unwrap();
+    };
+    let range = |index, start, end| TaskPart { index, count: 2, tiles: TaskTiles::Prefixes { start, end } };
+    let refused = |parts: &[TaskPart]| {
+        let dir = tempfile::tempdir().unwrap();
+        parts.iter().for_each(|&t| part(dir.path(), t));
+        match combine_parts(dir.path()) {
+            Err(TileError::Parts { reason, .. }) => reason,
+            other => panic!("{other:?}"),
+        }
+    };
+    let gap = refused(&[range(0, 0, 30), range(1, 31, 64)]);
+    assert!(gap.contains("30..31") && gap.contains("task-1-of-2.manifest"), "{gap}");
+    let overlap = refused(&[range(0, 0, 32), range(1, 31, 64)]);
+    assert!(overlap.contains("task-1-of-2.manifest") && overlap.contains("overlaps task-0-of-2.manifest"), "{overlap}");
+    let short = refused(&[range(0, 0, 32), range(1, 32, 63)]);
+    assert!(short.contains("63..64"), "{short}");
+    let mixed = refused(&[range(0, 0, 32), TaskPart::hashed(1, 2)]);
+    assert!(mixed.contains("by hash") && mixed.contains("task-0-of-2.manifest"), "{mixed}");
 }
 
 #[test]

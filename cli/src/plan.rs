@@ -1,0 +1,142 @@
+//! `octolinear plan`: split a tile set's tiles into tasks of even
+//! estimated work, for `build --task K/N --plan PLAN` on several machines.
+
+use super::build::{max_range_arg, resolution_arg, scans_arg};
+use super::input;
+use anyhow::{bail, Context, Result};
+use octolinear::formats::write_atomically;
+use octolinear::tiles::{TilePlan, TileWork, MAX_TILE_DEPTH};
+use octolinear::KeySpace;
+use std::collections::HashSet;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Plan a tile set built by several processes: tasks owning balanced
+/// ranges of tiles.
+///
+/// Reads the scans of a `.graph` file (`-` for standard input) and
+/// estimates how many ray steps each tile at --tile-depth costs (a coarse
+/// pass, a small part of a build; scans of more than 16384 points are
+/// sampled), then cuts the tiles, in Morton order, into --tasks contiguous
+/// ranges of about equal work. Each task of a `build --task K/N --plan
+/// PLAN` builds the tiles of its range and casts only the rays that reach
+/// them, so the rays are shared rather than each cast N times. The ranges
+/// cover every tile, whatever the estimate saw, so the map is exact; the
+/// estimate only decides how even the tasks are. Give the options of the
+/// build that change the rays (--res, --max-range, --discretize,
+/// --scans): the build checks --res and --tile-depth against the plan.
+///
+/// Prints the tasks (a table, or JSON with --json); -o writes the plan
+/// file (formats/tiles.md, "Plan file").
+///
+/// Example: octolinear plan scans.graph --tile-depth 8 --tasks 4 -o map.plan
+///
+/// Example: octolinear build scans.graph -o map.tiles --tile-depth 8 --task 2/4 --plan map.plan
+#[derive(clap::Args)]
+pub struct Args {
+    /// Input `.graph` file (OctoMap ScanGraph); `-` reads standard input.
+    input: PathBuf,
+    /// Depth of the tiles' roots (1 to 15), as the build's --tile-depth.
+    #[arg(long, value_name = "D")]
+    tile_depth: u8,
+    /// Number of tasks (1 to 8^D).
+    #[arg(long, value_name = "N")]
+    tasks: u32,
+    /// Voxel edge length in metres, as the build's.
+    #[arg(long, default_value_t = 0.1)]
+    res: f64,
+    /// Cut rays at this range (metres), as the build's --max-range.
+    #[arg(long)]
+    max_range: Option<f64>,
+    /// End points merged per voxel before casting, as the build's.
+    #[arg(long)]
+    discretize: bool,
+    /// Only the first N scans, as the build's --scans.
+    #[arg(long, value_name = "N")]
+    scans: Option<usize>,
+    /// Write the plan file here.
+    #[arg(short, long, value_name = "PLAN")]
+    output: Option<PathBuf>,
+    /// Print the plan as one JSON object instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    resolution_arg(a.res)?;
+    let max_range = max_range_arg(a.max_range)?;
+    let scans = scans_arg(a.scans)?.unwrap_or(usize::MAX);
+    if !(1..=MAX_TILE_DEPTH).contains(&a.tile_depth) {
+        bail!("--tile-depth must be between 1 and 15, got {}", a.tile_depth);
+    }
+    let prefixes = 1u64 << (3 * u32::from(a.tile_depth));
+    if a.tasks == 0 || u64::from(a.tasks) > prefixes {
+        bail!("--tasks must be between 1 and {prefixes} (the tiles at depth {}), got {}", a.tile_depth, a.tasks);
+    }
+    let name = input::name(&a.input);
+    let keys = KeySpace::new(a.res);
+    let mut work = TileWork::new(a.res, a.tile_depth)?;
+    let mut reader = input::open_graph(&a.input)?;
+    let mut count = 0;
+    for node in reader.by_ref().take(scans) {
+        let node = node.with_context(|| format!("cannot read {name}"))?;
+        let (cloud, origin) = node.graph2tree();
+        let mut points = cloud.points;
+        if a.discretize {
+            // one ray per end voxel, from its centre, as the build casts
+            let mut seen = HashSet::new();
+            points.retain(|&p| p.is_finite() && keys.key(p).is_ok_and(|k| seen.insert(k)));
+            points.iter_mut().for_each(|p| *p = keys.key_to_point(keys.key_unchecked(*p)));
+        }
+        work.add_scan(&points, origin, max_range);
+        count += 1;
+    }
+    let plan = work.split(a.tasks)?;
+    if let Some(path) = &a.output {
+        let text = plan.to_text();
+        write_atomically(path, |w| w.write_all(text.as_bytes()))
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    let total: u64 = plan.tasks.iter().map(|t| t.work).sum();
+    if a.json {
+        let tasks: Vec<_> = plan
+            .tasks
+            .iter()
+            .enumerate()
+            .map(|(i, t)| {
+                serde_json::json!({
+                    "task": i, "prefix_start": t.prefixes.start, "prefix_end": t.prefixes.end,
+                    "tiles": t.tiles, "work": t.work,
+                })
+            })
+            .collect();
+        let out = serde_json::json!({
+            "input": name, "scans": count, "resolution": plan.resolution, "tile_depth": plan.depth,
+            "work": total, "tasks": tasks, "output": a.output,
+        });
+        println!("{out}");
+        return Ok(());
+    }
+    let edge = a.res * f64::from(1u32 << (16 - u32::from(a.tile_depth)));
+    println!(
+        "{} tasks over the tiles of depth {} ({edge} m a side) of {name} ({count} scans, {total} estimated ray steps)",
+        plan.tasks.len(),
+        plan.depth,
+    );
+    println!("{:>6}  {:>25}  {:>7}  {:>12}  {:>6}", "task", "tile prefixes", "tiles", "ray steps", "share");
+    for (i, t) in plan.tasks.iter().enumerate() {
+        let share = if total == 0 { 0.0 } else { 100.0 * t.work as f64 / total as f64 };
+        let range = format!("{}..{}", t.prefixes.start, t.prefixes.end);
+        println!("{i:>6}  {range:>25}  {:>7}  {:>12}  {share:>5.1}%", t.tiles, t.work);
+    }
+    if let Some(path) = &a.output {
+        println!("Plan written to {}", path.display());
+    }
+    Ok(())
+}
+
+/// Reads a plan file; its errors name the file and line.
+pub fn read_plan(path: &Path) -> Result<TilePlan> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read the plan {}", path.display()))?;
+    TilePlan::parse(&text).with_context(|| format!("{} is not a valid plan", path.display()))
+}
