@@ -77,42 +77,37 @@ fn finished_build(dir: &Path, wanted: &Manifest) -> Option<Manifest> {
 
 /// Removes the tile files in `dir` that `manifest` does not list (left by
 /// an earlier build), as `octolinear build` does after a whole set.
-fn remove_unlisted_tiles(dir: &Path, manifest: &Manifest) -> Result<(), TileError> {
+fn remove_unlisted_tiles(dir: &Path, manifest: &Manifest) -> PyResult<()> {
     let listed: std::collections::HashSet<String> = manifest.tiles.iter().map(|t| t.id.file_name()).collect();
-    for item in std::fs::read_dir(dir).map_err(|e| TileError::Io { path: dir.into(), source: e })? {
-        let item = item.map_err(|e| TileError::Io { path: dir.into(), source: e })?;
+    for item in std::fs::read_dir(dir).map_err(|e| convert::io_error(dir, &e))? {
+        let item = item.map_err(|e| convert::io_error(dir, &e))?;
         let name = item.file_name();
         let Some(name) = name.to_str() else { continue };
         if TileId::from_file_name(name).is_some() && !listed.contains(name) {
-            std::fs::remove_file(item.path()).map_err(|e| TileError::Io { path: item.path(), source: e })?;
+            std::fs::remove_file(item.path()).map_err(|e| convert::io_error(&item.path(), &e))?;
         }
     }
     Ok(())
 }
 
-/// Nodes of the single tree a whole set in `dir` holds.
-fn set_nodes(dir: &Path) -> Result<u64, TileError> {
-    Ok(TileSet::open(dir)?.node_count())
+/// Nodes of the single tree the whole set in `dir` holds.
+fn set_nodes(dir: &Path) -> PyResult<u64> {
+    Ok(TileSet::open(dir).map_err(tile_error)?.node_count())
 }
 
-/// What a build, a skipped build or a combination of parts wrote, as the
-/// summary dict the functions return.
+/// The summary dict of what `manifest` lists: `tiles`, `nodes`, `bytes`,
+/// `seconds`.
 fn summary<'py>(
     py: Python<'py>,
     manifest: &Manifest,
     nodes: Option<u64>,
-    seconds: f64,
-    built: Option<(usize, usize)>,
+    started: Instant,
 ) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("tiles", manifest.tiles.len())?;
     d.set_item("nodes", nodes)?;
     d.set_item("bytes", manifest.tiles.iter().map(|t| t.bytes).sum::<u64>())?;
-    d.set_item("seconds", seconds)?;
-    d.set_item("task", manifest.task.map(|t| (t.index, t.count)))?;
-    d.set_item("skipped", built.is_none())?;
-    d.set_item("scans", built.map(|b| b.0))?;
-    d.set_item("points", built.map(|b| b.1))?;
+    d.set_item("seconds", started.elapsed().as_secs_f64())?;
     Ok(d)
 }
 
@@ -187,11 +182,9 @@ pub fn build_tiles<'py>(
     };
     type Built = (Manifest, Option<u64>, Option<(usize, usize)>);
     let (manifest, nodes, built) = py.detach(|| -> PyResult<Built> {
-        if resume {
-            if let Some(found) = finished_build(&dir, &wanted) {
-                let nodes = if task.is_none() { Some(set_nodes(&dir).map_err(tile_error)?) } else { None };
-                return Ok((found, nodes, None));
-            }
+        if let Some(found) = resume.then(|| finished_build(&dir, &wanted)).flatten() {
+            let nodes = if task.is_none() { Some(set_nodes(&dir)?) } else { None };
+            return Ok((found, nodes, None));
         }
         let mut reader = graph::open(&path).map_err(|e| graph_error(&path, e))?;
         let (mut failure, mut count) = (None, (0, 0));
@@ -206,12 +199,17 @@ pub fn build_tiles<'py>(
         }
         let manifest = map.flush(&dir).map_err(tile_error)?;
         if task.is_none() {
-            remove_unlisted_tiles(&dir, &manifest).map_err(tile_error)?;
+            remove_unlisted_tiles(&dir, &manifest)?;
         }
         let nodes = task.is_none().then(|| map.stats().nodes);
         Ok((manifest, nodes, Some(count)))
     })?;
-    summary(py, &manifest, nodes, started.elapsed().as_secs_f64(), built)
+    let d = summary(py, &manifest, nodes, started)?;
+    d.set_item("task", manifest.task.map(|t| (t.index, t.count)))?;
+    d.set_item("skipped", built.is_none())?;
+    d.set_item("scans", built.map(|b| b.0))?;
+    d.set_item("points", built.map(|b| b.1))?;
+    Ok(d)
 }
 
 /// Plans how `tasks` tasks share the tiles of a build of `graph_path`
@@ -221,7 +219,7 @@ pub fn build_tiles<'py>(
 /// reach its range. Returns the plan's text, for `build_tiles(...,
 /// task=(k, tasks), plan=text)`; `None` when this build of octolinear has
 /// no tile planner, and tasks then share the tiles by a hash of their
-/// position (`task=(k, n)` alone). Runs without the GIL.
+/// position (`task=(k, n)` alone).
 #[pyfunction]
 #[pyo3(signature = (graph_path, *, resolution=0.1, tile_depth, tasks, max_range=None, discretize=false, scans=None))]
 #[allow(clippy::too_many_arguments)]
@@ -268,17 +266,11 @@ fn planned_task(text: &str, resolution: f64, tile_depth: u8, task: Option<TaskPa
 pub fn write_tile_manifest<'py>(py: Python<'py>, out_dir: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
     let started = Instant::now();
     let dir = convert::path(out_dir)?;
-    let (manifest, nodes) = py
-        .detach(|| -> Result<_, TileError> {
-            let manifest = octolinear::tiles::combine_parts(&dir)?;
-            Ok((manifest, set_nodes(&dir)?))
-        })
-        .map_err(tile_error)?;
-    let d = summary(py, &manifest, Some(nodes), started.elapsed().as_secs_f64(), None)?;
-    for key in ["task", "skipped", "scans", "points"] {
-        d.del_item(key)?;
-    }
-    Ok(d)
+    let (manifest, nodes) = py.detach(|| -> PyResult<_> {
+        let manifest = octolinear::tiles::combine_parts(&dir).map_err(tile_error)?;
+        Ok((manifest, set_nodes(&dir)?))
+    })?;
+    summary(py, &manifest, Some(nodes), started)
 }
 
 /// Writes the map of the tile set `tiles_dir` to `output`, atomically, as
