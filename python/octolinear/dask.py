@@ -57,8 +57,9 @@ def build_tiles(inputs, out_dir, *, resolution, tile_depth, client, tasks=None, 
     (``task-K-of-N.manifest``) is already in ``out_dir``, built with the
     same parameters, and whose tiles all verify (lengths, CRC-32s,
     structure) is not run again; a task interrupted before its part file
-    was written is. The input and scan options are not recorded in the
-    part files: resume only a build of the same input and options.
+    was written is, and so is a finished set (its parts combined into the
+    manifest). The input and scan options are not recorded in the part
+    files: resume only a build of the same input and options.
 
     ``build_options``: ``max_range``, ``discretize``, ``sensor``,
     ``clamping``, ``scans``, ``threads``, as for ``octolinear.build_tiles``.
