@@ -16,6 +16,7 @@ import os
 import re
 import time
 import uuid
+from typing import Any, Optional, Union
 
 try:
     import distributed
@@ -38,7 +39,17 @@ _PART_FILE = re.compile(r"task-\d+-of-(\d+)\.manifest")
 _TILE_TEMP_FILE = re.compile(r"\.d\d+-\d+-\d+-\d+\.olm\.\d+\.\d+\.tmp")
 
 
-def build_tiles(inputs, out_dir, *, resolution, tile_depth, client, tasks=None, resume=True, **build_options):
+def build_tiles(
+    inputs: Union[str, os.PathLike],
+    out_dir: Union[str, os.PathLike],
+    *,
+    resolution: float,
+    tile_depth: int,
+    client: "distributed.Client",
+    tasks: Optional[int] = None,
+    resume: bool = True,
+    **build_options: Any,
+) -> dict[str, Any]:
     """Builds the tile set of the ``.graph`` file ``inputs`` in ``out_dir`` on
     the Dask cluster of ``client``, as ``octolinear.build_tiles(inputs,
     out_dir, resolution=..., tile_depth=...)`` does on one machine.
