@@ -1,7 +1,7 @@
 """Type stubs of the compiled module (re-exported by ``octolinear``)."""
 
 import os
-from typing import Iterator, Literal, Optional, Sequence, Tuple, Union, overload
+from typing import Any, Iterator, Literal, Optional, Sequence, Tuple, Union, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -265,6 +265,47 @@ def build(
     threads: Optional[int] = None,
 ) -> OcTree:
     """What ``octolinear build`` does: a map from a .graph file."""
+
+def build_tiles(
+    graph_path: PathArg,
+    out_dir: PathArg,
+    *,
+    resolution: float = 0.1,
+    tile_depth: int,
+    max_range: Optional[float] = None,
+    discretize: bool = False,
+    sensor: Optional[Tuple[float, float]] = None,
+    clamping: Optional[Tuple[float, float]] = None,
+    scans: Optional[int] = None,
+    threads: Optional[int] = None,
+    task: Optional[Tuple[int, int]] = None,
+    plan: Optional[str] = None,
+    resume: bool = False,
+) -> dict[str, Any]:
+    """What ``octolinear build IN -o OUT.tiles --tile-depth D [--task K/N]`` does:
+    a tile set (or one task's part of it) from a .graph file. Returns its
+    summary: tiles, bytes, nodes, seconds, task, skipped, scans, points."""
+
+def plan_tiles(
+    graph_path: PathArg,
+    *,
+    resolution: float = 0.1,
+    tile_depth: int,
+    tasks: int,
+    max_range: Optional[float] = None,
+    discretize: bool = False,
+    scans: Optional[int] = None,
+) -> Optional[str]:
+    """The text of a plan sharing a tile build among ``tasks`` tasks, or None
+    without a tile planner (tasks then share the tiles by hash)."""
+
+def write_tile_manifest(out_dir: PathArg) -> dict[str, Any]:
+    """What ``octolinear tiles manifest`` does: the task parts combined into the
+    set's manifest. Returns tiles, nodes, bytes, seconds."""
+
+def convert_tiles(tiles_dir: PathArg, output: PathArg) -> None:
+    """What ``octolinear convert MAP.tiles OUT`` does: a tile set written as
+    .ot or .bt (tile by tile) or .olm."""
 
 @overload
 def read_points(path: PathArg, colors: Literal[False] = False) -> npt.NDArray[np.float64]: ...

@@ -96,7 +96,9 @@ pub fn save(py: Python<'_>, tree: &OccupancyTree, path: &Path) -> PyResult<()> {
     .map_err(|e| convert::io_error(path, &e))
 }
 
-fn graph_error(path: &Path, e: graph::GraphError) -> PyErr {
+/// A `.graph` file that could not be read: `OSError` for I/O, `ValueError`
+/// for content (a truncated file included), the path in the message.
+pub(crate) fn graph_error(path: &Path, e: graph::GraphError) -> PyErr {
     match e {
         graph::GraphError::Io { source, .. } if source.kind() != std::io::ErrorKind::UnexpectedEof => {
             convert::io_error(path, &source)
@@ -134,7 +136,7 @@ pub fn read_graph<'py>(
 
 /// The sensor model `octolinear build` (and graph2tree) uses, with the
 /// optional `(miss, hit)` and `(min, max)` clamping probabilities.
-fn sensor_model(sensor: Option<(f64, f64)>, clamping: Option<(f64, f64)>) -> PyResult<SensorModel> {
+pub(crate) fn sensor_model(sensor: Option<(f64, f64)>, clamping: Option<(f64, f64)>) -> PyResult<SensorModel> {
     let mut p = SensorProbabilities::default();
     if let Some((miss, hit)) = sensor {
         (p.miss, p.hit) = (miss, hit);
@@ -143,6 +145,27 @@ fn sensor_model(sensor: Option<(f64, f64)>, clamping: Option<(f64, f64)>) -> PyR
         (p.clamping_min, p.clamping_max) = (lo, hi);
     }
     SensorModel::from_probabilities(&p).map_err(|e| PyValueError::new_err(e.to_string()))
+}
+
+/// The first `limit` scans (all with `None`) of an opened `.graph` file as
+/// `(points, origin)` in the world frame, as graph2tree transforms them,
+/// each read when insertion asks for it; a read error ends them and is
+/// left in `failure`.
+pub(crate) fn graph_scans<'a, R: std::io::Read>(
+    reader: &'a mut graph::ScanReader<R>,
+    limit: Option<usize>,
+    failure: &'a mut Option<graph::GraphError>,
+) -> impl Iterator<Item = (Vec<Point3>, Point3)> + 'a {
+    reader.take(limit.unwrap_or(usize::MAX)).map_while(|node| match node {
+        Ok(node) => {
+            let (cloud, origin) = node.graph2tree();
+            Some((cloud.points, origin))
+        }
+        Err(e) => {
+            *failure = Some(e);
+            None
+        }
+    })
 }
 
 /// Builds a map from an OctoMap `.graph` file as `octolinear build` (and
@@ -196,17 +219,7 @@ pub fn build<'py>(
     let built = py.detach(|| -> Result<OccupancyTree, PyErr> {
         let mut reader = graph::open(&path).map_err(|e| graph_error(&path, e))?;
         let mut failure = None;
-        let limit = scans.unwrap_or(usize::MAX);
-        let stream = reader.by_ref().take(limit).map_while(|node| match node {
-            Ok(node) => {
-                let (cloud, origin) = node.graph2tree();
-                Some((cloud.points, origin))
-            }
-            Err(e) => {
-                failure = Some(e);
-                None
-            }
-        });
+        let stream = graph_scans(&mut reader, scans, &mut failure);
         tree.insert_point_clouds(stream, &opts, |t, _| {
             if compress_ml {
                 t.to_max_likelihood();

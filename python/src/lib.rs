@@ -3,7 +3,9 @@
 //! (same names, argument order and bit-identical answers and files); the
 //! array methods (`occupancy`, `cast_rays`, `leaves`) and the module
 //! functions (`read`, `open_mapped`, `read_graph`, `build`, `read_points`)
-//! answer whole numpy arrays in one call, without the GIL.
+//! answer whole numpy arrays in one call, without the GIL; `build_tiles`,
+//! `plan_tiles`, `write_tile_manifest` and `convert_tiles` build tile sets
+//! in parts, which `octolinear.dask` shares among a Dask cluster's workers.
 
 // Python method names follow octomap-python (camelCase), argument names too
 #![allow(non_snake_case)]
@@ -15,6 +17,7 @@ mod mapped;
 mod nodes;
 mod octree;
 mod queries;
+mod tiles;
 
 use pyo3::prelude::*;
 
@@ -57,6 +60,10 @@ fn _octolinear(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(files::build, m)?)?;
     m.add_function(wrap_pyfunction!(files::read_points, m)?)?;
     m.add_function(wrap_pyfunction!(mapped::open_mapped, m)?)?;
+    m.add_function(wrap_pyfunction!(tiles::build_tiles, m)?)?;
+    m.add_function(wrap_pyfunction!(tiles::plan_tiles, m)?)?;
+    m.add_function(wrap_pyfunction!(tiles::write_tile_manifest, m)?)?;
+    m.add_function(wrap_pyfunction!(tiles::convert_tiles, m)?)?;
     m.add_function(wrap_pyfunction!(set_num_threads, m)?)?;
     m.add_function(wrap_pyfunction!(get_num_threads, m)?)?;
     m.add("UNKNOWN", queries::UNKNOWN)?;

@@ -1,7 +1,8 @@
 //! Runs the Python package's pytest suite (python/tests) from `cargo test`:
 //! makes a venv under the target directory, installs the test
-//! requirements into it (once), builds the abi3 wheel with maturin,
-//! installs it and runs pytest, failing when pytest fails.
+//! requirements into it (once; `dask[distributed]` whenever it is
+//! missing), builds the abi3 wheel with maturin, installs it and runs
+//! pytest, failing when pytest fails.
 //!
 //! Without `python3` the test prints why it is skipped and passes, unless
 //! `CI=true`, where it fails. `OCTOLINEAR_PYTHON` names another
@@ -14,6 +15,11 @@ use std::process::Command;
 /// What the venv needs besides the package; pinned where the tests
 /// compare against an exact version.
 const REQUIREMENTS: &[&str] = &["maturin>=1.7,<2", "numpy", "pytest", "octomap-python==1.10.0.0"];
+
+/// Requirements of some tests only, as (module, requirement): installed
+/// into the venv when the module is missing; where that fails (no
+/// network), their tests skip (and fail under `CI=true`).
+const OPTIONAL: &[(&str, &str)] = &[("distributed", "dask[distributed]")];
 
 fn run(cmd: &mut Command, what: &str) {
     eprintln!("pytest.rs: {what}: {cmd:?}");
@@ -44,6 +50,22 @@ fn venv(python: &Path, dir: &Path) -> PathBuf {
     );
     std::fs::write(&stamp, wanted).expect("write the venv's requirements stamp");
     bin
+}
+
+/// Installs the [`OPTIONAL`] requirements whose modules the venv lacks.
+fn install_optional(bin: &Path) {
+    for (module, requirement) in OPTIONAL {
+        let python = || Command::new(bin.join("python"));
+        if python().args(["-c", &format!("import {module}")]).output().is_ok_and(|o| o.status.success()) {
+            continue;
+        }
+        let mut pip = python();
+        pip.args(["-m", "pip", "install", "--quiet", "--disable-pip-version-check", requirement]);
+        eprintln!("pytest.rs: install {requirement}: {pip:?}");
+        if !pip.status().is_ok_and(|s| s.success()) {
+            eprintln!("pytest.rs: {requirement} could not be installed: the tests that need it skip");
+        }
+    }
 }
 
 /// Splits at whitespace outside single or double quotes, as a shell
@@ -87,6 +109,7 @@ fn pytest_suite_passes() {
     let crate_dir = Path::new(env!("CARGO_MANIFEST_DIR"));
     let work = Path::new(env!("CARGO_TARGET_TMPDIR")).join("python");
     let bin = venv(&python, &work.join("venv"));
+    install_optional(&bin);
     let dist = work.join("dist");
     let _ = std::fs::remove_dir_all(&dist);
     run(
@@ -109,8 +132,11 @@ fn pytest_suite_passes() {
         "install the wheel",
     );
     let extra = split_args(&std::env::var("OCTOLINEAR_PYTEST_ARGS").unwrap_or_default());
+    // the venv's pytest script run by the venv's interpreter, not through
+    // the script's first line, which names where the venv was made
     run(
-        Command::new(bin.join("pytest"))
+        Command::new(bin.join("python"))
+            .arg(bin.join("pytest"))
             .current_dir(crate_dir)
             .args(["-q", "-p", "no:cacheprovider"])
             .args(extra)

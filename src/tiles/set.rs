@@ -143,14 +143,23 @@ impl TileSet {
     /// structure, root node against the manifest), whatever
     /// [`Self::set_check`] says; the first fault is the error.
     pub fn verify(&self) -> Result<TileSetReport, TileError> {
+        let bytes = Self::verify_tiles(&self.dir, &self.manifest)?;
+        Ok(TileSetReport { tiles: self.manifest.tiles.len(), bytes, nodes: self.node_count() })
+    }
+
+    /// Checks every tile `manifest` lists (a whole set's or a task's part)
+    /// fully against its file in `dir`, as [`Self::verify`] does, and
+    /// returns the bytes read: how a build in parts that was interrupted
+    /// knows which tasks' tiles it can keep.
+    pub fn verify_tiles(dir: &Path, manifest: &Manifest) -> Result<u64, TileError> {
         let mut bytes = 0;
-        for entry in &self.manifest.tiles {
-            let map = open_tile(&self.dir, entry)?;
-            check_tile(&map, entry, &self.manifest, TileCheck::Full)
-                .map_err(|reason| TileError::damaged(entry.id, self.dir.join(entry.id.file_name()), reason))?;
+        for entry in &manifest.tiles {
+            let map = open_tile(dir, entry)?;
+            check_tile(&map, entry, manifest, TileCheck::Full)
+                .map_err(|reason| TileError::damaged(entry.id, dir.join(entry.id.file_name()), reason))?;
             bytes += entry.bytes;
         }
-        Ok(TileSetReport { tiles: self.manifest.tiles.len(), bytes, nodes: self.node_count() })
+        Ok(bytes)
     }
 
     /// The derived levels above the tiles.

@@ -1,0 +1,304 @@
+//! Tile sets from Python (formats/tiles.md): `build_tiles` (what `octolinear
+//! build IN -o OUT.tiles --tile-depth D [--task K/N]` does),
+//! `write_tile_manifest` (`octolinear tiles manifest`), `convert_tiles`
+//! (`octolinear convert MAP.tiles OUT`) and `plan_tiles`, the building blocks
+//! of builds shared by many processes (`octolinear.dask`).
+
+use crate::convert;
+use crate::files::{graph_error, graph_scans, sensor_model};
+use octolinear::formats::{bt, graph, ot, write_atomically};
+use octolinear::tiles::{read_manifest, Manifest, TaskPart, TileError, TileId, TileSet, TiledMap, MANIFEST_FILE};
+use octolinear::{InnerNodes, NodeKind, OutOfMap, ScanOptions, TreeKind};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::Path;
+use std::time::Instant;
+
+/// A tile error as the matching Python exception: `OSError` for I/O,
+/// `ValueError` for anything else (damaged tiles, bad manifests, refused
+/// scans), the file in the message.
+fn tile_error(e: TileError) -> PyErr {
+    match e {
+        TileError::Io { path, source } => convert::io_error(&path, &source),
+        other => PyValueError::new_err(other.to_string()),
+    }
+}
+
+/// An I/O error of a file writer walking a tile set: the tile error inside
+/// when a tile could not be read, else the error on `path`.
+fn walk_error(path: &Path, e: std::io::Error) -> PyErr {
+    if e.get_ref().is_some_and(|inner| inner.is::<TileError>()) {
+        let inner = e.into_inner().expect("checked above").downcast::<TileError>().expect("checked above");
+        return tile_error(*inner);
+    }
+    convert::io_error(path, &e)
+}
+
+/// Checks the arguments shared by `build_tiles` and `plan_tiles`.
+fn check_build_arguments(tile_depth: u8, max_range: Option<f64>, scans: Option<usize>) -> PyResult<()> {
+    if !(1..=octolinear::tiles::MAX_TILE_DEPTH).contains(&tile_depth) {
+        return Err(PyValueError::new_err(format!("tile_depth must be between 1 and 15, got {tile_depth}")));
+    }
+    if let Some(r) = max_range.filter(|r| !(r.is_finite() && *r > 0.0)) {
+        return Err(PyValueError::new_err(format!(
+            "max_range must be a positive finite number of metres, got {r} (None for no limit)"
+        )));
+    }
+    if scans == Some(0) {
+        return Err(PyValueError::new_err("scans must be at least 1 (None for every scan)"));
+    }
+    Ok(())
+}
+
+/// `task=(k, n)` as the library's task part, checked.
+fn task_part(task: (u32, u32)) -> PyResult<TaskPart> {
+    let (index, count) = task;
+    if count == 0 || index >= count {
+        return Err(PyValueError::new_err(format!("task must be (k, n) with 0 <= k < n, got ({index}, {count})")));
+    }
+    Ok(TaskPart { index, count })
+}
+
+/// The manifest (or task part) an earlier build with these parameters
+/// left in `dir`, when every tile it lists is there and verifies fully;
+/// `None` when it is missing, unreadable, of other parameters or its tiles
+/// do not verify (the build then runs again).
+fn finished_build(dir: &Path, wanted: &Manifest) -> Option<Manifest> {
+    let name = wanted.task.map_or_else(|| MANIFEST_FILE.to_string(), TaskPart::file_name);
+    let found = read_manifest(&dir.join(name)).ok()?;
+    let parameters = Manifest { tiles: Vec::new(), ..found.clone() };
+    if parameters != *wanted {
+        return None;
+    }
+    TileSet::verify_tiles(dir, &found).ok()?;
+    Some(found)
+}
+
+/// Removes the tile files in `dir` that `manifest` does not list (left by
+/// an earlier build), as `octolinear build` does after a whole set.
+fn remove_unlisted_tiles(dir: &Path, manifest: &Manifest) -> PyResult<()> {
+    let listed: std::collections::HashSet<String> = manifest.tiles.iter().map(|t| t.id.file_name()).collect();
+    for item in std::fs::read_dir(dir).map_err(|e| convert::io_error(dir, &e))? {
+        let item = item.map_err(|e| convert::io_error(dir, &e))?;
+        let name = item.file_name();
+        let Some(name) = name.to_str() else { continue };
+        if TileId::from_file_name(name).is_some() && !listed.contains(name) {
+            std::fs::remove_file(item.path()).map_err(|e| convert::io_error(&item.path(), &e))?;
+        }
+    }
+    Ok(())
+}
+
+/// Nodes of the single tree the whole set in `dir` holds.
+fn set_nodes(dir: &Path) -> PyResult<u64> {
+    Ok(TileSet::open(dir).map_err(tile_error)?.node_count())
+}
+
+/// The summary dict of what `manifest` lists: `tiles`, `nodes`, `bytes`,
+/// `seconds`.
+fn summary<'py>(
+    py: Python<'py>,
+    manifest: &Manifest,
+    nodes: Option<u64>,
+    started: Instant,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("tiles", manifest.tiles.len())?;
+    d.set_item("nodes", nodes)?;
+    d.set_item("bytes", manifest.tiles.iter().map(|t| t.bytes).sum::<u64>())?;
+    d.set_item("seconds", started.elapsed().as_secs_f64())?;
+    Ok(d)
+}
+
+/// Builds a tile set (formats/tiles.md) in `out_dir` from an OctoMap
+/// `.graph` file, as `octolinear build GRAPH -o OUT.tiles --tile-depth D`
+/// does: the same tiles, which `convert_tiles` writes as the `.ot` and
+/// `.bt` bytes of `build`. Scans are read one at a time; runs without the
+/// GIL. `resolution`, `max_range`, `discretize`, `sensor`, `clamping`,
+/// `scans` and `threads` as for `build`.
+///
+/// With `task=(k, n)` only task `k`'s share of the tiles is built and its
+/// part file `task-k-of-n.manifest` written (`--task k/n`); once all `n`
+/// tasks are done, `write_tile_manifest` combines the parts. `plan` is the
+/// text of `plan_tiles` for the same `n`, which gives each task a balanced
+/// range of tiles; without it the tiles are shared by a hash of their
+/// position. With `resume=True` a build whose manifest (or part file) is
+/// already in `out_dir` with the same parameters, and whose tiles all
+/// verify (lengths, CRC-32s, structure), is not run again; the input and
+/// the scan options are not recorded there, so resume only with the ones
+/// that built it.
+///
+/// Returns a dict: `tiles`, `bytes` (of tile files), `nodes` (of the whole
+/// map; `None` for a task), `seconds`, `task` (`(k, n)` or `None`),
+/// `skipped` (resumed), `scans` and `points` (`None` when skipped).
+#[pyfunction]
+#[pyo3(signature = (graph_path, out_dir, *, resolution=0.1, tile_depth, max_range=None, discretize=false,
+                    sensor=None, clamping=None, scans=None, threads=None, task=None, plan=None, resume=false))]
+#[allow(clippy::too_many_arguments)]
+pub fn build_tiles<'py>(
+    py: Python<'py>,
+    graph_path: &Bound<'py, PyAny>,
+    out_dir: &Bound<'py, PyAny>,
+    resolution: f64,
+    tile_depth: u8,
+    max_range: Option<f64>,
+    discretize: bool,
+    sensor: Option<(f64, f64)>,
+    clamping: Option<(f64, f64)>,
+    scans: Option<usize>,
+    threads: Option<usize>,
+    task: Option<(u32, u32)>,
+    plan: Option<&str>,
+    resume: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let started = Instant::now();
+    let path = convert::path(graph_path)?;
+    let dir = convert::path(out_dir)?;
+    check_build_arguments(tile_depth, max_range, scans)?;
+    match threads {
+        Some(0) => return Err(PyValueError::new_err("threads must be at least 1")),
+        Some(n) => crate::queries::check_threads(n)?,
+        None => {}
+    }
+    let task = task.map(task_part).transpose()?;
+    let task = match plan {
+        Some(text) => Some(planned_task(text, resolution, tile_depth, task)?),
+        None => task,
+    };
+    let sensor = sensor_model(sensor, clamping)?;
+    let mut map = TiledMap::new(resolution, sensor, NodeKind::Plain, tile_depth).map_err(tile_error)?;
+    if let Some(t) = task {
+        map.set_task(t);
+    }
+    let wanted = Manifest { resolution, depth: tile_depth, kind: TreeKind::OcTree, sensor, task, tiles: Vec::new() };
+    let opts = ScanOptions {
+        max_range,
+        discretize,
+        inner: InnerNodes::Update,
+        bbx: None,
+        out_of_map: OutOfMap::OctoMap,
+        threads: threads.or_else(crate::queries::scan_threads),
+    };
+    type Built = (Manifest, Option<u64>, Option<(usize, usize)>);
+    let (manifest, nodes, built) = py.detach(|| -> PyResult<Built> {
+        if let Some(found) = resume.then(|| finished_build(&dir, &wanted)).flatten() {
+            let nodes = if task.is_none() { Some(set_nodes(&dir)?) } else { None };
+            return Ok((found, nodes, None));
+        }
+        let mut reader = graph::open(&path).map_err(|e| graph_error(&path, e))?;
+        let (mut failure, mut count) = (None, (0, 0));
+        let stream = graph_scans(&mut reader, scans, &mut failure).inspect(|(points, _)| {
+            count.0 += 1;
+            count.1 += points.len();
+        });
+        map.insert_point_clouds(stream, &opts, |_, _| {})
+            .map_err(|(i, e)| PyValueError::new_err(format!("{}: scan {i}: {e}", path.display())))?;
+        if let Some(e) = failure {
+            return Err(graph_error(&path, e));
+        }
+        let manifest = map.flush(&dir).map_err(tile_error)?;
+        if task.is_none() {
+            remove_unlisted_tiles(&dir, &manifest)?;
+        }
+        let nodes = task.is_none().then(|| map.stats().nodes);
+        Ok((manifest, nodes, Some(count)))
+    })?;
+    let d = summary(py, &manifest, nodes, started)?;
+    d.set_item("task", manifest.task.map(|t| (t.index, t.count)))?;
+    d.set_item("skipped", built.is_none())?;
+    d.set_item("scans", built.map(|b| b.0))?;
+    d.set_item("points", built.map(|b| b.1))?;
+    Ok(d)
+}
+
+/// Plans how `tasks` tasks share the tiles of a build of `graph_path`
+/// (`build_tiles` with the same `resolution`, `tile_depth`, `max_range`,
+/// `discretize`, `scans`): each task gets a contiguous range of tiles of
+/// about equal estimated ray-casting work, and casts only the rays that
+/// reach its range. Returns the plan's text, for `build_tiles(...,
+/// task=(k, tasks), plan=text)`; `None` when this build of octolinear has
+/// no tile planner, and tasks then share the tiles by a hash of their
+/// position (`task=(k, n)` alone).
+#[pyfunction]
+#[pyo3(signature = (graph_path, *, resolution=0.1, tile_depth, tasks, max_range=None, discretize=false, scans=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn plan_tiles(
+    graph_path: &Bound<'_, PyAny>,
+    resolution: f64,
+    tile_depth: u8,
+    tasks: u32,
+    max_range: Option<f64>,
+    discretize: bool,
+    scans: Option<usize>,
+) -> PyResult<Option<String>> {
+    convert::path(graph_path)?;
+    check_build_arguments(tile_depth, max_range, scans)?;
+    if !(resolution.is_finite() && resolution > 0.0) {
+        return Err(PyValueError::new_err(format!("resolution must be a positive number of metres, got {resolution}")));
+    }
+    if tasks == 0 {
+        return Err(PyValueError::new_err("tasks must be at least 1"));
+    }
+    // FALLBACK until the library's tile planner (`octolinear::tiles::TileWork`,
+    // `TilePlan`) is available: no plan, the tasks share the tiles by hash.
+    let _ = discretize;
+    Ok(None)
+}
+
+/// Task `task` of the plan `text`, checked against the build's parameters.
+fn planned_task(text: &str, resolution: f64, tile_depth: u8, task: Option<TaskPart>) -> PyResult<TaskPart> {
+    let Some(task) = task else {
+        return Err(PyValueError::new_err("plan needs task=(k, n): the task of the plan to build"));
+    };
+    // FALLBACK until the library's tile planner (`octolinear::tiles::TilePlan`)
+    // is available: `plan_tiles` gives no plan, so there is none to follow.
+    let _ = (text, resolution, tile_depth, task);
+    Err(PyValueError::new_err("this build of octolinear has no tile planner (plan_tiles returns None): pass plan=None"))
+}
+
+/// Combines the task parts in `out_dir` (`task-K-of-N.manifest`, written by
+/// `build_tiles(..., task=(k, n))`) into the tile set's manifest, as
+/// `octolinear tiles manifest` does: every part of one `n` must be there,
+/// built with the same parameters; the parts are removed. Returns a dict:
+/// `tiles`, `nodes` (of the whole map), `bytes` (of tile files), `seconds`.
+#[pyfunction]
+pub fn write_tile_manifest<'py>(py: Python<'py>, out_dir: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyDict>> {
+    let started = Instant::now();
+    let dir = convert::path(out_dir)?;
+    let (manifest, nodes) = py.detach(|| -> PyResult<_> {
+        let manifest = octolinear::tiles::combine_parts(&dir).map_err(tile_error)?;
+        Ok((manifest, set_nodes(&dir)?))
+    })?;
+    summary(py, &manifest, Some(nodes), started)
+}
+
+/// Writes the map of the tile set `tiles_dir` to `output`, atomically, as
+/// `octolinear convert MAP.tiles OUT` does: `.ot` and `.bt` tile by tile
+/// (one tile in memory at a time), the bytes `build` writes for the same
+/// input; `.olm` from the tiles merged into one tree. Every tile is checked
+/// fully as it is read. Runs without the GIL.
+#[pyfunction]
+pub fn convert_tiles(py: Python<'_>, tiles_dir: &Bound<'_, PyAny>, output: &Bound<'_, PyAny>) -> PyResult<()> {
+    let dir = convert::path(tiles_dir)?;
+    let output = convert::path(output)?;
+    let ext = output.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
+    if !matches!(ext.as_str(), "ot" | "bt" | "olm") {
+        return Err(PyValueError::new_err(format!(
+            "{}: give the map file a .bt, .ot or .olm extension",
+            output.display()
+        )));
+    }
+    py.detach(|| {
+        let set = TileSet::open(&dir).map_err(tile_error)?;
+        let written = match ext.as_str() {
+            "bt" => write_atomically(&output, |w| bt::write_map(&set, w).map(|_| ())),
+            "ot" => write_atomically(&output, |w| ot::write_map(&set, w)),
+            _ => {
+                let tree = set.merge().map_err(tile_error)?;
+                octolinear::mapped::write_file(&tree, &output)
+            }
+        };
+        written.map_err(|e| walk_error(&output, e))
+    })
+}
