@@ -6,8 +6,6 @@ use super::input;
 use anyhow::{bail, Context, Result};
 use octolinear::formats::write_atomically;
 use octolinear::tiles::{TilePlan, TileWork, MAX_TILE_DEPTH};
-use octolinear::KeySpace;
-use std::collections::HashSet;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -74,21 +72,17 @@ pub fn run(a: Args) -> Result<()> {
         bail!("--tasks must be between 1 and {prefixes} (the tiles at depth {}), got {}", a.tile_depth, a.tasks);
     }
     let name = input::name(&a.input);
-    let keys = KeySpace::new(a.res);
     let mut work = TileWork::new(a.res, a.tile_depth)?;
     let mut reader = input::open_graph(&a.input)?;
     let mut count = 0;
     for node in reader.by_ref().take(scans) {
         let node = node.with_context(|| format!("cannot read {name}"))?;
         let (cloud, origin) = node.graph2tree();
-        let mut points = cloud.points;
         if a.discretize {
-            // one ray per end voxel, from its centre, as the build casts
-            let mut seen = HashSet::new();
-            points.retain(|&p| p.is_finite() && keys.key(p).is_ok_and(|k| seen.insert(k)));
-            points.iter_mut().for_each(|p| *p = keys.key_to_point(keys.key_unchecked(*p)));
+            work.add_discretized_scan(&cloud.points, origin, max_range);
+        } else {
+            work.add_scan(&cloud.points, origin, max_range);
         }
-        work.add_scan(&points, origin, max_range);
         count += 1;
     }
     let plan = work.split(a.tasks)?;

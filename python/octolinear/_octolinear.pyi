@@ -295,9 +295,10 @@ def plan_tiles(
     max_range: Optional[float] = None,
     discretize: bool = False,
     scans: Optional[int] = None,
-) -> Optional[str]:
-    """The text of a plan sharing a tile build among ``tasks`` tasks, or None
-    without a tile planner (tasks then share the tiles by hash)."""
+) -> str:
+    """The text of a plan sharing a tile build among ``tasks`` tasks: a
+    contiguous range of tiles of about equal estimated work each, for
+    ``build_tiles(..., task=(k, tasks), plan=text)``."""
 
 def write_tile_manifest(out_dir: PathArg) -> dict[str, Any]:
     """What ``octolinear tiles manifest`` does: the task parts combined into the

@@ -57,8 +57,9 @@ def build_tiles(
     The tiles are shared by ``tasks`` Dask tasks (default: the cluster's
     worker threads), each ``octolinear.build_tiles(..., task=(k, tasks))``
     on one thread (``threads=1`` unless ``build_options`` says otherwise),
-    balanced by ``octolinear.plan_tiles`` where this build of octolinear
-    has a tile planner. Tasks are retried twice on errors, and run again
+    each a contiguous range of tiles of about equal estimated work from
+    ``octolinear.plan_tiles`` (the first Dask task), casting only the rays
+    that reach it. Tasks are retried twice on errors, and run again
     elsewhere when their worker dies; tile files are replaced atomically,
     so a killed task leaves no partial tile. Once all are done, their parts
     are combined into the manifest (part files of another task count and
@@ -78,8 +79,7 @@ def build_tiles(
     input, a damaged file) is raised here, after its retries.
 
     Returns a dict: ``tiles``, ``nodes`` (of the whole map), ``bytes`` (of
-    tile files), ``seconds`` (wall time), ``plan`` (the plan's text, or
-    ``None`` for the hash split), ``skipped`` (the tasks resumed), and
+    tile files), ``seconds`` (wall time), ``plan`` (the plan's text), ``skipped`` (the tasks resumed), and
     ``tasks``: per task, in task order, ``task``, ``worker`` (its address),
     ``seconds``, ``tiles``, ``bytes``, ``skipped``, ``scans``, ``points``.
     """

@@ -7,7 +7,9 @@
 use crate::convert;
 use crate::files::{graph_error, graph_scans, sensor_model};
 use octolinear::formats::{bt, graph, ot, write_atomically};
-use octolinear::tiles::{read_manifest, Manifest, TaskPart, TileError, TileId, TileSet, TiledMap, MANIFEST_FILE};
+use octolinear::tiles::{
+    read_manifest, Manifest, TaskPart, TileError, TileId, TilePlan, TileSet, TileWork, TiledMap, MANIFEST_FILE,
+};
 use octolinear::{InnerNodes, NodeKind, OutOfMap, ScanOptions, TreeKind};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -57,7 +59,7 @@ fn task_part(task: (u32, u32)) -> PyResult<TaskPart> {
     if count == 0 || index >= count {
         return Err(PyValueError::new_err(format!("task must be (k, n) with 0 <= k < n, got ({index}, {count})")));
     }
-    Ok(TaskPart { index, count })
+    Ok(TaskPart::hashed(index, count))
 }
 
 /// The manifest (or task part) an earlier build with these parameters
@@ -216,14 +218,14 @@ pub fn build_tiles<'py>(
 /// (`build_tiles` with the same `resolution`, `tile_depth`, `max_range`,
 /// `discretize`, `scans`): each task gets a contiguous range of tiles of
 /// about equal estimated ray-casting work, and casts only the rays that
-/// reach its range. Returns the plan's text, for `build_tiles(...,
-/// task=(k, tasks), plan=text)`; `None` when this build of octolinear has
-/// no tile planner, and tasks then share the tiles by a hash of their
-/// position (`task=(k, n)` alone).
+/// reach its range. Returns the plan's text (formats/tiles.md, the file
+/// `octolinear plan -o` writes), for `build_tiles(..., task=(k, tasks),
+/// plan=text)`. Reads the scans once, without the GIL.
 #[pyfunction]
 #[pyo3(signature = (graph_path, *, resolution=0.1, tile_depth, tasks, max_range=None, discretize=false, scans=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn plan_tiles(
+    py: Python<'_>,
     graph_path: &Bound<'_, PyAny>,
     resolution: f64,
     tile_depth: u8,
@@ -231,8 +233,7 @@ pub fn plan_tiles(
     max_range: Option<f64>,
     discretize: bool,
     scans: Option<usize>,
-) -> PyResult<Option<String>> {
-    convert::path(graph_path)?;
+) -> PyResult<String> {
     check_build_arguments(tile_depth, max_range, scans)?;
     if !(resolution.is_finite() && resolution > 0.0) {
         return Err(PyValueError::new_err(format!("resolution must be a positive number of metres, got {resolution}")));
@@ -240,10 +241,24 @@ pub fn plan_tiles(
     if tasks == 0 {
         return Err(PyValueError::new_err("tasks must be at least 1"));
     }
-    // FALLBACK until the library's tile planner (`octolinear::tiles::TileWork`,
-    // `TilePlan`) is available: no plan, the tasks share the tiles by hash.
-    let _ = discretize;
-    Ok(None)
+    let path = convert::path(graph_path)?;
+    let mut work = TileWork::new(resolution, tile_depth).map_err(tile_error)?;
+    py.detach(|| {
+        let mut reader = graph::open(&path).map_err(|e| graph_error(&path, e))?;
+        let mut failure = None;
+        for (points, origin) in graph_scans(&mut reader, scans, &mut failure) {
+            if discretize {
+                work.add_discretized_scan(&points, origin, max_range);
+            } else {
+                work.add_scan(&points, origin, max_range);
+            }
+        }
+        match failure {
+            Some(e) => Err(graph_error(&path, e)),
+            None => Ok(()),
+        }
+    })?;
+    Ok(work.split(tasks).map_err(tile_error)?.to_text())
 }
 
 /// Task `task` of the plan `text`, checked against the build's parameters.
@@ -251,10 +266,18 @@ fn planned_task(text: &str, resolution: f64, tile_depth: u8, task: Option<TaskPa
     let Some(task) = task else {
         return Err(PyValueError::new_err("plan needs task=(k, n): the task of the plan to build"));
     };
-    // FALLBACK until the library's tile planner (`octolinear::tiles::TilePlan`)
-    // is available: `plan_tiles` gives no plan, so there is none to follow.
-    let _ = (text, resolution, tile_depth, task);
-    Err(PyValueError::new_err("this build of octolinear has no tile planner (plan_tiles returns None): pass plan=None"))
+    let plan = TilePlan::parse(text).map_err(|e| PyValueError::new_err(format!("plan: {e}")))?;
+    if plan.resolution != resolution || plan.depth != tile_depth || plan.tasks.len() != task.count as usize {
+        return Err(PyValueError::new_err(format!(
+            "the plan is for resolution {}, tile_depth {} and {} tasks; the build asks resolution {resolution}, tile_depth {tile_depth}, task ({}, {})",
+            plan.resolution,
+            plan.depth,
+            plan.tasks.len(),
+            task.index,
+            task.count
+        )));
+    }
+    plan.task(task.index).map_err(tile_error)
 }
 
 /// Combines the task parts in `out_dir` (`task-K-of-N.manifest`, written by

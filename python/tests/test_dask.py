@@ -145,7 +145,9 @@ def test_an_interrupted_build_resumes(clients, reference, tmp_path):
     out = tmp_path / "map.tiles"
 
     def task(k, n, **options):
-        return octolinear.build_tiles(SAMPLE_GRAPH, out, task=(k, n), **MAP, **{**OPTIONS, **options})
+        # the plan build_tiles makes, from the build's options
+        plan = octolinear.plan_tiles(SAMPLE_GRAPH, tasks=n, **MAP, **OPTIONS)
+        return octolinear.build_tiles(SAMPLE_GRAPH, out, task=(k, n), plan=plan, **MAP, **{**OPTIONS, **options})
 
     # what an interrupted build of 4 tasks leaves, after an abandoned build
     # of 3 tasks: tasks 0 and 1 done, but a tile of task 1 damaged since;

@@ -76,12 +76,9 @@ def test_a_tile_set_gives_the_bytes_of_build(tmp_path, options, tile_depth):
     assert converted_bytes(parts, tmp_path) == reference
 
 
-def test_tasks_share_the_tiles_by_plan_where_there_is_a_planner(tmp_path):
+def test_tasks_share_the_tiles_by_plan(tmp_path):
     plan = octolinear.plan_tiles(SAMPLE_GRAPH, tile_depth=12, tasks=3)
-    if plan is None:
-        with pytest.raises(ValueError, match="no tile planner"):
-            octolinear.build_tiles(SAMPLE_GRAPH, tmp_path / "p.tiles", tile_depth=12, task=(0, 3), plan="plan")
-        pytest.skip("this build of octolinear has no tile planner: tasks share the tiles by hash")
+    assert plan.splitlines()[0].startswith("octolinear-tile-plan ")
     out = tmp_path / "planned.tiles"
     for k in range(3):
         octolinear.build_tiles(SAMPLE_GRAPH, out, tile_depth=12, task=(k, 3), plan=plan)
@@ -152,6 +149,20 @@ def test_plan_arguments_are_checked():
             octolinear.plan_tiles(SAMPLE_GRAPH, **arguments)
     with pytest.raises(TypeError):
         octolinear.plan_tiles(SAMPLE_GRAPH, tasks=2)  # tile_depth is required
+
+
+def test_plans_that_do_not_fit_the_build_are_refused(tmp_path):
+    plan = octolinear.plan_tiles(SAMPLE_GRAPH, tile_depth=12, tasks=3)
+    out = tmp_path / "p.tiles"
+    for arguments, message in [
+        (dict(tile_depth=12, task=(0, 2), plan=plan), "3 tasks"),
+        (dict(tile_depth=11, task=(0, 3), plan=plan), "tile_depth 12"),
+        (dict(tile_depth=12, task=(0, 3), resolution=0.2, plan=plan), "resolution 0.1"),
+        (dict(tile_depth=12, task=(0, 3), plan="not a plan"), "plan: "),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            octolinear.build_tiles(SAMPLE_GRAPH, out, **arguments)
+    assert not out.exists()
 
 
 def test_files_that_cannot_be_read_are_errors(tmp_path):

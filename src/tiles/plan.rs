@@ -134,6 +134,19 @@ impl TileWork {
         }
     }
 
+    /// [`Self::add_scan`] for a build with `discretize`: one ray per end
+    /// voxel, from the voxel's centre, as insertion casts them.
+    pub fn add_discretized_scan(&mut self, points: &[Point3], origin: Point3, max_range: Option<f64>) {
+        let mut seen = hashbrown::HashSet::new();
+        let centres: Vec<Point3> = points
+            .iter()
+            .filter_map(|&p| self.keys.key(p).ok())
+            .filter(|&k| seen.insert(k))
+            .map(|k| self.keys.key_to_point(k))
+            .collect();
+        self.add_scan(&centres, origin, max_range);
+    }
+
     /// Estimated work by tile prefix, tiles without work left out.
     pub fn tiles(&self) -> impl Iterator<Item = (u64, u64)> + '_ {
         self.work.iter().filter(|(_, &w)| w > 0).map(|(&p, &w)| (p, w))
