@@ -13,7 +13,8 @@ use std::path::{Path, PathBuf};
 /// ranges of tiles.
 ///
 /// Reads the scans of a `.graph` file (`-` for standard input) and
-/// estimates how many ray steps each tile at --tile-depth costs (a coarse
+/// estimates the insertion work each tile at --tile-depth costs, in ray
+/// steps and voxel updates (a coarse
 /// pass, a small part of a build; scans of more than 16384 points are
 /// sampled), then cuts the tiles, in Morton order, into --tasks contiguous
 /// ranges of about equal work. Each task of a `build --task K/N --plan
@@ -113,11 +114,11 @@ pub fn run(a: Args) -> Result<()> {
     }
     let edge = a.res * f64::from(1u32 << (16 - u32::from(a.tile_depth)));
     println!(
-        "{} tasks over the tiles of depth {} ({edge} m a side) of {name} ({count} scans, {total} estimated ray steps)",
+        "{} tasks over the tiles of depth {} ({edge} m a side) of {name} ({count} scans, {total} units of estimated work, in ray steps)",
         plan.tasks.len(),
         plan.depth,
     );
-    println!("{:>6}  {:>25}  {:>7}  {:>12}  {:>6}", "task", "tile prefixes", "tiles", "ray steps", "share");
+    println!("{:>6}  {:>25}  {:>7}  {:>12}  {:>6}", "task", "tile prefixes", "tiles", "work", "share");
     for (i, t) in plan.tasks.iter().enumerate() {
         let share = if total == 0 { 0.0 } else { 100.0 * t.work as f64 / total as f64 };
         let range = format!("{}..{}", t.prefixes.start, t.prefixes.end);

@@ -78,7 +78,7 @@ pub use forget::{Beyond, Window};
 pub use id::{TileId, MAX_TILE_DEPTH};
 pub use manifest::{task_of, Manifest, ManifestError, TaskPart, TaskTiles, TileEntry, MAGIC, MANIFEST_FILE, VERSION};
 pub use map::{TiledMap, TiledStats};
-pub use plan::{PlannedTask, TilePlan, TileWork, PLAN_MAGIC, PLAN_VERSION, SAMPLE_ABOVE, SAMPLE_STRIDE};
+pub use plan::{PlannedTask, TilePlan, TileWork, PLAN_MAGIC, PLAN_VERSION, SAMPLE_ABOVE, SAMPLE_STRIDE, UPDATE_COST};
 pub use set::{combine_parts, read_manifest, TileSet, TileSetReport};
 pub use top::TileRoot;
 
