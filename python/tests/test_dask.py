@@ -1,16 +1,17 @@
 """octolinear.dask: tile sets built on Dask clusters (two and four worker
 processes, and threads in this process) give the .ot and .bt bytes of
-octolinear.build; so do a build whose worker dies mid-task and an
-interrupted build resumed. Importing octolinear never imports Dask, and
+octolinear.build; so do a build whose worker dies mid-task, an
+interrupted build resumed, and golden cases (OctoMap's own bytes). Importing octolinear never imports Dask, and
 octolinear.dask without it names the package to install."""
 
+import gzip
 import os
 import re
 import subprocess
 import sys
 
 import pytest
-from conftest import SAMPLE_GRAPH
+from conftest import REPO, SAMPLE_GRAPH
 
 import octolinear
 
@@ -202,3 +203,41 @@ def test_octolinear_dask_without_dask_names_what_to_install(tmp_path):
     done = run_python(code, tmp_path)
     assert done.returncode != 0
     assert "ImportError: octolinear.dask needs Dask's distributed scheduler: pip install 'dask[distributed]'" in done.stderr
+
+
+GOLDEN = REPO / "tests" / "golden"
+
+
+def golden_bytes(case, name):
+    """A file of a golden case, produced by OctoMap 1.10 (gzipped or not)."""
+    plain = GOLDEN / "cases" / case / name
+    if plain.exists():
+        return plain.read_bytes()
+    return gzip.decompress(plain.with_name(name + ".gz").read_bytes())
+
+
+@pytest.mark.parametrize(
+    "case, graph, resolution, max_range, discretize",
+    [
+        ("spherical_scan_r0.1_mrm1_d0_l0_def", "spherical_scan.graph", 0.1, None, False),
+        ("syn_edges_r0.05_mr5_d1_l0_def", "syn_edges.graph", 0.05, 5.0, True),
+        ("syn_mapedge_r010_mrm1_d0", "syn_mapedge_r010.graph", 0.1, None, False),
+    ],
+)
+def test_golden_cases_built_on_dask_give_octomaps_bytes(
+    clients, tmp_path, case, graph, resolution, max_range, discretize
+):
+    from octolinear.dask import build_tiles
+
+    out = tmp_path / "map.tiles"
+    build_tiles(
+        GOLDEN / "inputs" / graph,
+        out,
+        client=clients(2),
+        tasks=3,
+        resolution=resolution,
+        tile_depth=10,
+        max_range=max_range,
+        discretize=discretize,
+    )
+    assert converted(out, tmp_path) == {"ot": golden_bytes(case, "tree.ot"), "bt": golden_bytes(case, "tree.bt")}
