@@ -168,6 +168,20 @@ pub(crate) fn graph_scans<'a, R: std::io::Read>(
     })
 }
 
+/// The scan options of a build from a `.graph` file, as graph2tree inserts:
+/// OctoMap's out-of-map rule, inner nodes updated, `threads` or the
+/// package's default.
+pub(crate) fn build_options(max_range: Option<f64>, discretize: bool, threads: Option<usize>) -> ScanOptions {
+    ScanOptions {
+        max_range,
+        discretize,
+        inner: InnerNodes::Update,
+        bbx: None,
+        out_of_map: OutOfMap::OctoMap,
+        threads: threads.or_else(crate::queries::scan_threads),
+    }
+}
+
 /// Builds a map from an OctoMap `.graph` file as `octolinear build` (and
 /// OctoMap's `graph2tree`) does: every scan inserted with
 /// `insertPointCloud` in the world frame; `max_range` (None: no limit),
@@ -208,14 +222,7 @@ pub fn build<'py>(
     }
     let sensor = sensor_model(sensor, clamping)?;
     let mut tree = OccupancyTree::with_sensor(resolution, sensor).map_err(|e| PyValueError::new_err(e.to_string()))?;
-    let opts = ScanOptions {
-        max_range,
-        discretize,
-        inner: InnerNodes::Update,
-        bbx: None,
-        out_of_map: OutOfMap::OctoMap,
-        threads: threads.or_else(crate::queries::scan_threads),
-    };
+    let opts = build_options(max_range, discretize, threads);
     let built = py.detach(|| -> Result<OccupancyTree, PyErr> {
         let mut reader = graph::open(&path).map_err(|e| graph_error(&path, e))?;
         let mut failure = None;

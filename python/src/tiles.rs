@@ -5,12 +5,12 @@
 //! of builds shared by many processes (`octolinear.dask`).
 
 use crate::convert;
-use crate::files::{graph_error, graph_scans, sensor_model};
+use crate::files::{build_options, graph_error, graph_scans, sensor_model};
 use octolinear::formats::{bt, graph, ot, write_atomically};
 use octolinear::tiles::{
     read_manifest, Manifest, TaskPart, TileError, TileId, TilePlan, TileSet, TileWork, TiledMap, MANIFEST_FILE,
 };
-use octolinear::{InnerNodes, NodeKind, OutOfMap, ScanOptions, TreeKind};
+use octolinear::{NodeKind, TreeKind};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -174,14 +174,7 @@ pub fn build_tiles<'py>(
         map.set_task(t);
     }
     let wanted = Manifest { resolution, depth: tile_depth, kind: TreeKind::OcTree, sensor, task, tiles: Vec::new() };
-    let opts = ScanOptions {
-        max_range,
-        discretize,
-        inner: InnerNodes::Update,
-        bbx: None,
-        out_of_map: OutOfMap::OctoMap,
-        threads: threads.or_else(crate::queries::scan_threads),
-    };
+    let opts = build_options(max_range, discretize, threads);
     type Built = (Manifest, Option<u64>, Option<(usize, usize)>);
     let (manifest, nodes, built) = py.detach(|| -> PyResult<Built> {
         if let Some(found) = resume.then(|| finished_build(&dir, &wanted)).flatten() {

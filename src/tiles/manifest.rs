@@ -383,7 +383,7 @@ fn hex64(s: &str) -> Option<u64> {
 }
 
 /// At most 60 characters of `s`, for messages.
-fn clip(s: &str) -> String {
+pub(super) fn clip(s: &str) -> String {
     let mut out: String = s.chars().take(60).collect();
     if out.len() < s.len() {
         out.push('…');

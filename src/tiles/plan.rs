@@ -29,7 +29,7 @@
 
 use super::error::TileError;
 use super::id::{TileId, MAX_TILE_DEPTH};
-use super::manifest::{decimal, TaskPart, TaskTiles};
+use super::manifest::{clip, decimal, TaskPart, TaskTiles};
 use crate::geometry::Point3;
 use crate::key::{KeySpace, KEY_CENTER, TREE_DEPTH};
 use crate::tree::TreeError;
@@ -362,15 +362,6 @@ impl TilePlan {
         }
         Ok(TilePlan { resolution, depth, tasks })
     }
-}
-
-/// At most 60 characters of `s`, for messages.
-fn clip(s: &str) -> String {
-    let mut out: String = s.chars().take(60).collect();
-    if out.len() < s.len() {
-        out.push('…');
-    }
-    out
 }
 
 #[cfg(test)]
