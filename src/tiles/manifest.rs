@@ -131,6 +131,14 @@ impl Manifest {
         self.kind.node_kind().unwrap_or_default()
     }
 
+    /// Writes the manifest to `path` atomically and synced (after the
+    /// tiles it lists are on disk).
+    pub(super) fn write(&self, path: &std::path::Path) -> Result<(), super::TileError> {
+        let bytes = self.to_bytes();
+        crate::formats::write_atomically(path, |w| std::io::Write::write_all(w, &bytes))
+            .map_err(|e| super::TileError::io(path, e))
+    }
+
     /// The manifest's bytes.
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut s = format!("{MAGIC} {VERSION}\n");

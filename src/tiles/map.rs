@@ -584,6 +584,24 @@ impl TiledMap {
     /// synced. Files of tiles the map does not hold are left alone.
     /// Returns the manifest written.
     pub fn flush(&mut self, dir: &Path) -> Result<Manifest, TileError> {
+        let entries = self.write_tiles(dir)?;
+        let manifest = Manifest {
+            resolution: self.keys.resolution(),
+            depth: self.depth,
+            kind: TreeKind::of(self.kind),
+            sensor: self.sensor,
+            task: self.task,
+            tiles: entries,
+        };
+        let name = self.task.map_or_else(|| MANIFEST_FILE.to_string(), TaskPart::file_name);
+        manifest.write(&dir.join(name))?;
+        Ok(manifest)
+    }
+
+    /// Writes each tile's file into `dir` (created if needed) atomically,
+    /// then waits for the filesystem to have them on disk; returns their
+    /// descriptions in tile order.
+    pub(super) fn write_tiles(&self, dir: &Path) -> Result<Vec<TileEntry>, TileError> {
         if self.stale {
             return Err(TileError::StaleInnerNodes);
         }
@@ -606,22 +624,9 @@ impl TiledMap {
             };
             entries.push(entry);
         }
-        // every tile on disk before the manifest that lists them
+        // every tile on disk before a manifest lists them
         crate::formats::atomic::sync_filesystem(dir).map_err(|e| TileError::io(dir, e))?;
-        let manifest = Manifest {
-            resolution: self.keys.resolution(),
-            depth: self.depth,
-            kind: TreeKind::of(self.kind),
-            sensor: self.sensor,
-            task: self.task,
-            tiles: entries,
-        };
-        let name = self.task.map_or_else(|| MANIFEST_FILE.to_string(), TaskPart::file_name);
-        let path = dir.join(name);
-        let bytes = manifest.to_bytes();
-        crate::formats::write_atomically(&path, |w| std::io::Write::write_all(w, &bytes))
-            .map_err(|e| TileError::io(&path, e))?;
-        Ok(manifest)
+        Ok(entries)
     }
 }
 

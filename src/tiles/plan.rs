@@ -59,6 +59,9 @@ pub struct TileWork {
     keys: KeySpace,
     depth: u8,
     work: BTreeMap<u64, u64>,
+    /// The voxel updates alone (the part of `work` they make, without
+    /// [`UPDATE_COST`]), the measure of a tile's memory.
+    updates: BTreeMap<u64, u64>,
 }
 
 impl TileWork {
@@ -71,7 +74,7 @@ impl TileWork {
         if !(resolution.is_finite() && resolution > 0.0) {
             return Err(TreeError::BadResolution(resolution).into());
         }
-        Ok(TileWork { keys: KeySpace::new(resolution), depth, work: BTreeMap::new() })
+        Ok(TileWork { keys: KeySpace::new(resolution), depth, work: BTreeMap::new(), updates: BTreeMap::new() })
     }
 
     /// Adds one scan (world frame points, as
@@ -87,33 +90,40 @@ impl TileWork {
         let weight = stride as f64;
         let casts = self.keys.key(origin).is_ok();
         let spread = self.keys.resolution() / (4.0 * std::f64::consts::PI / points.len().max(1) as f64).sqrt();
-        let mut scan: HashMap<u64, f64> = HashMap::new();
+        // per tile: ray steps and voxel updates
+        let mut scan: HashMap<u64, (f64, f64)> = HashMap::new();
         for &p in points.iter().step_by(stride) {
             if !p.is_finite() {
                 continue;
             }
             let (_, end) = crate::ray::cut_to_range(p, origin, max_range.unwrap_or(-1.0));
             let Ok(end_key) = self.keys.key(end) else { continue };
-            *scan.entry(TileId::of_key(end_key, self.depth).prefix()).or_default() += weight;
+            let tile = scan.entry(TileId::of_key(end_key, self.depth).prefix()).or_default();
+            tile.0 += weight;
+            tile.1 += weight;
             if casts {
                 self.walk(origin, end, weight, spread, &mut scan);
             }
         }
         // per tile, sums in ray order: the same estimate on every run
-        for (prefix, steps) in scan {
+        for (prefix, (steps, updates)) in scan {
             *self.work.entry(prefix).or_default() += steps.round() as u64;
+            *self.updates.entry(prefix).or_default() += updates.round() as u64;
         }
     }
 
     /// The tiles the segment from `a` to `b` crosses, each given its
-    /// share of the segment's L1 length in voxels, times `weight`.
-    fn walk(&self, a: Point3, b: Point3, weight: f64, spread: f64, out: &mut HashMap<u64, f64>) {
+    /// share of the segment's L1 length in voxels and of the updates along
+    /// it, times `weight`, as (work, updates).
+    fn walk(&self, a: Point3, b: Point3, weight: f64, spread: f64, out: &mut HashMap<u64, (f64, f64)>) {
         let length = a.distance(b);
         // the updates per step: rays overlap within `spread` of the origin
         let swept = |r: f64| if r <= spread { r * r * r / (3.0 * spread * spread) } else { spread / 3.0 + r - spread };
+        // the share of the segment's steps from t0 to t1, and of its updates
         let cost = |t0: f64, t1: f64| {
             let (r0, r1) = (t0 * length, t1 * length);
-            (t1 - t0) + UPDATE_COST * if r1 > r0 { (swept(r1) - swept(r0)) / length } else { 0.0 }
+            let updates = if r1 > r0 { (swept(r1) - swept(r0)) / length } else { 0.0 };
+            (t1 - t0, updates)
         };
         let voxels_per_tile = f64::from(1u32 << (TREE_DEPTH - self.depth));
         let last_cell = (1i64 << self.depth) - 1;
@@ -144,7 +154,10 @@ impl TileWork {
             let t_next = if done { 1.0 } else { t_max[axis] };
             let xyz = c.map(|v| v.clamp(0, last_cell) as u32);
             let prefix = TileId::new(self.depth, xyz).expect("a clamped tile coordinate").prefix();
-            *out.entry(prefix).or_default() += cost(t, t_next) * steps;
+            let (share, updates) = cost(t, t_next);
+            let tile = out.entry(prefix).or_default();
+            tile.0 += (share + UPDATE_COST * updates) * steps;
+            tile.1 += updates * steps;
             if done {
                 return;
             }
@@ -170,6 +183,18 @@ impl TileWork {
     /// Estimated work by tile prefix, tiles without work left out.
     pub fn tiles(&self) -> impl Iterator<Item = (u64, u64)> + '_ {
         self.work.iter().filter(|(_, &w)| w > 0).map(|(&p, &w)| (p, w))
+    }
+
+    /// Estimated voxel updates by tile prefix (the scans' updates summed:
+    /// a voxel updated by several scans counts once for each), tiles
+    /// without updates left out. Memory follows them, not the ray steps.
+    pub fn updates(&self) -> impl Iterator<Item = (u64, u64)> + '_ {
+        self.updates.iter().filter(|(_, &u)| u > 0).map(|(&p, &u)| (p, u))
+    }
+
+    /// The tile depth estimated for.
+    pub fn depth(&self) -> u8 {
+        self.depth
     }
 
     /// Splits the tile prefixes `0..8^D` into `tasks` contiguous ranges
@@ -230,7 +255,7 @@ impl TileWork {
 }
 
 /// The prefix in `lo + 1..=hi` with the most trailing zero bits.
-fn aligned_between(lo: u64, hi: u64) -> u64 {
+pub(super) fn aligned_between(lo: u64, hi: u64) -> u64 {
     debug_assert!(lo < hi);
     let top = 63 - (lo ^ hi).leading_zeros();
     hi & !((1u64 << top) - 1)

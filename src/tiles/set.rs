@@ -272,10 +272,7 @@ pub fn combine_parts(dir: &Path) -> Result<Manifest, TileError> {
     let mut tiles: Vec<_> = parts.iter().flat_map(|(_, m)| m.tiles.iter().copied()).collect();
     tiles.sort_by_key(|t| t.id.prefix());
     let manifest = Manifest { task: None, tiles, ..first.clone() };
-    let path = dir.join(MANIFEST_FILE);
-    let bytes = manifest.to_bytes();
-    crate::formats::write_atomically(&path, |w| std::io::Write::write_all(w, &bytes))
-        .map_err(|e| TileError::io(&path, e))?;
+    manifest.write(&dir.join(MANIFEST_FILE))?;
     for (path, _) in &parts {
         std::fs::remove_file(path).map_err(|e| TileError::io(path, e))?;
     }

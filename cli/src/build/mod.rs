@@ -1,6 +1,8 @@
 //! `octolinear build`: OctoMap's `graph2tree` — integrate the scans of a
 //! `.graph` file into a map.
 
+mod grouped;
+
 use super::common::{format_g6, progress, save_map, spinner, MapFormat};
 use super::input;
 use super::plan;
@@ -11,8 +13,8 @@ use octolinear::formats::{bt, ot, write_atomically};
 use octolinear::geometry::graph2tree_transform;
 use octolinear::scan::OutOfMap;
 use octolinear::sensor::{SensorModel, SensorProbabilities};
-use octolinear::tiles::{Beyond, MemoryBudget, TaskPart, TiledMap, Window};
-use octolinear::tree::{Summarize, Tee, TreeSummary};
+use octolinear::tiles::{Beyond, Manifest, MemoryBudget, TaskPart, TiledMap, Window};
+use octolinear::tree::{PreorderSource, Summarize, Tee, TreeSummary};
 use octolinear::{InnerNodes, KeySpace, NodeKind, OccupancyTree, Point3, PointCloud, Pose6D, ScanOptions, ScanReport};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -58,13 +60,18 @@ use std::time::{Duration, Instant};
 /// plan`) task K builds a range of tiles of about an N-th of the estimated
 /// work and casts only the rays reaching it; without, tiles are shared by
 /// a hash and each task casts every scan. Once all have finished, `octolinear
-/// tiles manifest NAME.tiles` writes the manifest. --memory-cap keeps the
-/// map's tiles in memory up to that size and writes the others out (into
-/// the tile set, or beside OUT in a temporary directory), reading them
-/// back when scans reach them again: the map is the same. An .ot or .bt
-/// output is then written tile by tile,
-/// never as one tree; an .olm output, laid out as a whole, merges the
-/// tiles into one tree in memory at the end. Tiles cannot hold colour maps, and --compress-ml
+/// tiles manifest NAME.tiles` writes the manifest. With --memory-cap the
+/// map is the same, built within that memory: from a `.graph` file, in
+/// groups of neighbouring tiles that fit it together with a scan's update
+/// for them, each built from every scan (read again from the file,
+/// casting only the rays that reach the group) and written out (into the
+/// tile set, or beside OUT in a temporary directory), on one thread; from
+/// standard input or point files, scan by scan, the tiles not used lately
+/// written out and read back when scans reach them again (a whole scan's
+/// update is held besides). An .ot or .bt output is then written tile by
+/// tile, never as one tree (.bt holds its records, the size of the file,
+/// in memory); an .olm output, laid out as a whole, merges the tiles into
+/// one tree in memory at the end. Tiles cannot hold colour maps, and --compress-ml
 /// (OctoMap's prune() stops at the first level where nothing merged, a
 /// decision over the whole map) is not offered with them.
 ///
@@ -149,9 +156,9 @@ pub struct Args {
     /// it; the plan's resolution, tile depth and task count must match.
     #[arg(long, value_name = "PLAN", requires = "task")]
     plan: Option<PathBuf>,
-    /// Keep at most SIZE bytes of tiles in memory (e.g. 512M, 2G; K, M, G
-    /// are powers of 1024); the others wait on disk. The output is the same
-    /// (.ot and .bt written tile by tile; .olm merged in memory).
+    /// Build within SIZE bytes of tiles and scan updates (e.g. 64M, 2G; K,
+    /// M, G are powers of 1024); the rest waits on disk. The output is the
+    /// same (.ot and .bt written tile by tile; .olm merged in memory).
     #[arg(long, value_name = "SIZE")]
     memory_cap: Option<String>,
     /// After each scan, forget the tiles lying wholly farther than METRES
@@ -238,6 +245,14 @@ fn plan_name(a: &Args) -> String {
 /// when dropped.
 struct SpillDir(PathBuf);
 
+impl SpillDir {
+    /// A hidden directory beside `output`, named after it and this process.
+    fn beside(output: &Path) -> Self {
+        let name = output.file_name().map_or_else(|| "map".into(), |n| n.to_string_lossy().into_owned());
+        SpillDir(output.with_file_name(format!(".{name}.spill-{}", std::process::id())))
+    }
+}
+
 impl Drop for SpillDir {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.0);
@@ -302,11 +317,11 @@ fn write_tree(mut tree: OccupancyTree, format: MapFormat, output: &Path) -> Resu
     Ok((full, ml_stats))
 }
 
-/// Writes a tiled map to `output` (`.ot` or `.bt`) without merging it: one
-/// walk across the tiles writes the file and gathers the full tree's
+/// Writes a tiled map or a tile set to `output` (`.ot` or `.bt`) without
+/// merging it: one walk across the tiles writes the file and gathers the full tree's
 /// statistics, and the maximum-likelihood tree's come from its `.bt`
 /// records; they equal [`write_tree`]'s of the merged tree.
-fn write_tiled(map: &TiledMap, format: MapFormat, output: &Path) -> Result<(Value, Value)> {
+fn write_tiled<M: PreorderSource>(map: &M, format: MapFormat, output: &Path) -> Result<(Value, Value)> {
     let mut full = Summarize::new(map);
     let mut ml = None;
     let written = match format {
@@ -344,7 +359,7 @@ fn summary_statistics(s: &TreeSummary) -> Value {
 /// (the node count is OctoMap's `size()` counter, as graph2tree prints it).
 fn statistics(tree: &OccupancyTree) -> serde_json::Value {
     let mut summary = Summarize::new(tree);
-    let walked = octolinear::tree::PreorderSource::visit_preorder(tree, &mut summary);
+    let walked = PreorderSource::visit_preorder(tree, &mut summary);
     debug_assert!(walked.is_ok(), "a tree's walk cannot fail");
     let mut stats = summary_statistics(&summary.finish());
     stats["nodes"] = tree.size().into();
@@ -421,6 +436,22 @@ pub(super) fn scans_arg(scans: Option<usize>) -> Result<Option<usize>> {
         bail!("--scans must be at least 1 (leave it out for every scan)");
     }
     Ok(scans)
+}
+
+/// The insertion options the flags ask for.
+fn scan_options(a: &Args, max_range: Option<f64>) -> ScanOptions {
+    ScanOptions {
+        max_range,
+        discretize: a.discretize,
+        inner: InnerNodes::Update,
+        bbx: None,
+        out_of_map: match a.out_of_map {
+            OutOfMapArg::Octomap => OutOfMap::OctoMap,
+            OutOfMapArg::Skip => OutOfMap::Skip,
+            OutOfMapArg::Error => OutOfMap::Error,
+        },
+        threads: a.threads,
+    }
 }
 
 /// A warning on stderr, in the form of the errors.
@@ -531,19 +562,25 @@ fn insert_tiled(
 }
 
 /// Writes a tiled build's tile set (or its task's part) and reports it.
-fn finish_tile_set(
-    a: &Args,
-    map: &mut TiledMap,
-    input: &str,
-    (scans, points, seconds): (usize, usize, f64),
-) -> Result<()> {
+fn finish_tile_set(a: &Args, map: &mut TiledMap, input: &str, inserted: (usize, usize, f64)) -> Result<()> {
     let phase = spinner(&format!("writing {}", a.output.display()));
     let manifest = map.flush(&a.output)?;
     if manifest.task.is_none() {
         tiles::remove_unlisted_tiles(&a.output, &manifest)?;
     }
     phase.finish_and_clear();
-    let nodes = map.stats().nodes;
+    print_tile_set(a, &manifest, map.stats().nodes, input, inserted)
+}
+
+/// Reports a tile set written (or a task's part): what went in, where it
+/// went, `nodes` in the single tree.
+fn print_tile_set(
+    a: &Args,
+    manifest: &Manifest,
+    nodes: u64,
+    input: &str,
+    (scans, points, seconds): (usize, usize, f64),
+) -> Result<()> {
     let bytes: u64 = manifest.tiles.iter().map(|t| t.bytes).sum();
     if a.json {
         let out = serde_json::json!({
@@ -668,6 +705,9 @@ pub fn run(a: Args) -> Result<()> {
     let kind = if a.color { NodeKind::Color } else { NodeKind::Plain };
     let mut tree = OccupancyTree::with_kind(a.res, sensor, kind)?;
     let tiling = tiling(&a, tile_output)?;
+    if let Some(t) = tiling.as_ref().filter(|t| grouped::applies(&a, t)) {
+        return grouped::run(&a, t, sensor, format, tile_output);
+    }
     let mut spill_dir = None;
     let mut tiled = match &tiling {
         Some(t) => {
@@ -679,9 +719,9 @@ pub fn run(a: Args) -> Result<()> {
                 let dir = if tile_output {
                     a.output.clone()
                 } else {
-                    let name = a.output.file_name().map_or_else(|| "map".into(), |n| n.to_string_lossy().into_owned());
-                    let dir = a.output.with_file_name(format!(".{name}.spill-{}", std::process::id()));
-                    spill_dir = Some(SpillDir(dir.clone()));
+                    let spill = SpillDir::beside(&a.output);
+                    let dir = spill.0.clone();
+                    spill_dir = Some(spill);
                     dir
                 };
                 map.set_budget(MemoryBudget { bytes, dir })?;
@@ -706,18 +746,7 @@ pub fn run(a: Args) -> Result<()> {
         None => (a.points.len(), point_files(&a)?),
     };
     let n = a.scans.map_or(announced, |s| s.min(announced));
-    let opts = ScanOptions {
-        max_range,
-        discretize: a.discretize,
-        inner: InnerNodes::Update,
-        bbx: None,
-        out_of_map: match a.out_of_map {
-            OutOfMapArg::Octomap => OutOfMap::OctoMap,
-            OutOfMapArg::Skip => OutOfMap::Skip,
-            OutOfMapArg::Error => OutOfMap::Error,
-        },
-        threads: a.threads,
-    };
+    let opts = scan_options(&a, max_range);
     let bar = progress(n as u64, "inserting scans");
     let (keys, mut tally, mut failure, start) = (KeySpace::new(a.res), Tally::default(), None, Instant::now());
     let mut reading = Duration::ZERO;
@@ -802,6 +831,21 @@ pub fn run(a: Args) -> Result<()> {
         }
         None => write_tree(tree, format, &a.output)?,
     };
+    print_build(&a, kind, &input, &tally, (seconds, read_seconds), (&full, &ml_stats));
+    Ok(())
+}
+
+/// Reports a map built: what went in, graph2tree's statistics of the full
+/// and of the maximum-likelihood tree, where it went.
+fn print_build(
+    a: &Args,
+    kind: NodeKind,
+    input: &str,
+    tally: &Tally,
+    (seconds, read_seconds): (f64, f64),
+    (full, ml_stats): (&Value, &Value),
+) {
+    let (scans, points) = (tally.ids.len(), tally.points);
     if a.json {
         let out = serde_json::json!({
             "input": input, "output": a.output, "tree_type": ot::TreeKind::of(kind).id(),
@@ -818,9 +862,8 @@ pub fn run(a: Args) -> Result<()> {
         println!("time to insert scans: {seconds} sec");
         println!("time to read them, included above (scans are read as they are inserted): {read_seconds} sec");
         println!("time to insert 100.000 points took: {} sec (avg)\n", seconds / (points as f64 / 100000.0));
-        print_statistics("Pruned tree (lossless compression)", &full);
-        print_statistics("Pruned max-likelihood tree (lossy compression)", &ml_stats);
+        print_statistics("Pruned tree (lossless compression)", full);
+        print_statistics("Pruned max-likelihood tree (lossy compression)", ml_stats);
         println!("Map written to {}", a.output.display());
     }
-    Ok(())
 }
