@@ -2,7 +2,8 @@
 //! (tiles of half the map) to fine (2 voxels a side, pruned whole and merged
 //! above), and under a memory budget so small that every tile is written
 //! out and read back after each group of updates (the constants say which
-//! cases get which depths), the `.ot` and `.bt` written tile by tile from
+//! cases get which depths), and group by group (groups split down to
+//! single tiles), the `.ot` and `.bt` written tile by tile from
 //! the tiled map are OctoMap's to the byte; the tile set written from it
 //! writes them too, merges to the same tree, and its queries answer as
 //! that merged map.
@@ -13,7 +14,7 @@ mod scans;
 
 use common::*;
 use octolinear::formats::{bt, ot};
-use octolinear::tiles::{MemoryBudget, TileSet, TiledMap};
+use octolinear::tiles::{GroupedBuild, MemoryBudget, TileSet, TileWork, TiledMap};
 use octolinear::tree::PreorderSource;
 use octolinear::{CastOptions, InnerNodes, NodeKind, OccupancyTree, Point3, ScanOptions, UpdateBox};
 use rayon::prelude::*;
@@ -27,6 +28,10 @@ const DEPTHS: [u8; 5] = [1, 3, 8, 13, 15];
 /// the second (thousands of tiles written and read back per scan in the
 /// large cases) for every third.
 const CAPPED_DEPTHS: [u8; 2] = [5, 12];
+
+/// The depth of the group-by-group builds (a memory of one byte: groups
+/// split down to single tiles).
+const GROUPED_DEPTH: u8 = 6;
 
 /// Depths whose tile sets are written and queried: the first for every
 /// case, the second for every third.
@@ -45,15 +50,10 @@ fn bytes(map: &impl PreorderSource) -> (Vec<u8>, Vec<u8>) {
     (o, b)
 }
 
-/// Builds one case as tiles at `depth`, with a budget when `spill` names
-/// a directory.
-fn build(case: &Value, scans: &[Scan], depth: u8, spill: Option<&std::path::Path>) -> TiledMap {
+/// A case's resolution and insertion options.
+fn case_options(case: &Value) -> (f64, ScanOptions) {
     let p = &case["params"];
     let res = p["resolution"].as_f64().unwrap();
-    let mut map = TiledMap::new(res, case_sensor(case), NodeKind::Plain, depth).unwrap();
-    if let Some(dir) = spill {
-        map.set_budget(MemoryBudget { bytes: 1, dir: dir.to_path_buf() }).unwrap();
-    }
     let max_range = p["maxrange"].as_f64().unwrap();
     let lazy = p["lazy_eval"].as_bool().unwrap_or(false);
     let probe = OccupancyTree::new(res).unwrap();
@@ -68,6 +68,18 @@ fn build(case: &Value, scans: &[Scan], depth: u8, spill: Option<&std::path::Path
         bbx,
         ..Default::default()
     };
+    (res, opts)
+}
+
+/// Builds one case as tiles at `depth`, with a budget when `spill` names
+/// a directory.
+fn build(case: &Value, scans: &[Scan], depth: u8, spill: Option<&std::path::Path>) -> TiledMap {
+    let (res, opts) = case_options(case);
+    let lazy = opts.inner == InnerNodes::Defer;
+    let mut map = TiledMap::new(res, case_sensor(case), NodeKind::Plain, depth).unwrap();
+    if let Some(dir) = spill {
+        map.set_budget(MemoryBudget { bytes: 1, dir: dir.to_path_buf() }).unwrap();
+    }
     for (points, origin) in scans {
         map.insert_point_cloud(points, *origin, &opts).unwrap();
         if lazy {
@@ -121,6 +133,24 @@ fn run_case(g: &Golden, (index, case): (usize, &Value)) -> Vec<String> {
     let every_third = index % 3 == 0;
     let capped = CAPPED_DEPTHS.into_iter().take(if every_third { 2 } else { 1 });
     let runs = DEPTHS.map(|d| (d, false)).into_iter().chain(capped.map(|d| (d, true)));
+    // group by group, in groups split until they hold one tile
+    let dir = scratch_dir();
+    let (res, opts) = case_options(case);
+    let mut work = TileWork::new(res, GROUPED_DEPTH).unwrap();
+    for (points, origin) in &scans {
+        work.add_scan(points, *origin, opts.max_range);
+    }
+    let grouped = GroupedBuild { resolution: res, sensor: case_sensor(case), memory: 1, dir: dir.path().to_path_buf() };
+    let given = || scans.iter().map(|(p, o)| Ok::<_, std::convert::Infallible>((p, *o)));
+    grouped.build(&work, &opts, given, |_, _| {}).unwrap();
+    let (o, b) = bytes(&TileSet::open(dir.path()).unwrap());
+    let before = f.0.len();
+    f.check_digest(g, case, "tree.ot", &o);
+    f.check_digest(g, case, "tree.bt", &b);
+    for failure in &mut f.0[before..] {
+        *failure = format!("grouped at tile depth {GROUPED_DEPTH}: {failure}");
+    }
+    drop(dir);
     for (depth, capped) in runs {
         // declared before the map, so removed after it
         let dir = scratch_dir();

@@ -2142,6 +2142,49 @@ fn memory_capped_builds_equal_uncapped_builds() {
     assert!(left.is_empty(), "{left:?}");
 }
 
+/// A capped build from a `.graph` file goes group by group, one from
+/// standard input scan by scan: both give the plain build's bytes, with
+/// the options that change the scans (--scans, --discretize, --max-range,
+/// --out-of-map skip); a truncated file is an error and writes nothing.
+#[test]
+fn capped_builds_from_a_file_and_from_standard_input_equal_plain_builds() {
+    let f = Fixture::new();
+    let graph = std::fs::read(f.path("s.graph")).unwrap();
+    let options: [&[&str]; 4] = [
+        &["--res", "0.1", "--scans", "4"],
+        &["--res", "0.05", "--discretize"],
+        &["--res", "0.1", "--max-range", "3"],
+        &["--res", "0.1", "--out-of-map", "skip", "--threads", "2"],
+    ];
+    for (i, flags) in options.into_iter().enumerate() {
+        for ext in ["bt", "olm"] {
+            let want = tiled_build_bytes(&f, f.p(&format!("p{i}.{ext}")), flags);
+            for cap in ["1", "300K"] {
+                let capped = [flags, &["--memory-cap", cap, "--tile-depth", "10"]].concat();
+                let out = f.p(&format!("g{i}-{cap}.{ext}"));
+                assert!(tiled_build_bytes(&f, out, &capped) == want, "{flags:?} {cap} .{ext} from the file");
+                let piped = f.p(&format!("s{i}-{cap}.{ext}"));
+                let args = [&["build", "-", "-o", piped][..], &capped].concat();
+                let run = run_with_stdin(&args, graph.clone());
+                assert!(run.status.success(), "{args:?}: {}", String::from_utf8_lossy(&run.stderr));
+                assert!(std::fs::read(piped).unwrap() == want, "{flags:?} {cap} .{ext} from standard input");
+            }
+        }
+        // a tile set: its bytes through convert
+        let want = tiled_build_bytes(&f, f.p(&format!("p{i}.ot")), flags);
+        for cap in ["1", "300K"] {
+            let set = f.p(&format!("g{i}-{cap}.tiles"));
+            let mut args = vec!["build", f.p("s.graph"), "-o", set, "--memory-cap", cap, "--tile-depth", "10"];
+            args.extend(flags);
+            ok(&args);
+            assert!(converted(&f, set, &format!("g{i}-{cap}.ot")) == want, "{flags:?} {cap} tiles");
+        }
+    }
+    let cut = f.write("cut.graph", &graph[..graph.len() * 2 / 3]);
+    fail(&["build", cut, "-o", f.p("cut.ot"), "--memory-cap", "1"], "cut.graph");
+    assert!(!f.path("cut.ot").exists());
+}
+
 #[test]
 fn damaged_tile_sets_are_errors_naming_the_tile_or_manifest_line() {
     let f = Fixture::new();
