@@ -33,9 +33,16 @@ fn streamed(map: &impl PreorderSource) -> (Vec<u8>, Vec<u8>, Vec<u8>, TreeSummar
     let (mut o, mut b, mut c) = (Vec::new(), Vec::new(), Vec::new());
     let mut full = Summarize::new(map);
     ot::write_map_observed(map, &mut o, &mut full).unwrap();
-    let ml = bt::write_map(map, &mut b).unwrap();
+    let mut ml = bt::write_map(map, &mut b).unwrap();
+    let summary = ml.summary(map).unwrap();
+    // the same with the records waiting in a scratch file
+    let mut again = Vec::new();
+    let scratch = tempfile::tempfile().unwrap();
+    let mut ml = bt::write_map_observed_with_scratch(map, &mut again, &mut (), scratch).unwrap();
+    assert!(again == b, "the .bt through a scratch file differs");
+    assert_eq!(ml.summary(map).unwrap(), summary);
     bt::write_const_map(map, &mut c).unwrap();
-    (o, b, c, full.finish(), ml.summary(map))
+    (o, b, c, full.finish(), summary)
 }
 
 /// The numbers a [`TreeSummary`] holds, as `tree` (compacted) has them.

@@ -8,6 +8,7 @@
 //! not stored: readers restore the clamping bounds. See `formats/bt.md`.
 
 use super::header::{read_first_line, read_header, write_header, CountingReader, FirstLine, BT_FIRST_LINE};
+use super::ml_records::RecordBuffer;
 use super::pieces::Pieces;
 use super::TreeFileError;
 use crate::key::KeySpace;
@@ -15,7 +16,7 @@ use crate::sensor::SensorModel;
 use crate::tree::{default_extra, ChildGroup, LabelFill, NodeKind, OccupancyTree};
 use crate::tree::{PreorderNode, PreorderSource, PreorderVisitor, Tee, TreeSummary};
 use std::convert::Infallible;
-use std::io::{self, BufRead, Write};
+use std::io::{self, BufRead, Read, Write};
 use std::ops::ControlFlow;
 use std::path::Path;
 
@@ -150,72 +151,125 @@ pub fn write_map(map: &impl PreorderSource, w: impl Write) -> io::Result<MlRecor
 /// once (statistics gathered while writing, without a second walk).
 pub fn write_map_observed(
     map: &impl PreorderSource,
-    mut w: impl Write,
+    w: impl Write,
     observer: &mut impl PreorderVisitor<Break = Infallible>,
 ) -> io::Result<MlRecordStream> {
-    let ml = if map.node_kind() == NodeKind::Stamped {
-        ml_records::<true>(map, observer)?
+    write_ml(map, w, observer, RecordBuffer::in_memory(records_hint(map.node_count())))
+}
+
+/// [`write_map_observed`] holding no more than a few megabytes of records
+/// in memory: the others wait in `scratch` (a file opened for reading and
+/// writing, emptied first) until the header, which counts the nodes, is
+/// written. For maps whose records outgrow the memory at hand.
+pub fn write_map_observed_with_scratch(
+    map: &impl PreorderSource,
+    w: impl Write,
+    observer: &mut impl PreorderVisitor<Break = Infallible>,
+    scratch: std::fs::File,
+) -> io::Result<MlRecordStream> {
+    write_ml(map, w, observer, RecordBuffer::with_scratch(scratch))
+}
+
+/// The maximum-likelihood tree's header and records, gathered in `out`.
+fn write_ml(
+    map: &impl PreorderSource,
+    mut w: impl Write,
+    observer: &mut impl PreorderVisitor<Break = Infallible>,
+    out: RecordBuffer,
+) -> io::Result<MlRecordStream> {
+    let mut ml = if map.node_kind() == NodeKind::Stamped {
+        ml_records::<true>(map, observer, out)?
     } else {
-        ml_records::<false>(map, observer)?
+        ml_records::<false>(map, observer, out)?
     };
     let size = usize::try_from(ml.nodes).map_err(io::Error::other)?;
     write_header(&mut w, BT_FIRST_LINE, super::ot::TreeKind::of(map.node_kind()).id(), size, map.resolution())?;
-    w.write_all(&ml.records)?;
+    ml.write_records(w)?;
     Ok(ml)
 }
 
 /// The node stream of the maximum-likelihood tree (`toMaxLikelihood()`
 /// then `prune()`), as `.bt` records, with its node count.
-#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct MlRecordStream {
-    /// The `.bt` records, in pre-order (what follows the header).
-    pub records: Vec<u8>,
+    /// The `.bt` records, in pre-order (what follows the header): in
+    /// memory, or most of them in a scratch file.
+    records: RecordBuffer,
     /// Nodes of the maximum-likelihood tree (`size()`, the header's).
     pub nodes: u64,
 }
 
 impl MlRecordStream {
+    /// Writes the records (what follows the header) to `w`.
+    pub fn write_records(&mut self, mut w: impl Write) -> io::Result<()> {
+        match self.records.in_memory_bytes() {
+            Some(bytes) => w.write_all(bytes),
+            None => io::copy(&mut self.records.reader()?, &mut w).map(|_| ()),
+        }
+    }
+
     /// The [`TreeSummary`] of the maximum-likelihood tree the records
     /// describe, of `map`'s kind and resolution: read from the records
     /// alone. Its every node holds a clamping bound, so all count as at
-    /// the threshold.
-    pub fn summary(&self, map: &impl PreorderSource) -> TreeSummary {
-        let keys = KeySpace::new(map.resolution());
-        let mut s = TreeSummary::empty(map.node_kind(), map.resolution());
-        let mut records = self.records.chunks_exact(2).map(|r| u16::from_le_bytes([r[0], r[1]]));
-        if let Some(root) = records.next() {
-            s.nodes = 1;
-            if root == 0 {
-                s.add_leaf(&keys, 0, 0);
-            }
-            // (Morton prefix, depth, labels, next child) of each open node
-            let mut path = vec![(0u64, 0u8, root, 0u32)];
-            while let Some(open) = path.last_mut() {
-                if open.3 == 8 {
-                    path.pop();
-                    continue;
-                }
-                let (code, depth, pos) = (open.0 << 3 | u64::from(open.3), open.1 + 1, open.3);
-                open.3 += 1;
-                match (open.2 >> (2 * pos)) & 3 {
-                    0 => continue,
-                    3 => path.push((code, depth, records.next().unwrap_or(0), 0)),
-                    _ => s.add_leaf(&keys, code, depth),
-                }
-                s.nodes += 1;
-            }
+    /// the threshold. Fails only when records on disk cannot be read.
+    pub fn summary(&mut self, map: &impl PreorderSource) -> io::Result<TreeSummary> {
+        if let Some(bytes) = self.records.in_memory_bytes() {
+            return Ok(summarize(map, bytes.chunks_exact(2).map(|r| u16::from_le_bytes([r[0], r[1]]))));
         }
-        s.at_threshold = s.nodes;
-        s.finish()
+        let mut reader = io::BufReader::with_capacity(1 << 16, self.records.reader()?);
+        let mut failed = None;
+        let records = std::iter::from_fn(|| {
+            let mut r = [0u8; 2];
+            match reader.read_exact(&mut r) {
+                Ok(()) => Some(u16::from_le_bytes(r)),
+                Err(e) if e.kind() == io::ErrorKind::UnexpectedEof => None,
+                Err(e) => {
+                    failed = Some(e);
+                    None
+                }
+            }
+        });
+        let summary = summarize(map, records);
+        failed.map_or(Ok(summary), Err)
     }
+}
+
+/// The [`TreeSummary`] of the maximum-likelihood tree of these records
+/// ([`MlRecordStream::summary`]).
+fn summarize(map: &impl PreorderSource, mut records: impl Iterator<Item = u16>) -> TreeSummary {
+    let keys = KeySpace::new(map.resolution());
+    let mut s = TreeSummary::empty(map.node_kind(), map.resolution());
+    if let Some(root) = records.next() {
+        s.nodes = 1;
+        if root == 0 {
+            s.add_leaf(&keys, 0, 0);
+        }
+        // (Morton prefix, depth, labels, next child) of each open node
+        let mut path = vec![(0u64, 0u8, root, 0u32)];
+        while let Some(open) = path.last_mut() {
+            if open.3 == 8 {
+                path.pop();
+                continue;
+            }
+            let (code, depth, pos) = (open.0 << 3 | u64::from(open.3), open.1 + 1, open.3);
+            open.3 += 1;
+            match (open.2 >> (2 * pos)) & 3 {
+                0 => continue,
+                3 => path.push((code, depth, records.next().unwrap_or(0), 0)),
+                _ => s.add_leaf(&keys, code, depth),
+            }
+            s.nodes += 1;
+        }
+    }
+    s.at_threshold = s.nodes;
+    s.finish()
 }
 
 /// Appends to `out` the node stream `toMaxLikelihood()` then `prune()`
 /// would leave, without copying or changing the tree; returns the node
 /// count (`size()`) that tree would have.
 pub(crate) fn write_ml_data(tree: &OccupancyTree, out: &mut Vec<u8>) -> usize {
-    let ml = write_map(tree, io::sink()).expect("a tree's walk cannot fail");
-    out.extend_from_slice(&ml.records);
+    let mut ml = write_map(tree, io::sink()).expect("a tree's walk cannot fail");
+    ml.write_records(&mut *out).expect("records in memory");
     ml.nodes as usize
 }
 
@@ -224,8 +278,9 @@ pub(crate) fn write_ml_data(tree: &OccupancyTree, out: &mut Vec<u8>) -> usize {
 fn ml_records<const STAMPED: bool>(
     map: &impl PreorderSource,
     observer: &mut impl PreorderVisitor<Break = Infallible>,
+    out: RecordBuffer,
 ) -> io::Result<MlRecordStream> {
-    let mut records = MlRecords::<STAMPED>::new(map.sensor(), 1, records_hint(map.node_count()));
+    let mut records = MlRecords::<STAMPED>::new(map.sensor(), 1, out);
     let ControlFlow::Continue(()) = map.visit_preorder(&mut Tee(observer, &mut records))?;
     records.complete(map)
 }
@@ -251,11 +306,22 @@ enum MlPass {
 impl MaxLikelihood {
     /// Ready for a walk of `map`.
     pub fn new(map: &impl PreorderSource) -> Self {
-        let (sensor, hint) = (map.sensor(), records_hint(map.node_count()));
+        Self::with_buffer(map, RecordBuffer::in_memory(records_hint(map.node_count())))
+    }
+
+    /// Ready for a walk of `map`, holding no more than a few megabytes of
+    /// records in memory: the others wait in `scratch` (a file opened for
+    /// reading and writing, emptied first).
+    pub fn with_scratch(map: &impl PreorderSource, scratch: std::fs::File) -> Self {
+        Self::with_buffer(map, RecordBuffer::with_scratch(scratch))
+    }
+
+    fn with_buffer(map: &impl PreorderSource, out: RecordBuffer) -> Self {
+        let sensor = map.sensor();
         MaxLikelihood(if map.node_kind() == NodeKind::Stamped {
-            MlPass::Stamped(MlRecords::new(sensor, 1, hint))
+            MlPass::Stamped(MlRecords::new(sensor, 1, out))
         } else {
-            MlPass::Plain(MlRecords::new(sensor, 1, hint))
+            MlPass::Plain(MlRecords::new(sensor, 1, out))
         })
     }
 
@@ -329,7 +395,7 @@ struct MlRecords<const STAMPED: bool> {
     /// `equal[a][b]`: whether values of classes `a` and `b` compare equal.
     equal: [[bool; 2]; 2],
     lowest: usize,
-    out: Vec<u8>,
+    out: RecordBuffer,
     /// Merges per depth.
     counts: [usize; 16],
     /// The open record of the node at each depth of the walk's path.
@@ -356,7 +422,7 @@ struct Open {
 impl<const STAMPED: bool> MlRecords<STAMPED> {
     /// Ready for a walk, with merges at depth `lowest` or deeper and room
     /// for about `hint` bytes of records.
-    fn new(s: &SensorModel, lowest: usize, hint: usize) -> Self {
+    fn new(s: &SensorModel, lowest: usize, out: RecordBuffer) -> Self {
         let value = [s.clamping_min, s.clamping_max];
         let label = value.map(|v| if s.is_occupied(v) { 2 } else { 1 });
         let equal = [0, 1].map(|a| [0, 1].map(|b| value[a] == value[b]));
@@ -365,7 +431,7 @@ impl<const STAMPED: bool> MlRecords<STAMPED> {
             label,
             equal,
             lowest,
-            out: Vec::with_capacity(hint),
+            out,
             counts: [0; 16],
             path: [Open::default(); 16],
             stamps: [[0; 8]; 16],
@@ -381,7 +447,7 @@ impl<const STAMPED: bool> MlRecords<STAMPED> {
         let lowest = stop.max(1);
         let mut records = self.out;
         if self.counts[1..lowest].iter().any(|&c| c > 0) {
-            let mut again = MlRecords::<STAMPED>::new(map.sensor(), lowest, records.len());
+            let mut again = MlRecords::<STAMPED>::new(map.sensor(), lowest, records.emptied());
             let ControlFlow::Continue(()) = map.visit_preorder(&mut again)?;
             records = again.out;
         }
@@ -409,7 +475,7 @@ impl<const STAMPED: bool> PreorderVisitor for MlRecords<STAMPED> {
     fn leaf(&mut self, node: &PreorderNode) -> ControlFlow<Infallible> {
         if node.depth == 0 {
             // a lone root: a record without children
-            self.out.extend_from_slice(&[0, 0]);
+            self.out.push([0, 0]);
         }
         ControlFlow::Continue(())
     }
@@ -418,7 +484,7 @@ impl<const STAMPED: bool> PreorderVisitor for MlRecords<STAMPED> {
     fn enter(&mut self, node: &PreorderNode, children: &ChildGroup<'_>) -> ControlFlow<Infallible> {
         let depth = usize::from(node.depth);
         self.path[depth] = Open { at: self.out.len(), ..Open::default() };
-        self.out.extend_from_slice(&[0, 0]);
+        self.out.push([0, 0]);
         let (masks, values, extras) = (children.child_masks(), children.values(), children.extras());
         for (rank, pos) in children.positions() {
             if masks[rank] == 0 {
@@ -435,7 +501,7 @@ impl<const STAMPED: bool> PreorderVisitor for MlRecords<STAMPED> {
     fn leave(&mut self, node: &PreorderNode) -> ControlFlow<Infallible> {
         let depth = usize::from(node.depth);
         let open = self.path[depth];
-        self.out[open.at..open.at + 2].copy_from_slice(&open.labels.to_le_bytes());
+        self.out.set(open.at, open.labels.to_le_bytes());
         if depth == 0 {
             return ControlFlow::Continue(());
         }

@@ -10,6 +10,7 @@ pub mod graph;
 mod header;
 pub mod log;
 mod map_file;
+mod ml_records;
 pub mod ot;
 pub mod pcd;
 mod pieces;

@@ -15,9 +15,10 @@
 //! a ray crossing several groups is walked by each, from the sensor.
 //!
 //! The groups are sized from the estimated voxel updates of their tiles
-//! ([`TileWork::updates`]), at bytes per estimated update calibrated on
-//! the groups built so far (a conservative guess for the first). The
-//! estimate errs, so a group is watched as it grows: once its tiles and a
+//! ([`TileWork::updates`]): a scan's for the update it holds, all scans'
+//! for its tiles, at bytes per estimated update measured on the groups
+//! built so far (the first group counts its update alone). The estimate
+//! errs, so a group is watched as it grows: once its tiles and a
 //! scan's update would pass the memory, it stops after the scan in hand
 //! and splits in two ranges of about equal bytes; both go on from the
 //! next scan, the upper one set aside on disk while the lower one is
@@ -42,14 +43,6 @@ use std::time::Instant;
 /// bitmaps the casting fills (measured on the full-size sequences: a few
 /// voxels per 64-byte block far from the sensor).
 pub const UPDATE_BYTES: usize = 24;
-
-/// Tile bytes per estimated voxel update assumed for the first group,
-/// before any is measured (the full-size sequences measure 4–13).
-const FIRST_TILE_BYTES: f64 = 24.0;
-
-/// A scan's share of a group's estimated updates assumed for the first
-/// group: all of them, as when there is one scan.
-const FIRST_SCAN_SHARE: f64 = 1.0;
 
 /// Groups are cut to this part of the memory, for the error of the
 /// estimate from group to group.
@@ -119,29 +112,32 @@ pub enum GroupedError<E> {
     Tiles(#[from] TileError),
 }
 
-/// Bytes per estimated update, measured on the groups built.
+/// What the groups built measured against what was estimated of them.
 #[derive(Default)]
 struct Calibration {
-    estimate: f64,
+    /// Estimated updates, summed over the scans.
+    summed: f64,
+    /// Estimated updates of one scan, the most per tile, summed.
+    largest: f64,
     tile_bytes: f64,
     largest_updates: f64,
 }
 
 impl Calibration {
-    /// Bytes one estimated update of a group costs: its tiles' share and
-    /// that of the update of its largest scan.
-    fn bytes_per_update(&self) -> f64 {
-        let (tiles, share) = if self.estimate > 0.0 {
-            (self.tile_bytes / self.estimate, self.largest_updates / self.estimate)
-        } else {
-            (FIRST_TILE_BYTES, FIRST_SCAN_SHARE)
-        };
-        tiles + share * UPDATE_BYTES as f64
+    /// Bytes a group of tiles whose estimates are `summed` and `largest`
+    /// will hold: its tiles (none before a group is measured: a group that
+    /// outgrows the memory splits) and the update of its largest scan (as
+    /// estimated before a group is measured).
+    fn bytes(&self, summed: u64, largest: u64) -> f64 {
+        let tiles = if self.summed > 0.0 { self.tile_bytes / self.summed } else { 0.0 };
+        let scan = if self.largest > 0.0 { self.largest_updates / self.largest } else { 1.0 };
+        tiles * summed as f64 + scan * (UPDATE_BYTES as f64) * largest as f64
     }
 
-    fn add(&mut self, g: &BuiltGroup) {
-        if g.estimate > 0 {
-            self.estimate += g.estimate as f64;
+    fn add(&mut self, g: &BuiltGroup, largest: u64) {
+        if g.estimate > 0 && largest > 0 {
+            self.summed += g.estimate as f64;
+            self.largest += largest as f64;
             self.tile_bytes += g.tile_bytes as f64;
             self.largest_updates += g.largest_update as f64;
         }
@@ -167,10 +163,11 @@ impl GroupedBuild {
     {
         let depth = work.depth();
         let prefixes = 1u64 << (3 * u32::from(depth));
-        let tiles: Vec<(u64, u64)> = work.updates().collect();
-        let estimate_of = |r: &Range<u64>| -> u64 {
+        let tiles: Vec<(u64, u64, u64)> = work.updates().collect();
+        // the estimates (summed, largest scan) of the tiles of a range
+        let estimate_of = |r: &Range<u64>| -> (u64, u64) {
             let (a, b) = (tiles.partition_point(|t| t.0 < r.start), tiles.partition_point(|t| t.0 < r.end));
-            tiles[a..b].iter().map(|t| t.1).sum()
+            tiles[a..b].iter().fold((0, 0), |e, t| (e.0 + t.1, e.1 + t.2))
         };
         let mut calibration = Calibration::default();
         let (mut groups, mut entries) = (Vec::new(), Vec::new());
@@ -181,11 +178,15 @@ impl GroupedBuild {
             let mut group = match pending.pop() {
                 Some(g) => g,
                 None if start < prefixes => {
-                    let limit = FILL * self.memory as f64 / calibration.bytes_per_update();
+                    let limit = FILL * self.memory as f64;
                     // at least one tile, then as many as fit
-                    let (mut last, mut estimate) = (first, 0u64);
-                    while last < tiles.len() && (last == first || (estimate + tiles[last].1) as f64 <= limit) {
-                        estimate += tiles[last].1;
+                    let (mut last, mut summed, mut largest) = (first, 0u64, 0u64);
+                    while last < tiles.len()
+                        && (last == first
+                            || calibration.bytes(summed + tiles[last].1, largest + tiles[last].2) <= limit)
+                    {
+                        summed += tiles[last].1;
+                        largest += tiles[last].2;
                         last += 1;
                     }
                     let end =
@@ -198,6 +199,7 @@ impl GroupedBuild {
                         next_scan: 0,
                         largest_update: 0,
                         seconds: 0.0,
+                        split: false,
                     }
                 }
                 None => break,
@@ -214,15 +216,19 @@ impl GroupedBuild {
             let started = Instant::now();
             let tile_bytes = group.map.tile_bytes();
             let written = group.map.write_tiles(&self.dir)?;
+            let (estimate, largest) = estimate_of(&group.range);
             let built = BuiltGroup {
-                estimate: estimate_of(&group.range),
+                estimate,
                 prefixes: group.range,
                 tiles: written.len(),
                 tile_bytes,
                 largest_update: group.largest_update,
                 seconds: group.seconds + started.elapsed().as_secs_f64(),
             };
-            calibration.add(&built);
+            if !group.split {
+                // a split group's halves measured part of the scans only
+                calibration.add(&built, largest);
+            }
             groups.push(built);
             entries.extend(written);
         }
@@ -300,11 +306,14 @@ impl GroupedBuild {
             map: self.group_map(group.map.depth, upper_range.clone())?,
             range: upper_range,
             next_scan: group.next_scan,
-            largest_update: group.largest_update,
+            largest_update: 0,
             seconds: 0.0,
+            split: true,
         };
         group.map.move_tiles_from(at, &mut upper.map)?;
         group.range.end = at;
+        // the updates measured were the whole range's: each half measures its own
+        (group.largest_update, group.split) = (0, true);
         group.map.set_task(TaskPart {
             index: 0,
             count: 1,
@@ -315,13 +324,15 @@ impl GroupedBuild {
 }
 
 /// A group of tiles being built: its map, the scan it goes on from, the
-/// voxel updates of its largest scan so far, its time so far.
+/// voxel updates of its largest scan so far, its time so far, whether it
+/// is half of a group that split.
 struct Group {
     range: Range<u64>,
     map: TiledMap,
     next_scan: usize,
     largest_update: usize,
     seconds: f64,
+    split: bool,
 }
 
 impl TiledMap {

@@ -60,8 +60,9 @@ pub struct TileWork {
     depth: u8,
     work: BTreeMap<u64, u64>,
     /// The voxel updates alone (the part of `work` they make, without
-    /// [`UPDATE_COST`]), the measure of a tile's memory.
-    updates: BTreeMap<u64, u64>,
+    /// [`UPDATE_COST`]), the measure of a tile's memory: summed over the
+    /// scans, and the largest of one scan.
+    updates: BTreeMap<u64, (u64, u64)>,
 }
 
 impl TileWork {
@@ -108,7 +109,9 @@ impl TileWork {
         // per tile, sums in ray order: the same estimate on every run
         for (prefix, (steps, updates)) in scan {
             *self.work.entry(prefix).or_default() += steps.round() as u64;
-            *self.updates.entry(prefix).or_default() += updates.round() as u64;
+            let (summed, largest) = self.updates.entry(prefix).or_default();
+            *summed += updates.round() as u64;
+            *largest = (*largest).max(updates.round() as u64);
         }
     }
 
@@ -185,11 +188,12 @@ impl TileWork {
         self.work.iter().filter(|(_, &w)| w > 0).map(|(&p, &w)| (p, w))
     }
 
-    /// Estimated voxel updates by tile prefix (the scans' updates summed:
-    /// a voxel updated by several scans counts once for each), tiles
-    /// without updates left out. Memory follows them, not the ray steps.
-    pub fn updates(&self) -> impl Iterator<Item = (u64, u64)> + '_ {
-        self.updates.iter().filter(|(_, &u)| u > 0).map(|(&p, &u)| (p, u))
+    /// Estimated voxel updates by tile prefix: the scans' updates summed
+    /// (a voxel updated by several scans counts once for each), and the
+    /// most of one scan; tiles without updates left out. Memory follows
+    /// them, not the ray steps.
+    pub fn updates(&self) -> impl Iterator<Item = (u64, u64, u64)> + '_ {
+        self.updates.iter().filter(|(_, u)| u.0 > 0).map(|(&p, &(summed, largest))| (p, summed, largest))
     }
 
     /// The tile depth estimated for.

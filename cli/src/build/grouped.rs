@@ -137,7 +137,7 @@ pub(super) fn run(a: &Args, t: &Tiling, sensor: SensorModel, format: MapFormat, 
     } else {
         // the tiles walked one at a time, straight into the file
         let phase = spinner(&format!("writing {} from the tiles", a.output.display()));
-        let stats = write_tiled(&set, format, &a.output)?;
+        let stats = write_tiled(&set, format, &a.output, Some(&dir))?;
         phase.finish_and_clear();
         stats
     };

@@ -318,26 +318,54 @@ fn write_tree(mut tree: OccupancyTree, format: MapFormat, output: &Path) -> Resu
 }
 
 /// Writes a tiled map or a tile set to `output` (`.ot` or `.bt`) without
-/// merging it: one walk across the tiles writes the file and gathers the full tree's
-/// statistics, and the maximum-likelihood tree's come from its `.bt`
-/// records; they equal [`write_tree`]'s of the merged tree.
-fn write_tiled<M: PreorderSource>(map: &M, format: MapFormat, output: &Path) -> Result<(Value, Value)> {
+/// merging it: one walk across the tiles writes the file and gathers the
+/// full tree's statistics, and the maximum-likelihood tree's come from its
+/// `.bt` records; they equal [`write_tree`]'s of the merged tree. With
+/// `scratch` (a directory), the records wait there, not in memory.
+fn write_tiled<M: PreorderSource>(
+    map: &M,
+    format: MapFormat,
+    output: &Path,
+    scratch: Option<&Path>,
+) -> Result<(Value, Value)> {
+    let scratch = scratch.map(scratch_file).transpose()?;
     let mut full = Summarize::new(map);
     let mut ml = None;
     let written = match format {
         MapFormat::Ot => {
-            let mut records = MaxLikelihood::new(map);
+            let mut records = match scratch {
+                Some(file) => MaxLikelihood::with_scratch(map, file),
+                None => MaxLikelihood::new(map),
+            };
             write_atomically(output, |w| ot::write_map_observed(map, w, &mut Tee(&mut full, &mut records)))
                 .and_then(|()| records.finish(map))
         }
         _ => write_atomically(output, |w| {
-            ml = Some(bt::write_map_observed(map, w, &mut full)?);
+            ml = Some(match scratch {
+                Some(file) => bt::write_map_observed_with_scratch(map, w, &mut full, file)?,
+                None => bt::write_map_observed(map, w, &mut full)?,
+            });
             Ok(())
         })
         .map(|()| ml.take().expect("written")),
     };
-    let ml = written.with_context(|| format!("cannot write {}", output.display()))?;
-    Ok((summary_statistics(&full.finish()), summary_statistics(&ml.summary(map))))
+    let summary = written.and_then(|mut ml| ml.summary(map));
+    let ml = summary.with_context(|| format!("cannot write {}", output.display()))?;
+    Ok((summary_statistics(&full.finish()), summary_statistics(&ml)))
+}
+
+/// A new file in `dir` for records that wait on disk, removed at once (it
+/// lives while open).
+fn scratch_file(dir: &Path) -> Result<std::fs::File> {
+    let path = dir.join(format!("records-{}", std::process::id()));
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create_new(true)
+        .open(&path)
+        .with_context(|| format!("cannot create {}", path.display()))?;
+    let _ = std::fs::remove_file(&path);
+    Ok(file)
 }
 
 /// [`statistics`] from a [`TreeSummary`]: the same numbers, with memory as
@@ -813,7 +841,7 @@ pub fn run(a: Args) -> Result<()> {
         Some(map) if format != MapFormat::Olm => {
             // the tiles walked one at a time, straight into the file
             let phase = spinner(&format!("writing {} from the tiles", a.output.display()));
-            let stats = write_tiled(&map, format, &a.output)?;
+            let stats = write_tiled(&map, format, &a.output, spill_dir.as_ref().map(|d| d.0.as_path()))?;
             phase.finish_and_clear();
             drop(map);
             drop(spill_dir);
