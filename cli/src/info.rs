@@ -10,7 +10,7 @@ use octolinear::formats::{bt, ot, write_atomically, xyz};
 use octolinear::mapped::{Index, MappedMap, SectionKind, TreeKind, Variant};
 use octolinear::sensor::probability;
 use octolinear::{BoundsRule, Key, KeySpace, NodeKind, OccupancyTree, Point3};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Print the kind, resolution and statistics of a map (.bt, .ot or .olm),
 /// or of a tile set (NAME.tiles: its manifest's numbers, no tile read).
@@ -147,9 +147,12 @@ pub fn convert(a: ConvertArgs) -> Result<()> {
     let (kind, nodes) = if streamed {
         // the tiles walked one at a time, straight into the file
         let set = super::tiles::open(&a.input)?;
-        write_atomically(a.output.path(), |w| match format {
-            MapFormat::Bt => bt::write_map(&set, w).map(|_| ()),
-            _ => ot::write_map(&set, w),
+        // a tile set may be larger than memory: .bt records wait on disk
+        let dir = a.output.path().parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        let mut scratch = (format == MapFormat::Bt).then(|| super::build::scratch_file(dir)).transpose()?;
+        write_atomically(a.output.path(), |w| match scratch.take() {
+            Some(file) => bt::write_map_observed_with_scratch(&set, w, &mut (), file).map(|_| ()),
+            None => ot::write_map(&set, w),
         })
         .with_context(|| format!("cannot write {}", a.output.path().display()))?;
         (set.manifest().kind, set.node_count() as usize)

@@ -69,9 +69,8 @@ use std::time::{Duration, Instant};
 /// standard input or point files, scan by scan, the tiles not used lately
 /// written out and read back when scans reach them again (a whole scan's
 /// update is held besides). An .ot or .bt output is then written tile by
-/// tile, never as one tree (.bt holds its records, the size of the file,
-/// in memory); an .olm output, laid out as a whole, merges the tiles into
-/// one tree in memory at the end. Tiles cannot hold colour maps, and --compress-ml
+/// tile, never as one tree; an .olm output, laid out as a whole, merges
+/// the tiles into one tree in memory at the end. Tiles cannot hold colour maps, and --compress-ml
 /// (OctoMap's prune() stops at the first level where nothing merged, a
 /// decision over the whole map) is not offered with them.
 ///
@@ -356,7 +355,7 @@ fn write_tiled<M: PreorderSource>(
 
 /// A new file in `dir` for records that wait on disk, removed at once (it
 /// lives while open).
-fn scratch_file(dir: &Path) -> Result<std::fs::File> {
+pub(super) fn scratch_file(dir: &Path) -> Result<std::fs::File> {
     let path = dir.join(format!("records-{}", std::process::id()));
     let file = std::fs::OpenOptions::new()
         .read(true)
