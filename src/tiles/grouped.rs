@@ -23,6 +23,11 @@
 //! and splits in two ranges of about equal bytes; both go on from the
 //! next scan, the upper one set aside on disk while the lower one is
 //! built. A group of one tile cannot split: its tile is held whole.
+//!
+//! With `T` threads, `T` workers build groups at once, each on one thread
+//! within a `T`-th of the memory (casting one scan on two threads holds a
+//! set per thread and was no faster on the full-size outdoor sequence);
+//! they share the groups still to build and the calibration.
 
 use super::budget::MemoryBudget;
 use super::error::TileError;
@@ -36,13 +41,16 @@ use crate::sensor::SensorModel;
 use crate::tree::{InnerNodes, NodeKind};
 use std::ops::Range;
 use std::path::PathBuf;
+use std::sync::{Condvar, Mutex};
 use std::time::Instant;
 
 /// Bytes a voxel update of a scan holds while the scan is cast and
-/// applied: its code in the sorted list (8) and its share of the block
-/// bitmaps the casting fills (measured on the full-size sequences: a few
-/// voxels per 64-byte block far from the sensor).
-pub const UPDATE_BYTES: usize = 24;
+/// applied: its code in the sorted list (8), its share of the block
+/// bitmaps the casting fills (64-byte blocks, a few voxels each far from
+/// the sensor) and of their growth. Measured on the full-size outdoor
+/// sequence at 0.05 m: with 24, builds under a 64 MB cap peaked 26 MB
+/// (one thread) and 52 MB (two) above it; with 48, 4 and 20 MB.
+pub const UPDATE_BYTES: usize = 48;
 
 /// Groups are cut to this part of the memory, for the error of the
 /// estimate from group to group.
@@ -149,89 +157,43 @@ impl GroupedBuild {
     /// giving the same scans in the same order) with the insertion
     /// options `opts`, in groups sized from `work` (the estimate of the
     /// same scans at the tile depth to build); `progress(group, scans)`
-    /// after each scan. Returns the manifest written and the groups.
+    /// after each scan. With `opts.threads` of `T` (all cores when unset),
+    /// `T` groups are built at once, each on one thread within an `T`-th of
+    /// the memory. Returns the manifest written and the groups.
     pub fn build<I, P, E>(
         &self,
         work: &TileWork,
         opts: &ScanOptions,
-        mut scans: impl FnMut() -> I,
-        mut progress: impl FnMut(usize, usize),
+        scans: impl Fn() -> I + Sync,
+        progress: impl Fn(usize, usize) + Sync,
     ) -> Result<GroupedReport, GroupedError<E>>
     where
         I: IntoIterator<Item = Result<(P, Point3), E>>,
         P: AsRef<[Point3]>,
+        E: Send,
     {
         let depth = work.depth();
-        let prefixes = 1u64 << (3 * u32::from(depth));
-        let tiles: Vec<(u64, u64, u64)> = work.updates().collect();
-        // the estimates (summed, largest scan) of the tiles of a range
-        let estimate_of = |r: &Range<u64>| -> (u64, u64) {
-            let (a, b) = (tiles.partition_point(|t| t.0 < r.start), tiles.partition_point(|t| t.0 < r.end));
-            tiles[a..b].iter().fold((0, 0), |e, t| (e.0 + t.1, e.1 + t.2))
+        let workers = opts.threads.unwrap_or_else(rayon::current_num_threads).max(1);
+        let plan = Plan {
+            tiles: work.updates().collect(),
+            prefixes: 1u64 << (3 * u32::from(depth)),
+            depth,
+            limit: FILL * self.memory as f64 / workers as f64,
+            opts: ScanOptions { threads: Some(1), ..*opts },
         };
-        let mut calibration = Calibration::default();
-        let (mut groups, mut entries) = (Vec::new(), Vec::new());
-        // groups begun and split, the next to build last
-        let mut pending: Vec<Group> = Vec::new();
-        let (mut start, mut first) = (0u64, 0usize);
-        loop {
-            let mut group = match pending.pop() {
-                Some(g) => g,
-                None if start < prefixes => {
-                    let limit = FILL * self.memory as f64;
-                    // at least one tile, then as many as fit
-                    let (mut last, mut summed, mut largest) = (first, 0u64, 0u64);
-                    while last < tiles.len()
-                        && (last == first
-                            || calibration.bytes(summed + tiles[last].1, largest + tiles[last].2) <= limit)
-                    {
-                        summed += tiles[last].1;
-                        largest += tiles[last].2;
-                        last += 1;
-                    }
-                    let end =
-                        if last < tiles.len() { aligned_between(tiles[last - 1].0, tiles[last].0) } else { prefixes };
-                    let range = start..end;
-                    (start, first) = (end, last);
-                    Group {
-                        map: self.group_map(depth, range.clone())?,
-                        range,
-                        next_scan: 0,
-                        largest_update: 0,
-                        seconds: 0.0,
-                        split: false,
-                    }
-                }
-                None => break,
-            };
-            let index = groups.len();
-            let limit = (FILL * self.memory as f64) as usize;
-            if let Some(upper) = self.grow(&mut group, opts, limit, scans(), |s| progress(index, s))? {
-                pending.extend([upper, group]);
-                continue;
+        let state = Mutex::new(State::default());
+        let wake = Condvar::new();
+        std::thread::scope(|s| {
+            for _ in 0..workers {
+                s.spawn(|| self.work(&plan, &state, &wake, &scans, &progress));
             }
-            if opts.inner == InnerNodes::Defer {
-                group.map.update_inner_occupancy()?;
-            }
-            let started = Instant::now();
-            let tile_bytes = group.map.tile_bytes();
-            let written = group.map.write_tiles(&self.dir)?;
-            let (estimate, largest) = estimate_of(&group.range);
-            let built = BuiltGroup {
-                estimate,
-                prefixes: group.range,
-                tiles: written.len(),
-                tile_bytes,
-                largest_update: group.largest_update,
-                seconds: group.seconds + started.elapsed().as_secs_f64(),
-            };
-            if !group.split {
-                // a split group's halves measured part of the scans only
-                calibration.add(&built, largest);
-            }
-            groups.push(built);
-            entries.extend(written);
+        });
+        let state = state.into_inner().unwrap_or_else(|e| e.into_inner());
+        if let Some(e) = state.error {
+            return Err(e);
         }
+        let (mut groups, mut entries) = (state.groups, state.entries);
+        groups.sort_by_key(|g| g.prefixes.start);
         entries.sort_by_key(|e: &TileEntry| e.id.prefix());
         let manifest = Manifest {
             resolution: self.resolution,
@@ -243,6 +205,99 @@ impl GroupedBuild {
         };
         manifest.write(&self.dir.join(MANIFEST_FILE))?;
         Ok(GroupedReport { manifest, groups })
+    }
+
+    /// One worker: takes groups (one split before, else the next from the
+    /// estimate) and builds them until none is left or one failed.
+    fn work<I, P, E>(
+        &self,
+        plan: &Plan,
+        state: &Mutex<State<E>>,
+        wake: &Condvar,
+        scans: &(impl Fn() -> I + Sync),
+        progress: &(impl Fn(usize, usize) + Sync),
+    ) where
+        I: IntoIterator<Item = Result<(P, Point3), E>>,
+        P: AsRef<[Point3]>,
+    {
+        let lock = || state.lock().unwrap_or_else(|e| e.into_inner());
+        loop {
+            let (mut group, index) = {
+                let mut st = lock();
+                let group = loop {
+                    if st.error.is_some() {
+                        return;
+                    }
+                    if let Some(g) = st.pending.pop() {
+                        break g;
+                    }
+                    if st.start < plan.prefixes {
+                        let range = plan.next_range(&mut st);
+                        match self.group_map(plan.depth, range.clone()) {
+                            Ok(map) => break Group::new(range, map),
+                            Err(e) => {
+                                st.error = Some(e.into());
+                                wake.notify_all();
+                                return;
+                            }
+                        }
+                    }
+                    if st.busy == 0 {
+                        wake.notify_all();
+                        return;
+                    }
+                    st = wake.wait(st).unwrap_or_else(|e| e.into_inner());
+                };
+                st.busy += 1;
+                st.started += 1;
+                (group, st.started - 1)
+            };
+            let limit = plan.limit as usize;
+            let grown = self.grow(&mut group, &plan.opts, limit, scans(), |n| progress(index, n));
+            let outcome = match grown {
+                Ok(Some(upper)) => Ok(Err(upper)),
+                Ok(None) => self.finish(&mut group, &plan.opts).map(Ok).map_err(GroupedError::from),
+                Err(e) => Err(e),
+            };
+            let mut st = lock();
+            st.busy -= 1;
+            match outcome {
+                Ok(Err(upper)) => st.pending.extend([upper, group]),
+                Ok(Ok((mut built, written))) => {
+                    let (estimate, largest) = plan.estimate(&built.prefixes);
+                    built.estimate = estimate;
+                    if !group.split {
+                        // a split group's halves measured part of the scans only
+                        st.calibration.add(&built, largest);
+                    }
+                    st.groups.push(built);
+                    st.entries.extend(written);
+                }
+                Err(e) => {
+                    st.error.get_or_insert(e);
+                }
+            }
+            wake.notify_all();
+        }
+    }
+
+    /// Writes a group built, returning what it made and its tiles.
+    fn finish(&self, group: &mut Group, opts: &ScanOptions) -> Result<(BuiltGroup, Vec<TileEntry>), TileError> {
+        if opts.inner == InnerNodes::Defer {
+            group.map.update_inner_occupancy()?;
+        }
+        let started = Instant::now();
+        let tile_bytes = group.map.tile_bytes();
+        let written = group.map.write_tiles(&self.dir)?;
+        let built = BuiltGroup {
+            estimate: 0,
+            prefixes: group.range.clone(),
+            tiles: written.len(),
+            tile_bytes,
+            largest_update: group.largest_update,
+            seconds: group.seconds + started.elapsed().as_secs_f64(),
+        };
+        Ok((built, written))
     }
 
     /// An empty map of the tiles of `range`, spilling into the set's
@@ -333,6 +388,88 @@ struct Group {
     largest_update: usize,
     seconds: f64,
     split: bool,
+}
+
+impl Group {
+    /// A group of `range` not begun, with its empty map.
+    fn new(range: Range<u64>, map: TiledMap) -> Self {
+        Group { range, map, next_scan: 0, largest_update: 0, seconds: 0.0, split: false }
+    }
+}
+
+/// What the workers share and do not change.
+struct Plan {
+    /// The estimates by tile: prefix, updates summed over the scans, the
+    /// most of one scan.
+    tiles: Vec<(u64, u64, u64)>,
+    /// Tile prefixes at the depth: `8^depth`.
+    prefixes: u64,
+    depth: u8,
+    /// Bytes a worker's group may hold.
+    limit: f64,
+    /// Insertion options, one thread.
+    opts: ScanOptions,
+}
+
+impl Plan {
+    /// The estimates (summed, largest scan) of the tiles of a range.
+    fn estimate(&self, r: &Range<u64>) -> (u64, u64) {
+        let t = &self.tiles;
+        let (a, b) = (t.partition_point(|t| t.0 < r.start), t.partition_point(|t| t.0 < r.end));
+        t[a..b].iter().fold((0, 0), |e, t| (e.0 + t.1, e.1 + t.2))
+    }
+
+    /// The next group from the estimate: at least one tile, then as many
+    /// as the calibration says fit.
+    fn next_range<E>(&self, st: &mut State<E>) -> Range<u64> {
+        let (tiles, first) = (&self.tiles, st.first);
+        let (mut last, mut summed, mut largest) = (first, 0u64, 0u64);
+        while last < tiles.len()
+            && (last == first || st.calibration.bytes(summed + tiles[last].1, largest + tiles[last].2) <= self.limit)
+        {
+            summed += tiles[last].1;
+            largest += tiles[last].2;
+            last += 1;
+        }
+        let end = if last < tiles.len() { aligned_between(tiles[last - 1].0, tiles[last].0) } else { self.prefixes };
+        let range = st.start..end;
+        (st.start, st.first) = (end, last);
+        range
+    }
+}
+
+/// What the workers share and change, under a lock.
+struct State<E> {
+    /// Groups split, the next to build last.
+    pending: Vec<Group>,
+    /// The first prefix and the first estimated tile not given to a group.
+    start: u64,
+    first: usize,
+    calibration: Calibration,
+    groups: Vec<BuiltGroup>,
+    entries: Vec<TileEntry>,
+    /// Groups being built.
+    busy: usize,
+    /// Groups begun, for the progress.
+    started: usize,
+    /// The first failure: the others stop after their group.
+    error: Option<GroupedError<E>>,
+}
+
+impl<E> Default for State<E> {
+    fn default() -> Self {
+        State {
+            pending: Vec::new(),
+            start: 0,
+            first: 0,
+            calibration: Calibration::default(),
+            groups: Vec::new(),
+            entries: Vec::new(),
+            busy: 0,
+            started: 0,
+            error: None,
+        }
+    }
 }
 
 impl TiledMap {

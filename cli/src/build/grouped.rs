@@ -1,8 +1,8 @@
 //! `build --memory-cap` from a `.graph` file: the tile set built group by
 //! group ([`GroupedBuild`]), each group from every scan read again from
 //! the file, so that memory holds one group's tiles and a scan's update
-//! for them, not a whole scan's update beside the tiles. It runs on one
-//! thread.
+//! for them, not a whole scan's update beside the tiles; with several
+//! threads, as many groups at once.
 
 use super::{
     input, input_name, print_build, print_tile_set, scan_options, tiles, write_tiled, write_tree, Args, SpillDir,
@@ -12,7 +12,8 @@ use crate::common::{progress, spinner, MapFormat};
 use anyhow::{Context, Result};
 use octolinear::sensor::SensorModel;
 use octolinear::tiles::{GroupedBuild, GroupedError, TileSet, TileWork};
-use octolinear::{KeySpace, NodeKind, Point3, ScanOptions};
+use octolinear::{KeySpace, NodeKind, Point3};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -58,9 +59,7 @@ fn read_scans<'a>(
 /// temporary one beside the output), then writes the output from it.
 pub(super) fn run(a: &Args, t: &Tiling, sensor: SensorModel, format: MapFormat, tile_output: bool) -> Result<()> {
     let max_range = super::max_range_arg(a.max_range)?;
-    // one thread: casting a scan on more holds a set per thread and, on
-    // the full-size outdoor sequence, took no less time
-    let opts = ScanOptions { threads: Some(1), ..scan_options(a, max_range) };
+    let opts = scan_options(a, max_range);
     let input = input_name(a);
     let started = Instant::now();
 
@@ -98,16 +97,15 @@ pub(super) fn run(a: &Args, t: &Tiling, sensor: SensorModel, format: MapFormat, 
     };
     let bar = progress(n as u64, "inserting scans");
     let reading = Mutex::new(Duration::ZERO);
-    let mut current = usize::MAX;
+    let latest = AtomicUsize::new(0);
     let built = build.build(
         &work,
         &opts,
         || read_scans(a, n, &reading),
         |group, done| {
-            if group != current {
-                // the previous group's trees and sets are freed: return them
+            if latest.fetch_max(group + 1, Ordering::Relaxed) < group + 1 {
+                // a group done has freed its trees and sets: return them
                 crate::trim_heap();
-                current = group;
                 bar.set_message(format!("inserting scans, tile group {}", group + 1));
             }
             bar.set_position(done as u64);

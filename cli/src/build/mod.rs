@@ -65,7 +65,8 @@ use std::time::{Duration, Instant};
 /// groups of neighbouring tiles that fit it together with a scan's update
 /// for them, each built from every scan (read again from the file,
 /// casting only the rays that reach the group) and written out (into the
-/// tile set, or beside OUT in a temporary directory), on one thread; from
+/// tile set, or beside OUT in a temporary directory), one group per
+/// thread at a time, each thread within its share of the cap; from
 /// standard input or point files, scan by scan, the tiles not used lately
 /// written out and read back when scans reach them again (a whole scan's
 /// update is held besides). An .ot or .bt output is then written tile by
