@@ -65,9 +65,10 @@ pub struct GroupedBuild {
     pub resolution: f64,
     /// The sensor model of the map.
     pub sensor: SensorModel,
-    /// Bytes for one group's tiles ([`crate::OccupancyTree::memory_usage`])
-    /// and the scans' updates in flight for them together; not counted:
-    /// the program, a scan's points and the allocator's slack.
+    /// Bytes for the groups being built: their tiles
+    /// ([`crate::OccupancyTree::memory_usage`]) and a scan's update for
+    /// each; not counted: the program, the scans' points and the
+    /// allocator's slack.
     pub memory: usize,
     /// The tile set's directory: tiles are written there as their group
     /// is done, and the manifest once all are.
@@ -233,7 +234,7 @@ impl GroupedBuild {
                     }
                     if st.start < plan.prefixes {
                         let range = plan.next_range(&mut st);
-                        match self.group_map(plan.depth, range.clone()) {
+                        match self.group_map(plan, range.clone()) {
                             Ok(map) => break Group::new(range, map),
                             Err(e) => {
                                 st.error = Some(e.into());
@@ -252,18 +253,19 @@ impl GroupedBuild {
                 st.started += 1;
                 (group, st.started - 1)
             };
-            let limit = plan.limit as usize;
-            let grown = self.grow(&mut group, &plan.opts, limit, scans(), |n| progress(index, n));
+            let grown = self.grow(plan, &mut group, scans(), |n| progress(index, n));
             let outcome = match grown {
-                Ok(Some(upper)) => Ok(Err(upper)),
-                Ok(None) => self.finish(&mut group, &plan.opts).map(Ok).map_err(GroupedError::from),
+                Ok(Some(upper)) => Ok(Outcome::Split(Box::new(upper))),
+                Ok(None) => {
+                    self.finish(&mut group, &plan.opts).map(|(b, w)| Outcome::Done(b, w)).map_err(GroupedError::from)
+                }
                 Err(e) => Err(e),
             };
             let mut st = lock();
             st.busy -= 1;
             match outcome {
-                Ok(Err(upper)) => st.pending.extend([upper, group]),
-                Ok(Ok((mut built, written))) => {
+                Ok(Outcome::Split(upper)) => st.pending.extend([*upper, group]),
+                Ok(Outcome::Done(mut built, written)) => {
                     let (estimate, largest) = plan.estimate(&built.prefixes);
                     built.estimate = estimate;
                     if !group.split {
@@ -301,28 +303,26 @@ impl GroupedBuild {
     }
 
     /// An empty map of the tiles of `range`, spilling into the set's
-    /// directory past the memory.
-    fn group_map(&self, depth: u8, range: Range<u64>) -> Result<TiledMap, TileError> {
-        let mut map = TiledMap::new(self.resolution, self.sensor, NodeKind::Plain, depth)?;
+    /// directory past a worker's share of the memory.
+    fn group_map(&self, plan: &Plan, range: Range<u64>) -> Result<TiledMap, TileError> {
+        let mut map = TiledMap::new(self.resolution, self.sensor, NodeKind::Plain, plan.depth)?;
         map.set_task(TaskPart {
             index: 0,
             count: 1,
             tiles: TaskTiles::Prefixes { start: range.start, end: range.end },
         });
-        map.set_budget(MemoryBudget { bytes: self.memory, dir: self.dir.clone() })?;
+        map.set_budget(MemoryBudget { bytes: (plan.limit / FILL) as usize, dir: self.dir.clone() })?;
         Ok(map)
     }
 
     /// Inserts the scans from `group.next_scan` on until the last, or
     /// until the group's tiles and the update of its largest scan pass
     /// `limit` bytes: then it splits after the scan in hand, keeping the
-    /// lower half and returning the upper one. Scans are cast
-    /// one at a time (each on all the threads), so that one update is held.
+    /// lower half and returning the upper one.
     fn grow<I, P, E>(
         &self,
+        plan: &Plan,
         group: &mut Group,
-        opts: &ScanOptions,
-        limit: usize,
         scans: I,
         mut progress: impl FnMut(usize),
     ) -> Result<Option<Group>, GroupedError<E>>
@@ -338,13 +338,13 @@ impl GroupedBuild {
             let index = group.next_scan;
             let report = group
                 .map
-                .insert_point_cloud(points.as_ref(), origin, opts)
+                .insert_point_cloud(points.as_ref(), origin, &plan.opts)
                 .map_err(|source| GroupedError::Scan { index, source })?;
             group.largest_update = group.largest_update.max(report.free_updates + report.occupied_updates);
             group.next_scan += 1;
             progress(group.next_scan);
             let map = &group.map;
-            let over = map.tile_bytes() + group.largest_update * UPDATE_BYTES > limit;
+            let over = map.tile_bytes() + group.largest_update * UPDATE_BYTES > plan.limit as usize;
             // after the last scan, splitting would save nothing
             if over && map.tiles.len() > 1 && scans.peek().is_some() {
                 split = true;
@@ -358,7 +358,7 @@ impl GroupedBuild {
         let at = group.map.halfway();
         let upper_range = at..group.range.end;
         let mut upper = Group {
-            map: self.group_map(group.map.depth, upper_range.clone())?,
+            map: self.group_map(plan, upper_range.clone())?,
             range: upper_range,
             next_scan: group.next_scan,
             largest_update: 0,
@@ -388,6 +388,14 @@ struct Group {
     largest_update: usize,
     seconds: f64,
     split: bool,
+}
+
+/// What building a group came to.
+enum Outcome {
+    /// It outgrew its share and split: the upper half to go on.
+    Split(Box<Group>),
+    /// It is written: what it made, and its tiles.
+    Done(BuiltGroup, Vec<TileEntry>),
 }
 
 impl Group {

@@ -34,7 +34,7 @@ fn read_scans<'a>(
     a: &'a Args,
     n: usize,
     reading: &'a Mutex<Duration>,
-) -> impl Iterator<Item = Result<(Vec<Point3>, Point3)>> + Send + 'a {
+) -> impl Iterator<Item = Result<(Vec<Point3>, Point3)>> + 'a {
     let path = a.input.as_deref().expect("a grouped build reads a .graph file");
     let opened = input::open_graph(path);
     let (reader, failed) = match opened {
