@@ -180,6 +180,7 @@ impl GroupedBuild {
             prefixes: 1u64 << (3 * u32::from(depth)),
             depth,
             limit: FILL * self.memory as f64 / workers as f64,
+            whole: FILL * self.memory as f64,
             opts: ScanOptions { threads: Some(1), ..*opts },
         };
         let state = Mutex::new(State::default());
@@ -233,9 +234,9 @@ impl GroupedBuild {
                         break g;
                     }
                     if st.start < plan.prefixes {
-                        let range = plan.next_range(&mut st);
-                        match self.group_map(plan, range.clone()) {
-                            Ok(map) => break Group::new(range, map),
+                        let (range, limit) = plan.next_range(&mut st);
+                        match self.group_map(plan.depth, range.clone(), limit) {
+                            Ok(map) => break Group::new(range, map, limit),
                             Err(e) => {
                                 st.error = Some(e.into());
                                 wake.notify_all();
@@ -303,15 +304,16 @@ impl GroupedBuild {
     }
 
     /// An empty map of the tiles of `range`, spilling into the set's
-    /// directory past a worker's share of the memory.
-    fn group_map(&self, plan: &Plan, range: Range<u64>) -> Result<TiledMap, TileError> {
-        let mut map = TiledMap::new(self.resolution, self.sensor, NodeKind::Plain, plan.depth)?;
+    /// directory past its group's share of the memory (`limit` once
+    /// filled).
+    fn group_map(&self, depth: u8, range: Range<u64>, limit: f64) -> Result<TiledMap, TileError> {
+        let mut map = TiledMap::new(self.resolution, self.sensor, NodeKind::Plain, depth)?;
         map.set_task(TaskPart {
             index: 0,
             count: 1,
             tiles: TaskTiles::Prefixes { start: range.start, end: range.end },
         });
-        map.set_budget(MemoryBudget { bytes: (plan.limit / FILL) as usize, dir: self.dir.clone() })?;
+        map.set_budget(MemoryBudget { bytes: (limit / FILL) as usize, dir: self.dir.clone() })?;
         Ok(map)
     }
 
@@ -344,7 +346,7 @@ impl GroupedBuild {
             group.next_scan += 1;
             progress(group.next_scan);
             let map = &group.map;
-            let over = map.tile_bytes() + group.largest_update * UPDATE_BYTES > plan.limit as usize;
+            let over = map.tile_bytes() + group.largest_update * UPDATE_BYTES > group.limit as usize;
             // after the last scan, splitting would save nothing
             if over && map.tiles.len() > 1 && scans.peek().is_some() {
                 split = true;
@@ -358,8 +360,9 @@ impl GroupedBuild {
         let at = group.map.halfway();
         let upper_range = at..group.range.end;
         let mut upper = Group {
-            map: self.group_map(plan, upper_range.clone())?,
+            map: self.group_map(plan.depth, upper_range.clone(), plan.limit)?,
             range: upper_range,
+            limit: plan.limit,
             next_scan: group.next_scan,
             largest_update: 0,
             seconds: 0.0,
@@ -367,8 +370,9 @@ impl GroupedBuild {
         };
         group.map.move_tiles_from(at, &mut upper.map)?;
         group.range.end = at;
-        // the updates measured were the whole range's: each half measures its own
-        (group.largest_update, group.split) = (0, true);
+        // the updates measured were the whole range's: each half measures
+        // its own, within a worker's share
+        (group.largest_update, group.split, group.limit) = (0, true, plan.limit);
         group.map.set_task(TaskPart {
             index: 0,
             count: 1,
@@ -384,6 +388,8 @@ impl GroupedBuild {
 struct Group {
     range: Range<u64>,
     map: TiledMap,
+    /// Bytes its tiles and largest update may hold before it splits.
+    limit: f64,
     next_scan: usize,
     largest_update: usize,
     seconds: f64,
@@ -400,8 +406,8 @@ enum Outcome {
 
 impl Group {
     /// A group of `range` not begun, with its empty map.
-    fn new(range: Range<u64>, map: TiledMap) -> Self {
-        Group { range, map, next_scan: 0, largest_update: 0, seconds: 0.0, split: false }
+    fn new(range: Range<u64>, map: TiledMap, limit: f64) -> Self {
+        Group { range, map, limit, next_scan: 0, largest_update: 0, seconds: 0.0, split: false }
     }
 }
 
@@ -415,6 +421,8 @@ struct Plan {
     depth: u8,
     /// Bytes a worker's group may hold.
     limit: f64,
+    /// Bytes all groups may hold together.
+    whole: f64,
     /// Insertion options, one thread.
     opts: ScanOptions,
 }
@@ -429,8 +437,16 @@ impl Plan {
 
     /// The next group from the estimate: at least one tile, then as many
     /// as the calibration says fit.
-    fn next_range<E>(&self, st: &mut State<E>) -> Range<u64> {
+    fn next_range<E>(&self, st: &mut State<E>) -> (Range<u64>, f64) {
         let (tiles, first) = (&self.tiles, st.first);
+        if first == 0 {
+            // a map that fits the whole memory is one group, on one thread
+            let (summed, largest) = self.estimate(&(0..self.prefixes));
+            if st.calibration.bytes(summed, largest) <= self.whole {
+                (st.start, st.first) = (self.prefixes, tiles.len());
+                return (0..self.prefixes, self.whole);
+            }
+        }
         let (mut last, mut summed, mut largest) = (first, 0u64, 0u64);
         while last < tiles.len()
             && (last == first || st.calibration.bytes(summed + tiles[last].1, largest + tiles[last].2) <= self.limit)
@@ -442,7 +458,7 @@ impl Plan {
         let end = if last < tiles.len() { aligned_between(tiles[last - 1].0, tiles[last].0) } else { self.prefixes };
         let range = st.start..end;
         (st.start, st.first) = (end, last);
-        range
+        (range, self.limit)
     }
 }
 
