@@ -48,8 +48,8 @@ use std::time::Instant;
 /// applied: its code in the sorted list (8), its share of the block
 /// bitmaps the casting fills (64-byte blocks, a few voxels each far from
 /// the sensor) and of their growth. Measured on the full-size outdoor
-/// sequence at 0.05 m: with 24, builds under a 64 MB cap peaked 26 MB
-/// (one thread) and 52 MB (two) above it; with 48, 4 and 20 MB.
+/// sequence at 0.05 m: with 24, builds under a 64 MiB cap peaked 24 MiB
+/// (one thread) and 49 MiB (two) above it; with 48, 2 and 18 MiB.
 pub const UPDATE_BYTES: usize = 48;
 
 /// Groups are cut to this part of the memory, for the error of the
