@@ -281,10 +281,12 @@ def build_tiles(
     task: Optional[Tuple[int, int]] = None,
     plan: Optional[str] = None,
     resume: bool = False,
+    memory_cap: Optional[int] = None,
 ) -> dict[str, Any]:
-    """What ``octolinear build IN -o OUT.tiles --tile-depth D [--task K/N]`` does:
-    a tile set (or one task's part of it) from a .graph file. Returns its
-    summary: tiles, bytes, nodes, seconds, task, skipped, scans, points."""
+    """What ``octolinear build IN -o OUT.tiles --tile-depth D [--task K/N]
+    [--memory-cap BYTES]`` does: a tile set (or one task's part of it) from a
+    .graph file. Returns its summary: tiles, bytes, nodes, seconds, task,
+    skipped, scans, points."""
 
 def plan_tiles(
     graph_path: PathArg,

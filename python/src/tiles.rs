@@ -8,9 +8,10 @@ use crate::convert;
 use crate::files::{build_options, graph_error, graph_scans, sensor_model};
 use octolinear::formats::{bt, graph, ot, write_atomically};
 use octolinear::tiles::{
-    read_manifest, Manifest, TaskPart, TileError, TileId, TilePlan, TileSet, TileWork, TiledMap, MANIFEST_FILE,
+    read_manifest, GroupedBuild, GroupedError, Manifest, TaskPart, TileError, TileId, TilePlan, TileSet, TileWork,
+    TiledMap, MANIFEST_FILE,
 };
-use octolinear::{NodeKind, TreeKind};
+use octolinear::{NodeKind, Point3, TreeKind};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -131,12 +132,18 @@ fn summary<'py>(
 /// the scan options are not recorded there, so resume only with the ones
 /// that built it.
 ///
+/// With `memory_cap` (bytes) the whole set is built within that memory
+/// (`--memory-cap`): in groups of neighbouring tiles, each built from
+/// every scan (the file read again) and written out, one group per thread
+/// at a time; the tiles are the same.
+///
 /// Returns a dict: `tiles`, `bytes` (of tile files), `nodes` (of the whole
 /// map; `None` for a task), `seconds`, `task` (`(k, n)` or `None`),
 /// `skipped` (resumed), `scans` and `points` (`None` when skipped).
 #[pyfunction]
 #[pyo3(signature = (graph_path, out_dir, *, resolution=0.1, tile_depth, max_range=None, discretize=false,
-                    sensor=None, clamping=None, scans=None, threads=None, task=None, plan=None, resume=false))]
+                    sensor=None, clamping=None, scans=None, threads=None, task=None, plan=None, resume=false,
+                    memory_cap=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn build_tiles<'py>(
     py: Python<'py>,
@@ -153,6 +160,7 @@ pub fn build_tiles<'py>(
     task: Option<(u32, u32)>,
     plan: Option<&str>,
     resume: bool,
+    memory_cap: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let started = Instant::now();
     let path = convert::path(graph_path)?;
@@ -168,6 +176,13 @@ pub fn build_tiles<'py>(
         Some(text) => Some(planned_task(text, resolution, tile_depth, task)?),
         None => task,
     };
+    match memory_cap {
+        Some(0) => return Err(PyValueError::new_err("memory_cap must be at least 1 byte")),
+        Some(_) if task.is_some() => {
+            return Err(PyValueError::new_err("memory_cap builds the whole tile set: it does not take a task"))
+        }
+        _ => {}
+    }
     let sensor = sensor_model(sensor, clamping)?;
     let mut map = TiledMap::new(resolution, sensor, NodeKind::Plain, tile_depth).map_err(tile_error)?;
     if let Some(t) = task {
@@ -180,6 +195,29 @@ pub fn build_tiles<'py>(
         if let Some(found) = resume.then(|| finished_build(&dir, &wanted)).flatten() {
             let nodes = if task.is_none() { Some(set_nodes(&dir)?) } else { None };
             return Ok((found, nodes, None));
+        }
+        if let Some(memory) = memory_cap {
+            let (work, count) = estimate(&path, resolution, tile_depth, max_range, discretize, scans)?;
+            let grouped = GroupedBuild { resolution, sensor, memory, dir: dir.clone() };
+            let read = || -> ScansRead {
+                match graph::open(&path) {
+                    Ok(reader) => Box::new(reader.take(scans.unwrap_or(usize::MAX)).map(|node| {
+                        let (cloud, origin) = node?.graph2tree();
+                        Ok((cloud.points, origin))
+                    })),
+                    Err(e) => Box::new(std::iter::once(Err(e))),
+                }
+            };
+            let report = grouped.build(&work, &opts, read, |_, _| {}).map_err(|e| match e {
+                GroupedError::Input(e) => graph_error(&path, e),
+                GroupedError::Scan { index, source } => {
+                    PyValueError::new_err(format!("{}: scan {index}: {source}", path.display()))
+                }
+                GroupedError::Tiles(e) => tile_error(e),
+            })?;
+            remove_unlisted_tiles(&dir, &report.manifest)?;
+            let nodes = set_nodes(&dir)?;
+            return Ok((report.manifest, Some(nodes), Some(count)));
         }
         let mut reader = graph::open(&path).map_err(|e| graph_error(&path, e))?;
         let (mut failure, mut count) = (None, (0, 0));
@@ -235,23 +273,39 @@ pub fn plan_tiles(
         return Err(PyValueError::new_err("tasks must be at least 1"));
     }
     let path = convert::path(graph_path)?;
-    let mut work = TileWork::new(resolution, tile_depth).map_err(tile_error)?;
-    py.detach(|| {
-        let mut reader = graph::open(&path).map_err(|e| graph_error(&path, e))?;
-        let mut failure = None;
-        for (points, origin) in graph_scans(&mut reader, scans, &mut failure) {
-            if discretize {
-                work.add_discretized_scan(&points, origin, max_range);
-            } else {
-                work.add_scan(&points, origin, max_range);
-            }
-        }
-        match failure {
-            Some(e) => Err(graph_error(&path, e)),
-            None => Ok(()),
-        }
-    })?;
+    let (work, _) = py.detach(|| estimate(&path, resolution, tile_depth, max_range, discretize, scans))?;
     Ok(work.split(tasks).map_err(tile_error)?.to_text())
+}
+
+/// The scans of a `.graph` file as a grouped build reads them, each time
+/// from the start.
+type ScansRead = Box<dyn Iterator<Item = Result<(Vec<Point3>, Point3), graph::GraphError>>>;
+
+/// The estimated work per tile of a build of the `.graph` file at `path`,
+/// with the scans and points read.
+fn estimate(
+    path: &Path,
+    resolution: f64,
+    tile_depth: u8,
+    max_range: Option<f64>,
+    discretize: bool,
+    scans: Option<usize>,
+) -> PyResult<(TileWork, (usize, usize))> {
+    let mut work = TileWork::new(resolution, tile_depth).map_err(tile_error)?;
+    let mut reader = graph::open(path).map_err(|e| graph_error(path, e))?;
+    let (mut failure, mut count) = (None, (0, 0));
+    for (points, origin) in graph_scans(&mut reader, scans, &mut failure) {
+        count = (count.0 + 1, count.1 + points.len());
+        if discretize {
+            work.add_discretized_scan(&points, origin, max_range);
+        } else {
+            work.add_scan(&points, origin, max_range);
+        }
+    }
+    match failure {
+        Some(e) => Err(graph_error(path, e)),
+        None => Ok((work, count)),
+    }
 }
 
 /// Task `task` of the plan `text`, checked against the build's parameters.

@@ -1,5 +1,6 @@
-"""Tile sets from Python: build_tiles (whole, and in tasks combined by
-write_tile_manifest) converted by convert_tiles gives the bytes of build;
+"""Tile sets from Python: build_tiles (whole, in tasks combined by
+write_tile_manifest, and within a memory cap) converted by convert_tiles
+gives the bytes of build;
 resume keeps only builds whose tiles verify; bad arguments and damaged
 sets are exceptions naming the problem."""
 
@@ -75,6 +76,15 @@ def test_a_tile_set_gives_the_bytes_of_build(tmp_path, options, tile_depth):
     assert sum(b["tiles"] for b in built) == summary["tiles"]
     assert converted_bytes(parts, tmp_path) == reference
 
+    # within a memory cap: groups split down to single tiles, or one group
+    for cap in (1, 1 << 30):
+        capped_dir = tmp_path / f"capped-{cap}.tiles"
+        capped = octolinear.build_tiles(SAMPLE_GRAPH, capped_dir, tile_depth=tile_depth, memory_cap=cap, **options)
+        assert {k: capped[k] for k in ("tiles", "nodes", "bytes", "scans", "points")} == {
+            k: summary[k] for k in ("tiles", "nodes", "bytes", "scans", "points")
+        }
+        assert converted_bytes(capped_dir, tmp_path) == reference
+
 
 def test_tasks_share_the_tiles_by_plan(tmp_path):
     plan = octolinear.plan_tiles(SAMPLE_GRAPH, tile_depth=12, tasks=3)
@@ -129,6 +139,8 @@ def test_resume_keeps_only_builds_that_verify(tmp_path):
         (dict(tile_depth=8, task=(0, 0)), r"got \(0, 0\)"),
         (dict(tile_depth=8, plan="plan"), "plan needs task"),
         (dict(tile_depth=8, sensor=(0.9, 0.7)), "prob_miss = 0.9"),
+        (dict(tile_depth=8, memory_cap=0), "memory_cap must be at least 1 byte"),
+        (dict(tile_depth=8, memory_cap=1 << 20, task=(0, 2)), "does not take a task"),
     ],
 )
 def test_bad_arguments_are_refused_before_anything_is_written(tmp_path, arguments, message):

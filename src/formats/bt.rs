@@ -420,8 +420,8 @@ struct Open {
 }
 
 impl<const STAMPED: bool> MlRecords<STAMPED> {
-    /// Ready for a walk, with merges at depth `lowest` or deeper and room
-    /// for about `hint` bytes of records.
+    /// Ready for a walk, with merges at depth `lowest` or deeper, the
+    /// records gathered in `out`.
     fn new(s: &SensorModel, lowest: usize, out: RecordBuffer) -> Self {
         let value = [s.clamping_min, s.clamping_max];
         let label = value.map(|v| if s.is_occupied(v) { 2 } else { 1 });

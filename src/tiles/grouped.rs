@@ -22,7 +22,8 @@
 //! scan's update would pass the memory, it stops after the scan in hand
 //! and splits in two ranges of about equal bytes; both go on from the
 //! next scan, the upper one set aside on disk while the lower one is
-//! built. A group of one tile cannot split: its tile is held whole.
+//! built. A group of one tile cannot split: its tile is held whole. A
+//! map whose whole estimate fits the memory is one group.
 //!
 //! With `T` threads, `T` workers build groups at once, each on one thread
 //! within a `T`-th of the memory (casting one scan on two threads holds a

@@ -1,7 +1,11 @@
 //! Tiled maps: a map split into the octree's subtrees at a fixed depth
 //! `D` (1..=15), one tree per tile, so that a map can be built within a
 //! memory budget, larger than memory, or in parts by separate processes,
-//! and still be OctoMap's map to the byte.
+//! and still be OctoMap's map to the byte. [`TiledMap`] takes scans one by
+//! one (with a [`MemoryBudget`], tiles wait on disk); [`GroupedBuild`]
+//! builds a tile set group of tiles by group of tiles from scans it can
+//! read again, within a memory that holds the scans' updates too;
+//! [`TilePlan`] splits the tiles among processes.
 //!
 //! A tile ([`TileId`]) is the subtree below a node of depth `D`, named by
 //! the top `D` bits of each key axis; its edge is `resolution * 2^(16-D)`.

@@ -91,7 +91,7 @@ impl TileWork {
         let weight = stride as f64;
         let casts = self.keys.key(origin).is_ok();
         let spread = self.keys.resolution() / (4.0 * std::f64::consts::PI / points.len().max(1) as f64).sqrt();
-        // per tile: ray steps and voxel updates
+        // per tile: work (ray steps and their updates) and voxel updates
         let mut scan: HashMap<u64, (f64, f64)> = HashMap::new();
         for &p in points.iter().step_by(stride) {
             if !p.is_finite() {

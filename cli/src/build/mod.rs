@@ -71,9 +71,10 @@ use std::time::{Duration, Instant};
 /// written out and read back when scans reach them again (a whole scan's
 /// update is held besides). An .ot or .bt output is then written tile by
 /// tile, never as one tree; an .olm output, laid out as a whole, merges
-/// the tiles into one tree in memory at the end. Tiles cannot hold colour maps, and --compress-ml
-/// (OctoMap's prune() stops at the first level where nothing merged, a
-/// decision over the whole map) is not offered with them.
+/// the tiles into one tree in memory at the end. Tiles cannot hold colour
+/// maps, and --compress-ml (OctoMap's prune() stops at the first level
+/// where nothing merged, a decision over the whole map) is not offered
+/// with them.
 ///
 /// Example: octolinear build --points room.ply --color -o room.ot
 ///
