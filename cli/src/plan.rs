@@ -79,11 +79,7 @@ pub fn run(a: Args) -> Result<()> {
     for node in reader.by_ref().take(scans) {
         let node = node.with_context(|| format!("cannot read {name}"))?;
         let (cloud, origin) = node.graph2tree();
-        if a.discretize {
-            work.add_discretized_scan(&cloud.points, origin, max_range);
-        } else {
-            work.add_scan(&cloud.points, origin, max_range);
-        }
+        work.add(&cloud.points, origin, max_range, a.discretize);
         count += 1;
     }
     let plan = work.split(a.tasks)?;

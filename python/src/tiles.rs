@@ -296,11 +296,7 @@ fn estimate(
     let (mut failure, mut count) = (None, (0, 0));
     for (points, origin) in graph_scans(&mut reader, scans, &mut failure) {
         count = (count.0 + 1, count.1 + points.len());
-        if discretize {
-            work.add_discretized_scan(&points, origin, max_range);
-        } else {
-            work.add_scan(&points, origin, max_range);
-        }
+        work.add(&points, origin, max_range, discretize);
     }
     match failure {
         Some(e) => Err(graph_error(path, e)),

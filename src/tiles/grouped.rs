@@ -33,7 +33,7 @@
 use super::budget::MemoryBudget;
 use super::error::TileError;
 use super::manifest::{Manifest, TaskPart, TaskTiles, TileEntry, MANIFEST_FILE};
-use super::map::{TileState, TiledMap};
+use super::map::{Tile, TileState, TiledMap};
 use super::plan::{aligned_between, TileWork};
 use crate::formats::ot::TreeKind;
 use crate::geometry::Point3;
@@ -497,16 +497,20 @@ impl<E> Default for State<E> {
     }
 }
 
+impl Tile {
+    /// Bytes of its tree: in memory, or its file's when written out.
+    fn bytes(&self) -> usize {
+        match &self.state {
+            TileState::Live { bytes, .. } => *bytes,
+            TileState::Spilled(entry) => entry.bytes as usize,
+        }
+    }
+}
+
 impl TiledMap {
     /// Bytes of the tiles' trees, in memory or written out.
     fn tile_bytes(&self) -> usize {
-        self.tiles
-            .values()
-            .map(|t| match &t.state {
-                TileState::Live { bytes, .. } => *bytes,
-                TileState::Spilled(entry) => entry.bytes as usize,
-            })
-            .sum()
+        self.tiles.values().map(Tile::bytes).sum()
     }
 
     /// The prefix that splits the tiles in two parts of about equal bytes,
@@ -522,10 +526,7 @@ impl TiledMap {
                     cut = Some(aligned_between(p, prefix));
                 }
             }
-            below += match &tile.state {
-                TileState::Live { bytes, .. } => *bytes,
-                TileState::Spilled(entry) => entry.bytes as usize,
-            };
+            below += tile.bytes();
             previous = Some(prefix);
         }
         // past half only at the last tile: cut before it

@@ -170,6 +170,16 @@ impl TileWork {
         }
     }
 
+    /// The scan as a build with these options casts it: [`Self::add_scan`],
+    /// or with `discretize` [`Self::add_discretized_scan`].
+    pub fn add(&mut self, points: &[Point3], origin: Point3, max_range: Option<f64>, discretize: bool) {
+        if discretize {
+            self.add_discretized_scan(points, origin, max_range);
+        } else {
+            self.add_scan(points, origin, max_range);
+        }
+    }
+
     /// [`Self::add_scan`] for a build with `discretize`: one ray per end
     /// voxel, from the voxel's centre, as insertion casts them.
     pub fn add_discretized_scan(&mut self, points: &[Point3], origin: Point3, max_range: Option<f64>) {

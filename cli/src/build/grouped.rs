@@ -75,11 +75,7 @@ pub(super) fn run(a: &Args, t: &Tiling, sensor: SensorModel, format: MapFormat, 
         let (points, origin) = node.graph2tree();
         let scan = super::Scan { id: node.id, points, origin, colors: None };
         tally.count(&scan, &keys);
-        if a.discretize {
-            work.add_discretized_scan(&scan.points.points, origin, max_range);
-        } else {
-            work.add_scan(&scan.points.points, origin, max_range);
-        }
+        work.add(&scan.points.points, origin, max_range, a.discretize);
     }
     if n == announced {
         // every scan is taken: the rest of the file must be well-formed too
