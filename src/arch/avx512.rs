@@ -527,31 +527,36 @@ impl Group {
         self.alive &= !(_mm512_cmpeq_epi64_mask(self.code, self.end) | beyond);
     }
 
-    /// The lanes take the next packet: the rays of `rays` from `at` on,
-    /// eight or as many as are left, each from the origin's voxel; returns
-    /// where the rays after them start. `rays` must be padded and `at <=
-    /// rays.len` (else the slices below panic).
+    /// A packet's lanes: the rays of `rays` from `at` on, eight or as many
+    /// as are left, each from the origin's voxel; and where the rays after
+    /// them start. `rays` must be padded and `at <= rays.len` (else the
+    /// slices below panic). A new group rather than one changed through a
+    /// reference: where the compiler did not inline the call, a group's
+    /// address passed to it kept the group in memory through the whole
+    /// walk, every step storing and loading its vectors.
     #[target_feature(enable = "avx512f")]
     #[inline]
-    fn start(&mut self, rays: &LaneRays, at: usize, origin: __m512i) -> usize {
+    fn start(rays: &LaneRays, at: usize, origin: __m512i) -> (Self, usize) {
         debug_assert!(at <= rays.len && rays.padded);
         // SAFETY: the slice holds LANES values, 64 bytes
         let pd = |from: &[f64]| unsafe { _mm512_loadu_pd(from[at..at + LANES].as_ptr()) };
         // SAFETY: as for `pd`
         let epi = |from: &[u64]| unsafe { _mm512_loadu_si512(from[at..at + LANES].as_ptr().cast()) };
-        self.t0 = pd(&rays.t[0]);
-        self.t1 = pd(&rays.t[1]);
-        self.t2 = pd(&rays.t[2]);
-        self.dt0 = pd(&rays.dt[0]);
-        self.dt1 = pd(&rays.dt[1]);
-        self.dt2 = pd(&rays.dt[2]);
-        self.step = epi(&rays.step);
-        self.end = epi(&rays.end);
-        self.length = pd(&rays.length);
-        self.code = origin;
         let n = (rays.len - at).min(LANES);
-        self.alive = ((1u32 << n) - 1) as __mmask8;
-        at + n
+        let group = Group {
+            t0: pd(&rays.t[0]),
+            t1: pd(&rays.t[1]),
+            t2: pd(&rays.t[2]),
+            dt0: pd(&rays.dt[0]),
+            dt1: pd(&rays.dt[1]),
+            dt2: pd(&rays.dt[2]),
+            step: epi(&rays.step),
+            code: origin,
+            end: epi(&rays.end),
+            length: pd(&rays.length),
+            alive: ((1u32 << n) - 1) as __mmask8,
+        };
+        (group, at + n)
     }
 }
 
@@ -643,10 +648,10 @@ unsafe fn fill(
         // stays within `len` (the caller's contract for `*next`, then
         // `start`)
         if a.alive == 0 {
-            at = a.start(rays, at, origin);
+            (a, at) = Group::start(rays, at, origin);
         }
         if b.alive == 0 {
-            at = b.start(rays, at, origin);
+            (b, at) = Group::start(rays, at, origin);
         }
         if at == len && (!drain || (a.alive | b.alive) == 0) {
             break true;
