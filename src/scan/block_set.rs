@@ -19,7 +19,13 @@ const WORDS: usize = 1 << (BLOCK_BITS - 6);
 const RECENT_BITS: u32 = 8;
 
 type BlockIndex = HashMap<u64, u32, BuildHasherDefault<KeyHasher>>;
-type RecentBlocks = [(u64, u32); 1 << RECENT_BITS];
+/// The blocks in the slots, and where their words start: two arrays, so
+/// that a slot's place in each is a scaled index (16-byte pairs cost two
+/// instructions more per code).
+struct RecentBlocks {
+    blocks: [u64; 1 << RECENT_BITS],
+    firsts: [u32; 1 << RECENT_BITS],
+}
 
 /// A set of Morton codes (48 bits).
 pub(crate) struct BlockSet {
@@ -42,7 +48,7 @@ fn recent_slot(block: u64) -> usize {
 
 impl Default for BlockSet {
     fn default() -> Self {
-        BlockSet { index: HashMap::default(), recent: Box::new([(u64::MAX, 0); 1 << RECENT_BITS]), words: Vec::new() }
+        BlockSet { index: HashMap::default(), recent: Box::new(RecentBlocks { blocks: [u64::MAX; 1 << RECENT_BITS], firsts: [0; 1 << RECENT_BITS] }), words: Vec::new() }
     }
 }
 
@@ -55,7 +61,8 @@ fn add_block(index: &mut BlockIndex, recent: &mut RecentBlocks, words: &mut Vec<
         words.resize(first + WORDS, 0);
         u32::try_from(first).expect("fewer than 2^29 blocks per scan")
     });
-    recent[recent_slot(block)] = (block, first);
+    let slot = recent_slot(block);
+    (recent.blocks[slot], recent.firsts[slot]) = (block, first);
     first as usize
 }
 
@@ -79,9 +86,9 @@ impl BlockSet {
         let mut base = words.as_mut_ptr();
         for &code in codes {
             let block = code >> BLOCK_BITS;
-            let (b, first) = recent[recent_slot(block)];
-            let first = if b == block {
-                first as usize
+            let slot = recent_slot(block);
+            let first = if recent.blocks[slot] == block {
+                recent.firsts[slot] as usize
             } else {
                 let first = add_block(index, recent, words, block);
                 base = words.as_mut_ptr();
