@@ -239,6 +239,11 @@ fn set_up(
 ) {
     assert!(!rays.padded && rays.len + points.len() <= LaneRays::CAPACITY, "LaneRays full or padded");
     let mut eight = points.chunks_exact(LANES);
+    // the occupied end voxels' codes, handed on after the loop: a call in
+    // the loop (a set's new block) would have every vector live across it
+    // kept in memory
+    let mut ends = [0u64; LaneRays::CAPACITY + LANES];
+    let mut hits = 0;
     for batch in eight.by_ref() {
         // x, y and z of the eight points: 24 consecutive floats
         // (`Point3` is `repr(C)`), the first 16 in `lo`
@@ -312,11 +317,11 @@ fn set_up(
             let spread = spread_bits(_mm512_cvtepu32_epi64(key));
             code = _mm512_or_si512(code, _mm512_sll_epi64(spread, _mm_cvtsi32_si128(i as i32)));
         }
-        let mut codes = [0u64; LANES];
         let hit = in_map & within;
-        // SAFETY: `codes` holds LANES codes, 64 bytes
-        unsafe { _mm512_storeu_si512(codes.as_mut_ptr().cast(), _mm512_maskz_compress_epi64(hit, code)) };
-        codes[..hit.count_ones() as usize].iter().for_each(|&c| occupied(c));
+        let to = &mut ends[hits..hits + LANES];
+        // SAFETY: `to` holds LANES codes, 64 bytes
+        unsafe { _mm512_storeu_si512(to.as_mut_ptr().cast(), _mm512_maskz_compress_epi64(hit, code)) };
+        hits += hit.count_ones() as usize;
 
         // the ray (`RayFan::ray`): direction, length, per axis the step,
         // the first border's distance and the distance between borders
@@ -358,6 +363,7 @@ fn set_up(
         store_pd(_mm512_cvtps_pd(length), &mut rays.length);
         rays.len += kept.count_ones() as usize;
     }
+    ends[..hits].iter().for_each(|&c| occupied(c));
     for &p in eight.remainder() {
         let (within, end) = crate::ray::cut_to_range(p, fan.origin, max_range);
         let Ok(key) = keys.key(end) else { continue };
