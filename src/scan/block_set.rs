@@ -48,7 +48,11 @@ fn recent_slot(block: u64) -> usize {
 
 impl Default for BlockSet {
     fn default() -> Self {
-        BlockSet { index: HashMap::default(), recent: Box::new(RecentBlocks { blocks: [u64::MAX; 1 << RECENT_BITS], firsts: [0; 1 << RECENT_BITS] }), words: Vec::new() }
+        BlockSet {
+            index: HashMap::default(),
+            recent: Box::new(RecentBlocks { blocks: [u64::MAX; 1 << RECENT_BITS], firsts: [0; 1 << RECENT_BITS] }),
+            words: Vec::new(),
+        }
     }
 }
 
