@@ -56,7 +56,7 @@ impl Avx512 {
     }
 
     /// `Casting::cast`'s work for every point of `points`, in the lanes:
-    /// calls `occupied` with the code of every end voxel within
+    /// calls `occupied` with batches of the codes of the end voxels within
     /// `max_range` of `fan`'s origin (any distance when it is negative) and
     /// `free` with batches of the codes of the voxels the rays step into
     /// (in no particular order, some more than once). The rays are set up
@@ -71,7 +71,7 @@ impl Avx512 {
         keys: &KeySpace,
         points: &[Point3],
         limits: RayLimits<'_>,
-        occupied: impl FnMut(u64),
+        occupied: impl FnMut(&[u64]),
         free: impl FnMut(&[u64]),
     ) -> bool {
         // SAFETY: an `Avx512` exists only on a processor with AVX-512F,
@@ -96,7 +96,7 @@ fn cast_fan_lanes(
     keys: &KeySpace,
     points: &[Point3],
     RayLimits { max_range, stop }: RayLimits<'_>,
-    mut occupied: impl FnMut(u64),
+    mut occupied: impl FnMut(&[u64]),
     mut free: impl FnMut(&[u64]),
 ) -> bool {
     let mut rays = LaneRays::default();
@@ -239,7 +239,7 @@ fn step_bits(ray: &FanRay) -> u64 {
 /// [`LaneRays::CAPACITY`] less the rays already in `rays`), with
 /// `Casting::cast`'s end voxel: rays longer than `max_range` (when it is
 /// not negative) are cut there ([`crate::ray::cut_to_range`]); `occupied` is
-/// called with the code of the voxel of each point within range, and the
+/// called with the codes of the voxels of the points within range, and the
 /// non-empty rays join `rays`. Ends without a key are skipped. Eight points
 /// at a time, with the scalar code's operations in the same precision and
 /// order (every one correctly rounded), so the rays are the same to the
@@ -251,7 +251,7 @@ fn set_up(
     keys: &KeySpace,
     points: &[Point3],
     max_range: f64,
-    mut occupied: impl FnMut(u64),
+    mut occupied: impl FnMut(&[u64]),
 ) {
     assert!(!rays.padded && rays.len + points.len() <= LaneRays::CAPACITY, "LaneRays full or padded");
     let mut eight = points.chunks_exact(LANES);
@@ -379,14 +379,14 @@ fn set_up(
         store_pd(_mm512_cvtps_pd(length), &mut rays.length);
         rays.len += kept.count_ones() as usize;
     }
-    ends[..hits].iter().for_each(|&c| occupied(c));
+    occupied(&ends[..hits]);
     rays.ends = ends;
     for &p in eight.remainder() {
         let (within, end) = crate::ray::cut_to_range(p, fan.origin, max_range);
         let Ok(key) = keys.key(end) else { continue };
         let code = crate::morton::MortonCode::encode(key).0;
         if within {
-            occupied(code);
+            occupied(&[code]);
         }
         if let Some(ray) = fan.ray(end, code) {
             rays.push(ray);
@@ -817,7 +817,7 @@ mod tests {
                 let mut got = LaneRays::default();
                 let mut got_occupied = Vec::new();
                 // SAFETY: AVX-512F, BMI2 and POPCNT are available (checked above)
-                unsafe { set_up(&mut got, &fan, &keys, &pts, max_range, |c| got_occupied.push(c)) };
+                unsafe { set_up(&mut got, &fan, &keys, &pts, max_range, |c| got_occupied.extend_from_slice(c)) };
                 assert_eq!(got_occupied, want_occupied, "res {res}");
                 let n = want.len();
                 assert_eq!(got.len(), n, "res {res}");
@@ -863,7 +863,7 @@ mod tests {
             for &p in &pts {
                 rays.clear();
                 // SAFETY: AVX-512F, BMI2 and POPCNT are available (checked above)
-                unsafe { set_up(&mut rays, &fan, &keys, &[p], -1.0, |_| {}) };
+                unsafe { set_up(&mut rays, &fan, &keys, &[p], -1.0, |_: &[u64]| {}) };
                 rays.pad();
                 let mut got = Vec::new();
                 // SAFETY: as for `set_up`
@@ -879,7 +879,7 @@ mod tests {
             for (i, chunk) in chunks.iter().enumerate() {
                 rays.clear();
                 // SAFETY: AVX-512F, BMI2 and POPCNT are available (checked above)
-                unsafe { set_up(&mut rays, &fan, &keys, chunk, -1.0, |_| {}) };
+                unsafe { set_up(&mut rays, &fan, &keys, chunk, -1.0, |_: &[u64]| {}) };
                 rays.pad();
                 let last = i + 1 == chunks.len();
                 // SAFETY: as for `set_up`

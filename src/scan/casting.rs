@@ -105,23 +105,9 @@ impl Casting {
         if let Some(avx512) = crate::arch::avx512::Avx512::detect() {
             let Casting { free, occupied, recorded, stop } = self;
             let max_range = opts.max_range.unwrap_or(-1.0);
-            let everything = recorded.start == 0 && recorded.end == u64::MAX;
-            let mut kept = Vec::new();
-            let occupied = |c| {
-                if in_range(recorded, c) {
-                    occupied.insert(c)
-                }
-            };
-            // a restricted update filters each batch of codes before the set
-            let free = |codes: &[u64]| {
-                if everything {
-                    free.insert_all(codes)
-                } else {
-                    kept.clear();
-                    kept.extend(codes.iter().copied().filter(|&c| in_range(recorded, c)));
-                    free.insert_all(&kept)
-                }
-            };
+            let (mut kept_free, mut kept_occupied) = (Vec::new(), Vec::new());
+            let occupied = |codes: &[u64]| insert_recorded(occupied, codes, recorded, &mut kept_occupied);
+            let free = |codes: &[u64]| insert_recorded(free, codes, recorded, &mut kept_free);
             let stop_at = |dir| stop.as_ref().map_or(f64::INFINITY, |s| s.length(dir));
             let limits = RayLimits { max_range, stop: stop.as_ref().map(|_| &stop_at as _) };
             if avx512.cast_fan(fan, keys, points, limits, occupied, free) {
@@ -236,6 +222,19 @@ impl Casting {
     /// The scan's update, when this worker cast all of it.
     fn into_update(self) -> ScanUpdate {
         ScanUpdate { free: self.free.sorted_codes(Some(&self.occupied)), occupied: self.occupied.sorted_codes(None) }
+    }
+}
+
+/// Adds the codes of `codes` that lie in `recorded` to `set`: all at once
+/// when every code is recorded, else through `kept`.
+#[inline(always)]
+fn insert_recorded(set: &mut BlockSet, codes: &[u64], recorded: &Range<u64>, kept: &mut Vec<u64>) {
+    if recorded.start == 0 && recorded.end == u64::MAX {
+        set.insert_all(codes)
+    } else {
+        kept.clear();
+        kept.extend(codes.iter().copied().filter(|&c| in_range(recorded, c)));
+        set.insert_all(kept)
     }
 }
 
