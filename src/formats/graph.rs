@@ -244,7 +244,8 @@ impl<R: Read> Input<R> {
 
 /// The little-endian double at `at`. Inlined: the readers are generic, so
 /// other crates compile them, and without the hint they called this once
-/// per coordinate (a fifth of reading a `.graph` file).
+/// per coordinate (a quarter of the time a build spent reading a `.graph`
+/// file).
 #[inline]
 fn f64_at(b: &[u8], at: usize) -> f64 {
     let mut a = [0u8; 8];
