@@ -258,7 +258,7 @@ fn set_up(
     // the occupied end voxels' codes, handed on after the loop: a call in
     // the loop (a set's new block) would have every vector live across it
     // kept in memory
-    let mut ends = std::mem::take(&mut rays.ends);
+    let ends = &mut rays.ends;
     let mut hits = 0;
     for batch in eight.by_ref() {
         // x, y and z of the eight points: 24 consecutive floats
@@ -380,7 +380,6 @@ fn set_up(
         rays.len += kept.count_ones() as usize;
     }
     occupied(&ends[..hits]);
-    rays.ends = ends;
     for &p in eight.remainder() {
         let (within, end) = crate::ray::cut_to_range(p, fan.origin, max_range);
         let Ok(key) = keys.key(end) else { continue };
