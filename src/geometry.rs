@@ -147,6 +147,7 @@ impl Point3 {
 
 impl Add for Point3 {
     type Output = Self;
+    #[inline]
     fn add(self, o: Self) -> Self {
         Self::new(self.x + o.x, self.y + o.y, self.z + o.z)
     }
@@ -306,6 +307,7 @@ impl Quaternion {
     }
 
     /// Conjugate (`Quaternion::inv`); equals the inverse only for unit quaternions.
+    #[inline]
     pub fn inv(self) -> Self {
         Self::new(self.u, -self.x, -self.y, -self.z)
     }
@@ -317,11 +319,13 @@ impl Quaternion {
     }
 
     /// `Quaternion * Vector3`: the vector as pure quaternion `(0, v)`.
+    #[inline]
     pub fn mul_vec(self, v: Point3) -> Self {
         self * Self::new(0.0, v.x, v.y, v.z)
     }
 
     /// `q * v * q.inv()`, keeping the vector part.
+    #[inline]
     pub fn rotate(self, v: Point3) -> Point3 {
         let q = self.mul_vec(v) * self.inv();
         Point3::new(q.x, q.y, q.z)
@@ -362,6 +366,7 @@ impl Quaternion {
 impl Mul for Quaternion {
     type Output = Self;
     /// Hamilton product in float, in OctoMap's term order.
+    #[inline]
     fn mul(self, o: Self) -> Self {
         let (a, b) = (self, o);
         Self::new(
@@ -431,8 +436,47 @@ impl Pose6D {
     }
 
     /// `rot.rotate(v) + trans`.
+    #[inline]
     pub fn transform(&self, v: Point3) -> Point3 {
         self.rotation.rotate(v) + self.translation
+    }
+
+    /// [`Self::transform`] of every point of `points`, in place. Blocks of
+    /// points are taken apart into one array per axis, so that the compiler
+    /// runs the same float operations on several points at once (a point's
+    /// three coordinates alone fill no vector): the same bits, about three
+    /// times faster with AVX-512 (sixteen points an instruction), where the
+    /// processor has it.
+    pub fn transform_all(&self, points: &mut [Point3]) {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(avx512) = crate::arch::avx512::Avx512::detect() {
+            return avx512.transform_all(self, points);
+        }
+        self.transform_blocks(points);
+    }
+
+    /// [`Self::transform_all`]'s loop, inlined into each instruction set's
+    /// copy.
+    #[inline(always)]
+    pub(crate) fn transform_blocks(&self, points: &mut [Point3]) {
+        const BLOCK: usize = 16;
+        let mut blocks = points.chunks_exact_mut(BLOCK);
+        for block in &mut blocks {
+            let (mut x, mut y, mut z) = ([0.0; BLOCK], [0.0; BLOCK], [0.0; BLOCK]);
+            for (i, p) in block.iter().enumerate() {
+                (x[i], y[i], z[i]) = (p.x, p.y, p.z);
+            }
+            for i in 0..BLOCK {
+                let t = self.transform(Point3::new(x[i], y[i], z[i]));
+                (x[i], y[i], z[i]) = (t.x, t.y, t.z);
+            }
+            for (i, p) in block.iter_mut().enumerate() {
+                *p = Point3::new(x[i], y[i], z[i]);
+            }
+        }
+        for p in blocks.into_remainder() {
+            *p = self.transform(*p);
+        }
     }
 
     /// `Pose6D::inv`: normalised conjugate, translation rotated by the new rotation.
@@ -523,9 +567,7 @@ impl PointCloud {
 
     /// `Pointcloud::transform`: every point through `pose.transform`.
     pub fn transform(&mut self, pose: &Pose6D) {
-        for p in &mut self.points {
-            *p = pose.transform(*p);
-        }
+        pose.transform_all(&mut self.points);
     }
 
     /// `Pointcloud::rotate`: [`Point3::rotate_ip`] on every point.
@@ -617,9 +659,53 @@ impl<'a> IntoIterator for &'a PointCloud {
 /// can differ from `pose.trans()` in the last bits when the rotation is not
 /// the identity; OctoMap uses this round-tripped value, so we do too.
 pub fn graph2tree_transform(pose: &Pose6D, scan: &PointCloud) -> (PointCloud, Point3) {
-    let frame_origin = *pose;
-    let sensor_origin = frame_origin.inv().transform(pose.translation);
-    let mut world = scan.clone();
-    world.transform(&frame_origin);
-    (world, frame_origin.transform(sensor_origin))
+    graph2tree_in_place(pose, scan.clone())
+}
+
+/// [`graph2tree_transform`] of a scan given up for it: its points are
+/// transformed where they are.
+pub fn graph2tree_in_place(pose: &Pose6D, mut scan: PointCloud) -> (PointCloud, Point3) {
+    let sensor_origin = pose.inv().transform(pose.translation);
+    scan.transform(pose);
+    (scan, pose.transform(sensor_origin))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every block path gives each point the bits of the point-by-point
+    /// transform: rotations of every kind, special floats, a remainder.
+    #[test]
+    fn transform_all_equals_transform_bit_for_bit() {
+        let specials = [0.0f32, -0.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, f32::MIN_POSITIVE, 1e-40, 3.0e38];
+        let mut points = Vec::new();
+        let mut state = 12345u32;
+        for i in 0..1000 {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let r = |k: u32| ((state.rotate_left(k) >> 8) as f32 / (1 << 24) as f32 - 0.5) * 80.0;
+            let mut p = Point3::new(r(0), r(7), r(13));
+            if i % 37 == 0 {
+                p.y = specials[i / 37 % specials.len()];
+            }
+            points.push(p);
+        }
+        let poses = [
+            Pose6D::new(Point3::new(1.5, -2.25, 0.75), Quaternion::from_euler(0.3, -0.2, 2.9)),
+            Pose6D::new(Point3::new(0.0, 0.0, 0.0), Quaternion::new(1.0, 0.0, 0.0, 0.0)),
+            Pose6D::new(Point3::new(-1e3, 7.0, 1e-3), Quaternion::new(0.5, 0.5, -0.5, 0.5)),
+            Pose6D::new(Point3::new(0.1, 0.2, 0.3), Quaternion::new(0.9, 0.1, 0.3, -0.2)),
+        ];
+        for pose in poses {
+            let want: Vec<[u32; 3]> = points.iter().map(|&p| pose.transform(p).to_bits()).collect();
+            for len in [points.len(), 999, 16, 15, 0] {
+                let (mut all, mut blocks) = (points[..len].to_vec(), points[..len].to_vec());
+                pose.transform_all(&mut all);
+                pose.transform_blocks(&mut blocks);
+                let bits = |v: &[Point3]| v.iter().map(|p| p.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&all), want[..len], "{pose:?}, {len} points");
+                assert_eq!(bits(&blocks), want[..len], "{pose:?}, {len} points");
+            }
+        }
+    }
 }

@@ -215,6 +215,40 @@ impl KeySpace {
         Ok((key, key.child_index(0)))
     }
 
+    /// Whether every point of `points` has a key ([`Self::key`] is `Ok`:
+    /// finite and inside the map). A block of points whose coordinates all
+    /// lie within a float bound short of the map's edge is passed by one
+    /// comparison per coordinate, a loop the compiler vectorises; only
+    /// blocks with a point beyond it are tested point by point.
+    pub fn contains_all(&self, points: &[Point3]) -> bool {
+        let bound = self.inner_bound();
+        points.chunks(256).all(|block| {
+            let near = |v: f32| v.abs() <= bound;
+            block.iter().fold(true, |ok, p| ok & near(p.x) & near(p.y) & near(p.z))
+                || block.iter().all(|&p| self.key(p).is_ok())
+        })
+    }
+
+    /// A float `b` such that every coordinate of magnitude at most `b` has
+    /// a key: `factor * b` below the key range's end (the product rounds
+    /// monotonically, so smaller magnitudes are inside too); -1 when the
+    /// factor is not a positive number, so that no coordinate passes.
+    fn inner_bound(&self) -> f32 {
+        let center = f64::from(KEY_CENTER);
+        let factor = self.resolution_factor;
+        if !(factor > 0.0 && factor.is_finite()) {
+            return -1.0;
+        }
+        let mut b = (center / factor) as f32;
+        for _ in 0..4 {
+            if b.is_finite() && b > 0.0 && factor * f64::from(b) < center {
+                return b;
+            }
+            b = b.next_down();
+        }
+        -1.0
+    }
+
     /// [`Self::key`] one axis at a time (the error names the first axis
     /// without a key).
     fn key_per_axis(&self, p: Point3) -> Result<Key, KeyError> {
@@ -468,6 +502,34 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// `contains_all` says what testing every point's key says, for blocks
+    /// of points inside, at and just past the map's edges (where the fast
+    /// bound must not pass a point without a key), and non-finite ones.
+    #[test]
+    fn contains_all_agrees_with_every_key() {
+        for res in [0.01, 0.05, 0.1, 0.2, 0.3, 1.0, 0.123_456_7] {
+            let ks = KeySpace::new(res);
+            let edge = (ks.node_size(0) / 2.0) as f32;
+            let bound = ks.inner_bound();
+            assert!(bound > 0.99 * edge, "{res}: bound {bound}, edge {edge}");
+            let mut values = vec![0.0f32, -0.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 3.7];
+            for base in [edge, -edge, bound, -bound] {
+                for ulps in 0..6 {
+                    values.extend([base.next_up(), base.next_down()].map(|v| f32::from_bits(v.to_bits() + ulps)));
+                    values.extend([base.next_up(), base.next_down()].map(|v| f32::from_bits(v.to_bits() - ulps)));
+                }
+            }
+            for &a in &values {
+                for p in [Point3::new(a, 1.0, -2.0), Point3::new(1.0, a, 0.5), Point3::new(-0.5, 2.0, a)] {
+                    let block = vec![Point3::new(0.25, -0.25, 1.0); 300].into_iter().chain([p]).collect::<Vec<_>>();
+                    assert_eq!(ks.contains_all(&block), ks.key(p).is_ok(), "{p:?} at {res}");
+                }
+            }
+        }
+        assert!(!KeySpace::new(f64::NAN).contains_all(&[Point3::new(0.0, 0.0, 0.0)]));
+        assert!(KeySpace::new(0.1).contains_all(&[]));
     }
 
     #[test]

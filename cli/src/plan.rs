@@ -78,7 +78,7 @@ pub fn run(a: Args) -> Result<()> {
     let mut count = 0;
     for node in reader.by_ref().take(scans) {
         let node = node.with_context(|| format!("cannot read {name}"))?;
-        let (cloud, origin) = node.graph2tree();
+        let (cloud, origin) = node.into_graph2tree();
         work.add(&cloud.points, origin, max_range, a.discretize);
         count += 1;
     }

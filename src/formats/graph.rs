@@ -14,7 +14,7 @@ use std::fs;
 use std::io::{self, BufWriter, Read, Write};
 use std::path::Path;
 
-use crate::geometry::{graph2tree_transform, Point3, PointCloud, Pose6D, Quaternion};
+use crate::geometry::{graph2tree_in_place, graph2tree_transform, Point3, PointCloud, Pose6D, Quaternion};
 
 /// One scan: points in the sensor frame plus the pose they were taken from.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -31,6 +31,12 @@ impl ScanNode {
     /// World-frame points and sensor origin exactly as `graph2tree` computes them.
     pub fn graph2tree(&self) -> (PointCloud, Point3) {
         graph2tree_transform(&self.pose, &self.scan)
+    }
+
+    /// [`Self::graph2tree`] of a node given up for it: its points are
+    /// transformed where they are, not copied first.
+    pub fn into_graph2tree(self) -> (PointCloud, Point3) {
+        graph2tree_in_place(&self.pose, self.scan)
     }
 }
 

@@ -48,7 +48,7 @@ fn read_scans<'a>(
         let node = nodes.next();
         *reading.lock().unwrap_or_else(|e| e.into_inner()) += started.elapsed();
         Some(node?.with_context(|| format!("cannot read {input}")).map(|node| {
-            let (points, origin) = node.graph2tree();
+            let (points, origin) = node.into_graph2tree();
             (points.points, origin)
         }))
     });
@@ -72,8 +72,9 @@ pub(super) fn run(a: &Args, t: &Tiling, sensor: SensorModel, format: MapFormat, 
     let mut work = TileWork::new(a.res, t.depth)?;
     for node in reader.by_ref().take(n) {
         let node = node.with_context(|| format!("cannot read {input}"))?;
-        let (points, origin) = node.graph2tree();
-        let scan = super::Scan { id: node.id, points, origin, colors: None };
+        let id = node.id;
+        let (points, origin) = node.into_graph2tree();
+        let scan = super::Scan { id, points, origin, colors: None };
         tally.count(&scan, &keys);
         work.add(&scan.points.points, origin, max_range, a.discretize);
     }
