@@ -114,9 +114,9 @@ pub fn load_any(path: &Path) -> Result<AnyMap> {
 
 /// Memory-maps an `.olm` map and checks its header (O(1); the nodes are
 /// checked by [`verify_olm`] or by the conversion to a tree). Names the file
-/// in the message of [`report_truncated_maps`]'s handler first.
+/// in the message of [`report_truncated_files`]'s handler first.
 pub fn open_olm(path: &Path) -> Result<MappedMap<memmap2::Mmap>> {
-    truncated_map::name(path);
+    name_mapped_file(path);
     match octolinear::mapped::open(path) {
         Err(octolinear::mapped::OlmError::Io(e)) => Err(e).with_context(|| format!("cannot open {}", path.display())),
         opened => opened.with_context(|| format!("{}: not a valid .olm map", path.display())),
@@ -269,11 +269,17 @@ pub fn format_g6(v: f64) -> String {
 /// truncated in place while memory-mapped (by another process; the writers
 /// here rename a new file over the old one, which is safe) raises `SIGBUS`
 /// at the next read past its new end, which would otherwise kill the
-/// process without a word. Mapped `.olm` files are the only mappings here,
-/// so the handler blames the one [`open_olm`] opened last. Installed once,
-/// at start.
-pub fn report_truncated_maps() {
+/// process without a word. The mapped files are `.olm` maps and `.graph`
+/// inputs; the handler blames the one named last ([`name_mapped_file`]).
+/// Installed once, at start.
+pub fn report_truncated_files() {
     truncated_map::install();
+}
+
+/// Names `path` in the message of [`report_truncated_files`]'s handler:
+/// called before a file is mapped.
+pub fn name_mapped_file(path: &Path) {
+    truncated_map::name(path);
 }
 
 #[cfg(unix)]
@@ -281,17 +287,17 @@ mod truncated_map {
     use std::path::Path;
     use std::sync::atomic::{AtomicPtr, Ordering};
 
-    /// The line for the map opened last, built before it is mapped (the
-    /// handler may not allocate); null before any map is opened.
+    /// The line for the file mapped last, built before it is mapped (the
+    /// handler may not allocate); null before any file is mapped.
     static LINE: AtomicPtr<&'static [u8]> = AtomicPtr::new(std::ptr::null_mut());
 
-    const UNNAMED: &[u8] = b"octolinear: error: a map file was truncated while memory-mapped \
-        (replace map files by renaming a new file over them, never in place)\n";
+    const UNNAMED: &[u8] = b"octolinear: error: a file was truncated while memory-mapped \
+        (replace files by renaming a new file over them, never in place)\n";
 
     pub fn name(path: &Path) {
         let line = format!(
-            "octolinear: error: {}: the map file was truncated while memory-mapped \
-             (replace map files by renaming a new file over them, never in place)\n",
+            "octolinear: error: {}: the file was truncated while memory-mapped \
+             (replace files by renaming a new file over them, never in place)\n",
             path.display()
         );
         // leaked: the handler may read it at any time (one short line per map opened)

@@ -6,7 +6,7 @@
 //! standard input; pipes, FIFOs and `/dev/stdin` are read as streams.
 
 use anyhow::{bail, Context, Result};
-use octolinear::formats::graph::{self, ScanReader};
+use octolinear::formats::graph::{GraphInput, ScanReader};
 use octolinear::formats::{pcd, ply, xyz, ColoredCloud as Scan};
 use octolinear::{Point3, PointCloud, Pose6D};
 use std::io::{BufReader, Read, Seek};
@@ -29,17 +29,18 @@ fn is_stdin(path: &Path) -> bool {
 }
 
 /// A `.graph` read scan by scan from a file, pipe or FIFO, or from standard
-/// input for `-`. Only a regular file's counts are checked against its
-/// length before reading; the others are checked as their data arrives.
-pub fn open_graph(path: &Path) -> Result<ScanReader<Box<dyn Read + Send>>> {
-    let (reader, len): (Box<dyn Read + Send>, _) = if is_stdin(path) {
-        (Box::new(BufReader::with_capacity(1 << 16, std::io::stdin())), None)
+/// input for `-`. A regular file is memory-mapped a window at a time and
+/// its counts are checked against its length before reading; the others
+/// are read as streams and checked as their data arrives.
+pub fn open_graph(path: &Path) -> Result<ScanReader<GraphInput>> {
+    let input = if is_stdin(path) {
+        GraphInput::stream(BufReader::with_capacity(1 << 16, std::io::stdin()))
     } else {
-        let file = std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
-        let len = graph::stream_len(&file).with_context(|| format!("cannot read {}", path.display()))?;
-        (Box::new(BufReader::with_capacity(1 << 16, file)), len)
+        crate::common::name_mapped_file(path);
+        GraphInput::open(path).with_context(|| format!("cannot open {}", path.display()))?
     };
-    ScanReader::with_len(reader, len).with_context(|| format!("cannot read {}", name(path)))
+    let len = input.file_len();
+    ScanReader::with_len(input, len).with_context(|| format!("cannot read {}", name(path)))
 }
 
 /// Point formats, by extension or by content.

@@ -112,7 +112,7 @@ pub(crate) fn trim_heap() {
 /// Runs the tool; returns the process exit code.
 fn run() -> i32 {
     set_signal_actions();
-    common::report_truncated_maps();
+    common::report_truncated_files();
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {

@@ -1555,8 +1555,8 @@ fn a_map_changed_under_query_is_an_error_or_harmless() {
     assert_eq!(
         err,
         format!(
-            "octolinear: error: {map}: the map file was truncated while memory-mapped \
-             (replace map files by renaming a new file over them, never in place)\n"
+            "octolinear: error: {map}: the file was truncated while memory-mapped \
+             (replace files by renaming a new file over them, never in place)\n"
         )
     );
     let renamed = query_while(&|| {

@@ -151,14 +151,14 @@ pub(crate) fn sensor_model(sensor: Option<(f64, f64)>, clamping: Option<(f64, f6
 /// `(points, origin)` in the world frame, as graph2tree transforms them,
 /// each read when insertion asks for it; a read error ends them and is
 /// left in `failure`.
-pub(crate) fn graph_scans<'a, R: std::io::Read>(
+pub(crate) fn graph_scans<'a, R: graph::GraphSource>(
     reader: &'a mut graph::ScanReader<R>,
     limit: Option<usize>,
     failure: &'a mut Option<graph::GraphError>,
 ) -> impl Iterator<Item = (Vec<Point3>, Point3)> + 'a {
     reader.take(limit.unwrap_or(usize::MAX)).map_while(|node| match node {
         Ok(node) => {
-            let (cloud, origin) = node.graph2tree();
+            let (cloud, origin) = node.into_graph2tree();
             Some((cloud.points, origin))
         }
         Err(e) => {

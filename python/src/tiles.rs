@@ -202,7 +202,7 @@ pub fn build_tiles<'py>(
             let read = || -> ScansRead {
                 match graph::open(&path) {
                     Ok(reader) => Box::new(reader.take(scans.unwrap_or(usize::MAX)).map(|node| {
-                        let (cloud, origin) = node?.graph2tree();
+                        let (cloud, origin) = node?.into_graph2tree();
                         Ok((cloud.points, origin))
                     })),
                     Err(e) => Box::new(std::iter::once(Err(e))),

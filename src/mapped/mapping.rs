@@ -1,4 +1,5 @@
-//! The memory mapping behind [`MappedMap::open`](super::MappedMap::open):
+//! The memory mappings behind [`MappedMap::open`](super::MappedMap::open)
+//! and the `.graph` reader's [`GraphInput`](crate::formats::graph::GraphInput):
 //! the module's only `unsafe`.
 
 use std::fs::File;
@@ -11,4 +12,13 @@ pub(super) fn map_read_only(file: &File) -> io::Result<memmap2::Mmap> {
     // truncated for the lifetime of the map; see the assumption above.
     // The map is read-only and only ever read through `&[u8]`.
     unsafe { memmap2::Mmap::map(file) }
+}
+
+/// Maps `len` bytes of `file` from `offset` (a multiple of the page size)
+/// read-only, under the same assumption as [`map_read_only`] (stated by
+/// `GraphInput`).
+pub(crate) fn map_range(file: &File, offset: u64, len: usize) -> io::Result<memmap2::Mmap> {
+    // SAFETY: as in `map_read_only`: the file is assumed not to change
+    // while mapped, and the map is only read through `&[u8]`.
+    unsafe { memmap2::MmapOptions::new().offset(offset).len(len).map(file) }
 }

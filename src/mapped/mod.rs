@@ -71,7 +71,7 @@
 
 pub mod format;
 #[allow(unsafe_code)]
-mod mapping;
+pub(crate) mod mapping;
 mod nav;
 mod query;
 mod search_blocks;

@@ -14,6 +14,10 @@ use std::fs;
 use std::io::{self, BufWriter, Read, Write};
 use std::path::Path;
 
+mod source;
+
+pub use source::{GraphInput, GraphSource, WINDOW};
+
 use crate::geometry::{graph2tree_in_place, graph2tree_transform, Point3, PointCloud, Pose6D, Quaternion};
 
 /// One scan: points in the sensor frame plus the pose they were taken from.
@@ -181,34 +185,36 @@ struct Input<R> {
     inner: R,
     offset: u64,
     len: Option<u64>,
+    /// Room for the bytes of a source that copies them.
+    buffer: Vec<u8>,
 }
 
-impl<R: Read> Input<R> {
-    /// Fills `buf` completely or reports where the input ended.
-    fn fill(&mut self, buf: &mut [u8], context: &dyn Fn(usize) -> String) -> Result<(), GraphError> {
-        let mut filled = 0;
-        while filled < buf.len() {
-            match self.inner.read(&mut buf[filled..]) {
-                Ok(0) => {
-                    return Err(GraphError::Truncated {
-                        offset: self.offset + filled as u64,
-                        missing: (buf.len() - filled) as u64,
-                        context: context(filled),
-                    })
-                }
-                Ok(n) => filled += n,
-                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-                Err(source) => return Err(GraphError::Io { offset: self.offset + filled as u64, source }),
+impl<R: GraphSource> Input<R> {
+    /// The next `n` bytes, or where the input ended or failed.
+    fn take(&mut self, n: usize, context: &dyn Fn(usize) -> String) -> Result<&[u8], GraphError> {
+        let offset = self.offset;
+        match self.inner.lend(n, &mut self.buffer) {
+            Ok(bytes) if bytes.len() == n => {
+                self.offset += n as u64;
+                Ok(bytes)
             }
+            Ok(bytes) => Err(GraphError::Truncated {
+                offset: offset + bytes.len() as u64,
+                missing: (n - bytes.len()) as u64,
+                context: context(bytes.len()),
+            }),
+            Err((read, source)) => Err(GraphError::Io { offset: offset + read as u64, source }),
         }
-        self.offset += buf.len() as u64;
-        Ok(())
+    }
+
+    /// The next `N` bytes as an array.
+    fn array<const N: usize>(&mut self, context: &dyn Fn(usize) -> String) -> Result<[u8; N], GraphError> {
+        let bytes = self.take(N, context)?;
+        Ok(bytes.try_into().expect("take gives N bytes"))
     }
 
     fn u32(&mut self, context: &dyn Fn(usize) -> String) -> Result<u32, GraphError> {
-        let mut b = [0u8; 4];
-        self.fill(&mut b, context)?;
-        Ok(u32::from_le_bytes(b))
+        Ok(u32::from_le_bytes(self.array(context)?))
     }
 
     /// Checks that `count` items of at least `each` bytes (+ `tail`) can fit.
@@ -281,33 +287,31 @@ fn vector_at(b: &[u8], at: usize, base: u64, context: &dyn Fn() -> String) -> Re
     Ok(Point3::new(f64_at(b, at + 4) as f32, f64_at(b, at + 12) as f32, f64_at(b, at + 20) as f32))
 }
 
-fn read_pose<R: Read>(input: &mut Input<R>, context: &dyn Fn() -> String) -> Result<Pose6D, GraphError> {
-    let mut b = [0u8; POSE_BYTES];
+fn read_pose<R: GraphSource>(input: &mut Input<R>, context: &dyn Fn() -> String) -> Result<Pose6D, GraphError> {
     let base = input.offset;
-    input.fill(&mut b, &|_| context())?;
+    let b: [u8; POSE_BYTES] = input.array(&|_| context())?;
     let t = vector_at(&b, 0, base, &|| format!("translation of {}", context()))?;
     check_marker(i32_at(&b, POINT_BYTES), 4, base + POINT_BYTES as u64, || format!("rotation of {}", context()))?;
     let q = |i: usize| f64_at(&b, POINT_BYTES + 4 + 8 * i) as f32;
     Ok(Pose6D::new(t, Quaternion::new(q(0), q(1), q(2), q(3))))
 }
 
-fn read_cloud<R: Read>(input: &mut Input<R>, node: usize) -> Result<PointCloud, GraphError> {
+fn read_cloud<R: GraphSource>(input: &mut Input<R>, node: usize) -> Result<PointCloud, GraphError> {
     let count = input.u32(&|_| format!("point count of node {node}"))?;
     input.check_count("point", count, POINT_BYTES as u64, POSE_BYTES as u64 + 4)?;
     let mut cloud = PointCloud::new();
     let total = count as usize;
     let context = || format!("points of node {node} ({total} announced)");
     input.reserve(&mut cloud.points, input.reserve_hint(count), "points", &context)?;
-    let mut buf = vec![0u8; POINT_CHUNK.min(total) * POINT_BYTES];
     let mut done = 0usize;
     while done < total {
         let n = (total - done).min(POINT_CHUNK);
         // grows with the data actually present (the count alone may lie)
         input.reserve(&mut cloud.points, n, "points", &context)?;
-        let chunk = &mut buf[..n * POINT_BYTES];
         let base = input.offset;
-        input.fill(chunk, &|filled| format!("point {} of node {node}", done + filled / POINT_BYTES)).map_err(|e| {
-            match e {
+        let chunk = input
+            .take(n * POINT_BYTES, &|read| format!("point {} of node {node}", done + read / POINT_BYTES))
+            .map_err(|e| match e {
                 // Report what the interrupted point lacks, not the whole chunk.
                 GraphError::Truncated { offset, context, .. } => GraphError::Truncated {
                     offset,
@@ -315,8 +319,7 @@ fn read_cloud<R: Read>(input: &mut Input<R>, node: usize) -> Result<PointCloud, 
                     context,
                 },
                 e => e,
-            }
-        })?;
+            })?;
         // markers first, then the coordinates in a loop without exits
         let records = chunk.chunks_exact(POINT_BYTES);
         if let Some(i) = records.clone().position(|r| i32_at(r, 0) != 3) {
@@ -331,7 +334,8 @@ fn read_cloud<R: Read>(input: &mut Input<R>, node: usize) -> Result<PointCloud, 
     Ok(cloud)
 }
 
-/// Decodes a graph scan by scan from any [`Read`]: the node count when
+/// Decodes a graph scan by scan from any [`GraphSource`] (a [`Read`] or a
+/// mapped file, [`GraphInput`]): the node count when
 /// created, then one [`ScanNode`] per [`Iterator::next`], so that a caller
 /// inserting scans into a map holds one scan at a time, whether the input
 /// is a file, a pipe or standard input. After the last scan,
@@ -344,7 +348,7 @@ pub struct ScanReader<R> {
     failed: bool,
 }
 
-impl<R: Read> ScanReader<R> {
+impl<R: GraphSource> ScanReader<R> {
     /// Reads the node count of a stream of unknown length (buffer it
     /// yourself: reads are small).
     pub fn new(reader: R) -> Result<Self, GraphError> {
@@ -354,7 +358,7 @@ impl<R: Read> ScanReader<R> {
     /// As [`Self::new`], with the input's total length when it is known (a
     /// regular file, a slice): counts that cannot fit are refused up front.
     pub fn with_len(reader: R, len: Option<u64>) -> Result<Self, GraphError> {
-        let mut input = Input { inner: reader, offset: 0, len };
+        let mut input = Input { inner: reader, offset: 0, len, buffer: Vec::new() };
         let nodes = input.u32(&|_| "node count".to_string())?;
         input.check_count("node", nodes, MIN_NODE_BYTES, 4)?;
         Ok(ScanReader { input, nodes, next: 0, failed: false })
@@ -395,11 +399,9 @@ impl<R: Read> ScanReader<R> {
         let context = || format!("edge list ({n_edges} announced)");
         input.reserve(&mut edges, input.reserve_hint(n_edges), "edges", &context)?;
         for i in 0..n_edges as usize {
-            let mut ids = [0u8; 8];
-            input.fill(&mut ids, &|_| format!("node ids of edge {i}"))?;
+            let ids: [u8; 8] = input.array(&|_| format!("node ids of edge {i}"))?;
             let constraint = read_pose(input, &|| format!("constraint of edge {i}"))?;
-            let mut w = [0u8; 8];
-            input.fill(&mut w, &|_| format!("weight of edge {i}"))?;
+            let w: [u8; 8] = input.array(&|_| format!("weight of edge {i}"))?;
             input.reserve(&mut edges, 1, "edges", &context)?;
             edges.push(ScanEdge {
                 first: u32::from_le_bytes([ids[0], ids[1], ids[2], ids[3]]),
@@ -426,7 +428,7 @@ impl<R: Read> ScanReader<R> {
     }
 }
 
-impl<R: Read> Iterator for ScanReader<R> {
+impl<R: GraphSource> Iterator for ScanReader<R> {
     type Item = Result<ScanNode, GraphError>;
 
     fn next(&mut self) -> Option<Self::Item> {
@@ -455,14 +457,13 @@ pub fn read_bytes(bytes: &[u8]) -> Result<ScanGraph, GraphError> {
     ScanReader::with_len(bytes, Some(bytes.len() as u64))?.into_graph()
 }
 
-/// Opens a `.graph` file for reading scan by scan. The counts of a regular
-/// file are checked against its length; a pipe, FIFO or device is read as
-/// a stream.
-pub fn open(path: impl AsRef<Path>) -> Result<ScanReader<io::BufReader<fs::File>>, GraphError> {
-    let io_err = |source| GraphError::Io { offset: 0, source };
-    let file = fs::File::open(path).map_err(io_err)?;
-    let len = stream_len(&file).map_err(io_err)?;
-    ScanReader::with_len(io::BufReader::with_capacity(1 << 16, file), len)
+/// Opens a `.graph` file for reading scan by scan: a regular file is
+/// memory-mapped a window at a time ([`GraphInput`]) and its counts are
+/// checked against its length; a pipe, FIFO or device is read as a stream.
+pub fn open(path: impl AsRef<Path>) -> Result<ScanReader<GraphInput>, GraphError> {
+    let input = GraphInput::open(path).map_err(|source| GraphError::Io { offset: 0, source })?;
+    let len = input.file_len();
+    ScanReader::with_len(input, len)
 }
 
 /// The length of a regular file; `None` for a pipe, FIFO, socket or device,
