@@ -114,6 +114,14 @@ struct Process {
     peak_kb: i64,
 }
 
+impl Process {
+    /// The median wall time of `runs` and the highest peak among them.
+    fn median(runs: Vec<Process>) -> Process {
+        let peak_kb = runs.iter().map(|p| p.peak_kb).max().expect("a run");
+        Process { wall: median(runs.iter().map(|p| p.wall).collect()).median, peak_kb }
+    }
+}
+
 /// The argument that makes this bench a launcher ([`launch`]).
 pub const LAUNCH: &str = "--launch";
 
@@ -287,17 +295,27 @@ fn run_job(args: &FullArgs, kind: SceneKind, res: f64, scans: &[Scan], file: &Pa
     eprintln!("{name}: graph2tree and octolinear build");
     let res_arg = res.to_string();
     let g2t_out = dir.join("graph2tree.bt");
-    let graph2tree = run(
-        Command::new(&args.graph2tree)
-            .args(["-i".as_ref(), file.as_os_str(), "-o".as_ref(), g2t_out.as_os_str()])
-            .args(["-res", &res_arg]),
-        &dir.join("graph2tree.log"),
-    );
-    let log = std::fs::read_to_string(dir.join("graph2tree.log")).expect("graph2tree's log");
-    let graph2tree_insert = log
-        .lines()
-        .find_map(|l| l.strip_prefix("time to insert scans: ")?.strip_suffix(" sec")?.parse().ok())
-        .expect("graph2tree prints its insertion time");
+    // graph2tree's runs, and its own "time to insert scans" of each
+    let (mut g2t_runs, mut g2t_inserts) = (Vec::new(), Vec::new());
+    while g2t_runs.len() < args.reps
+        && g2t_runs.iter().map(|p: &Process| secs(p.wall)).sum::<f64>() < args.octomap_budget
+    {
+        let log_path = dir.join("graph2tree.log");
+        g2t_runs.push(run(
+            Command::new(&args.graph2tree)
+                .args(["-i".as_ref(), file.as_os_str(), "-o".as_ref(), g2t_out.as_os_str()])
+                .args(["-res", &res_arg]),
+            &log_path,
+        ));
+        let log = std::fs::read_to_string(&log_path).expect("graph2tree's log");
+        let insert: f64 = log
+            .lines()
+            .find_map(|l| l.strip_prefix("time to insert scans: ")?.strip_suffix(" sec")?.parse().ok())
+            .expect("graph2tree prints its insertion time");
+        g2t_inserts.push(Duration::from_secs_f64(insert));
+    }
+    let graph2tree = Process::median(g2t_runs);
+    let graph2tree_insert = secs(median(g2t_inserts).median);
     let expected = std::fs::read(&g2t_out).expect("graph2tree's .bt");
     for suffix in ["", ".ot", "_ml.ot"] {
         let _ = std::fs::remove_file(dir.join(format!("graph2tree.bt{suffix}")));
@@ -317,7 +335,13 @@ fn run_job(args: &FullArgs, kind: SceneKind, res: f64, scans: &[Scan], file: &Pa
         let _ = std::fs::remove_file(&out);
         p
     };
-    let (build1, build2) = (build("1"), build("2"));
+    // alternately, so that a slow phase of the machine touches both
+    let (mut ones, mut twos) = (Vec::new(), Vec::new());
+    for _ in 0..args.reps {
+        ones.push(build("1"));
+        twos.push(build("2"));
+    }
+    let (build1, build2) = (Process::median(ones), Process::median(twos));
     JobResult {
         name,
         points: num_points(scans),
@@ -368,7 +392,8 @@ fn print_tables(results: &[JobResult]) {
     println!();
     println!(
         "End to end (wall time of the process: read the .graph, insert, write the .bt; graph2tree also writes \
-         two .ot files; peak RSS from wait4):"
+         two .ot files; medians of as many runs as above, the builds' 1- and 2-thread runs alternating; the \
+         highest peak RSS from wait4):"
     );
     println!();
     println!(

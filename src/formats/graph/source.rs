@@ -60,7 +60,7 @@ enum Input {
 }
 
 /// Bytes of the file a window maps.
-pub const WINDOW: u64 = 8 << 20;
+pub const WINDOW: u64 = 4 << 20;
 
 /// Windows start at multiples of this (a multiple of every page size).
 const ALIGN: u64 = 1 << 16;
