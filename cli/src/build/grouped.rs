@@ -5,7 +5,7 @@
 //! threads, as many groups at once.
 
 use super::{
-    input, input_name, print_build, print_tile_set, scan_options, tiles, write_tiled, write_tree, Args, SpillDir,
+    input, input_name, print_build, print_tile_set, scan_options, tiles, write_tree, write_walked, Args, SpillDir,
     Tally, Tiling,
 };
 use crate::common::{progress, spinner, MapFormat};
@@ -132,7 +132,7 @@ pub(super) fn run(a: &Args, t: &Tiling, sensor: SensorModel, format: MapFormat, 
     } else {
         // the tiles walked one at a time, straight into the file
         let phase = spinner(&format!("writing {} from the tiles", a.output.display()));
-        let stats = write_tiled(&set, format, &a.output, Some(&dir))?;
+        let stats = write_walked(&set, format, &a.output, Some(&dir))?;
         phase.finish_and_clear();
         stats
     };

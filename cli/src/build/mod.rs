@@ -290,16 +290,22 @@ fn sensor_model(a: &Args) -> Result<SensorModel> {
 /// Writes the map `tree` to `output` in `format`, and returns the
 /// statistics of the full and of the maximum-likelihood tree.
 fn write_tree(mut tree: OccupancyTree, format: MapFormat, output: &Path) -> Result<(Value, Value)> {
+    if format != MapFormat::Olm {
+        // one walk of the tree as it is: converting, pruning and
+        // compacting it cost twice as much on a large map
+        let phase = spinner(&format!("writing {}", output.display()));
+        let stats = write_walked(&tree, format, output, None);
+        phase.finish_and_clear();
+        return stats;
+    }
     // one tree throughout (no copies): peak memory is the tree, compacted
     // in place, plus a scan's key sets
     let phase = spinner("compacting the tree");
     tree.compact();
     phase.set_message("counting nodes");
     let full = statistics(&tree);
-    if format != MapFormat::Bt {
-        phase.set_message(format!("writing {}", output.display()));
-        save_map(&tree, output)?;
-    }
+    phase.set_message(format!("writing {}", output.display()));
+    save_map(&tree, output)?;
     phase.set_message("converting to maximum likelihood");
     tree.to_max_likelihood();
     phase.set_message("pruning");
@@ -308,22 +314,17 @@ fn write_tree(mut tree: OccupancyTree, format: MapFormat, output: &Path) -> Resu
     tree.compact();
     phase.set_message("counting nodes");
     let ml_stats = statistics(&tree);
-    if format == MapFormat::Bt {
-        // already maximum likelihood and pruned: what writeBinary writes
-        phase.set_message(format!("writing {}", output.display()));
-        write_atomically(output, |w| bt::write_const(&tree, w))
-            .with_context(|| format!("cannot write {}", output.display()))?;
-    }
     phase.finish_and_clear();
     Ok((full, ml_stats))
 }
 
-/// Writes a tiled map or a tile set to `output` (`.ot` or `.bt`) without
-/// merging it: one walk across the tiles writes the file and gathers the
-/// full tree's statistics, and the maximum-likelihood tree's come from its
-/// `.bt` records; they equal [`write_tree`]'s of the merged tree. With
-/// `scratch` (a directory), the records wait there, not in memory.
-fn write_tiled<M: PreorderSource>(
+/// Writes a tree, a tiled map or a tile set to `output` (`.ot` or `.bt`)
+/// without changing or merging it: one walk (across the tiles) writes the
+/// file and gathers the full tree's statistics, and the
+/// maximum-likelihood tree's come from its `.bt` records; they equal those
+/// of the tree converted and pruned. With `scratch` (a directory), the
+/// records wait there, not in memory.
+fn write_walked<M: PreorderSource>(
     map: &M,
     format: MapFormat,
     output: &Path,
@@ -384,13 +385,10 @@ fn summary_statistics(s: &TreeSummary) -> Value {
     })
 }
 
-/// graph2tree's `outputStatistics`, as numbers, from one walk of the tree
-/// (the node count is OctoMap's `size()` counter, as graph2tree prints it).
+/// graph2tree's `outputStatistics`, as numbers (the node count is
+/// OctoMap's `size()` counter, as graph2tree prints it).
 fn statistics(tree: &OccupancyTree) -> serde_json::Value {
-    let mut summary = Summarize::new(tree);
-    let walked = PreorderSource::visit_preorder(tree, &mut summary);
-    debug_assert!(walked.is_ok(), "a tree's walk cannot fail");
-    let mut stats = summary_statistics(&summary.finish());
+    let mut stats = summary_statistics(&tree.summary());
     stats["nodes"] = tree.size().into();
     stats["nodes_other"] = (tree.size() as u64 - stats["nodes_thresholded"].as_u64().unwrap_or(0)).into();
     stats
@@ -847,7 +845,7 @@ pub fn run(a: Args) -> Result<()> {
         Some(map) if format != MapFormat::Olm => {
             // the tiles walked one at a time, straight into the file
             let phase = spinner(&format!("writing {} from the tiles", a.output.display()));
-            let stats = write_tiled(&map, format, &a.output, spill_dir.as_ref().map(|d| d.0.as_path()))?;
+            let stats = write_walked(&map, format, &a.output, spill_dir.as_ref().map(|d| d.0.as_path()))?;
             phase.finish_and_clear();
             drop(map);
             drop(spill_dir);
