@@ -10,7 +10,8 @@
 //! stays inside that box). Stretches are the voxels a ray visits in one
 //! aligned cube of 2, 4 or 8 voxels a side, or runs of 4, 8 or 16 steps
 //! from its start; a stretch counts when its box was covered before the
-//! ray. A probe.
+//! ray, and for cubes, also whether the whole cube was. `SCANS=N`: only
+//! the first N scans. A probe.
 
 #[path = "../../../benches/common/mod.rs"]
 mod common;
@@ -28,7 +29,11 @@ enum Stretch {
 }
 
 fn main() {
-    let (_, res, scans) = common::scene_from_args();
+    let (_, res, mut scans) = common::scene_from_args();
+    // SCANS=N: only the first N scans (full-size sequences take long)
+    if let Some(n) = std::env::var("SCANS").ok().and_then(|s| s.parse().ok()) {
+        scans.truncate(n);
+    }
     let tree = OccupancyTree::new(res).expect("resolution");
     let walks: Vec<Vec<Vec<Key>>> = scans
         .iter()
@@ -54,6 +59,7 @@ fn main() {
         [Stretch::Cube(1), Stretch::Cube(2), Stretch::Cube(3), Stretch::Steps(4), Stretch::Steps(8), Stretch::Steps(16)]
     {
         let (mut stretches, mut boxed, mut skipped) = (0usize, 0usize, 0usize);
+        let (mut whole, mut whole_steps) = (0usize, 0usize);
         for scan in &walks {
             let mut seen: HashSet<Key> = HashSet::new();
             for keys in scan {
@@ -74,6 +80,19 @@ fn main() {
                     if inside {
                         boxed += 1;
                         skipped += j - i;
+                        if let Stretch::Cube(shift) = stretch {
+                            let side = 1u16 << shift;
+                            let base = keys[i].0.map(|v| v >> shift << shift);
+                            let full = (0..side).all(|x| {
+                                (0..side).all(|y| {
+                                    (0..side).all(|z| seen.contains(&Key([base[0] + x, base[1] + y, base[2] + z])))
+                                })
+                            });
+                            if full {
+                                whole += 1;
+                                whole_steps += j - i;
+                            }
+                        }
                     }
                     i = j;
                 }
@@ -85,8 +104,10 @@ fn main() {
             Stretch::Steps(n) => format!("runs of {n} steps"),
         };
         println!(
-            "stretches of {name}: {stretches}, {boxed} with a covered box, holding {skipped} steps ({:.1}%)",
-            100.0 * skipped as f64 / steps as f64
+            "stretches of {name}: {stretches}, {boxed} with a covered box, holding {skipped} steps ({:.1}%); \
+             {whole} in a whole covered cube, holding {whole_steps} steps ({:.1}%)",
+            100.0 * skipped as f64 / steps as f64,
+            100.0 * whole_steps as f64 / steps as f64
         );
     }
 }
