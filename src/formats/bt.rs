@@ -13,8 +13,8 @@ use super::pieces::Pieces;
 use super::TreeFileError;
 use crate::key::KeySpace;
 use crate::sensor::SensorModel;
+use crate::tree::{child_key, LeafExtremes, PreorderNode, PreorderSource, PreorderVisitor, Tee, TreeSummary};
 use crate::tree::{default_extra, ChildGroup, LabelFill, NodeKind, OccupancyTree};
-use crate::tree::{PreorderNode, PreorderSource, PreorderVisitor, Tee, TreeSummary};
 use std::convert::Infallible;
 use std::io::{self, BufRead, Read, Write};
 use std::ops::ControlFlow;
@@ -236,30 +236,36 @@ impl MlRecordStream {
 /// The [`TreeSummary`] of the maximum-likelihood tree of these records
 /// ([`MlRecordStream::summary`]).
 fn summarize(map: &impl PreorderSource, mut records: impl Iterator<Item = u16>) -> TreeSummary {
-    let keys = KeySpace::new(map.resolution());
     let mut s = TreeSummary::empty(map.node_kind(), map.resolution());
+    let mut extremes = LeafExtremes::new();
     if let Some(root) = records.next() {
         s.nodes = 1;
         if root == 0 {
-            s.add_leaf(&keys, 0, 0);
+            s.add_leaf(0);
+            extremes.add([0; 4], 0);
         }
-        // (Morton prefix, depth, labels, next child) of each open node
-        let mut path = vec![(0u64, 0u8, root, 0u32)];
+        // (key, depth, labels, next child) of each open node
+        let mut path = vec![([0u16; 4], 0u8, root, 0u32)];
         while let Some(open) = path.last_mut() {
             if open.3 == 8 {
                 path.pop();
                 continue;
             }
-            let (code, depth, pos) = (open.0 << 3 | u64::from(open.3), open.1 + 1, open.3);
+            let (depth, pos) = (open.1 + 1, open.3);
+            let key = child_key(open.0, pos, depth);
             open.3 += 1;
             match (open.2 >> (2 * pos)) & 3 {
                 0 => continue,
-                3 => path.push((code, depth, records.next().unwrap_or(0), 0)),
-                _ => s.add_leaf(&keys, code, depth),
+                3 => path.push((key, depth, records.next().unwrap_or(0), 0)),
+                _ => {
+                    s.add_leaf(depth);
+                    extremes.add(key, depth);
+                }
             }
             s.nodes += 1;
         }
     }
+    extremes.widen(&KeySpace::new(map.resolution()), &mut s.bounds);
     s.at_threshold = s.nodes;
     s.finish()
 }

@@ -44,6 +44,7 @@ use search::descend_to;
 pub(crate) use search::search_target;
 pub(crate) use search_index::LevelTables;
 pub use search_index::SearchIndex;
+pub(crate) use stats::{child_key, LeafExtremes};
 pub use stats::{Summarize, TreeSummary};
 pub(crate) use trunk::{Trunks, GRID_NODES_PER_CELL};
 

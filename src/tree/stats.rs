@@ -6,7 +6,6 @@ use super::{
     ChildGroup, OccupancyTree, PreorderNode, PreorderSource, PreorderVisitor, OCTOMAP_TREE_OBJECT_BYTES, ROOT,
 };
 use crate::key::{Key, KeySpace};
-use crate::morton::MortonCode;
 use crate::sensor::SensorModel;
 use std::convert::Infallible;
 use std::ops::ControlFlow;
@@ -192,8 +191,7 @@ fn count_summary(a: &NodeArena, n: NodeId, depth: u8, sensor: &SensorModel, s: &
     s.nodes += 1;
     s.at_threshold += u64::from(sensor.is_at_threshold(a.value(n)));
     if !a.has_children(n) {
-        s.leaves += 1;
-        s.voxels += u64::from(depth == 16);
+        s.add_leaf(depth);
         return;
     }
     let first = a.first_child(n);
@@ -237,18 +235,12 @@ impl TreeSummary {
         TreeSummary { nodes: 0, leaves: 0, at_threshold: 0, voxels: 0, bounds, kind, resolution }
     }
 
-    /// Counts the leaf of Morton prefix `code` at `depth` into the leaf
-    /// counts and bounds (the node itself is counted by the caller).
-    pub(crate) fn add_leaf(&mut self, keys: &KeySpace, code: u64, depth: u8) {
+    /// Counts a leaf at `depth` (the node itself is counted by the caller;
+    /// its bounds by [`LeafExtremes`]).
+    #[inline(always)]
+    pub(crate) fn add_leaf(&mut self, depth: u8) {
         self.leaves += 1;
         self.voxels += u64::from(depth == 16);
-        let key = MortonCode(code << (3 * u32::from(16 - depth))).decode();
-        let half = keys.node_size(depth) / 2.0;
-        for axis in 0..3 {
-            let c = keys.key_to_coord_at_depth(key.0[axis], depth);
-            self.bounds.min[axis] = self.bounds.min[axis].min(c - half);
-            self.bounds.max[axis] = self.bounds.max[axis].max(c + half);
-        }
     }
 
     /// Done: an empty tree's bounds are zero, as [`OccupancyTree::bounds`] says.
@@ -288,26 +280,70 @@ impl TreeSummary {
     }
 }
 
+/// The leaves' bounds from the lowest and highest key along each axis
+/// among the leaves of each depth: at one depth a leaf's corner
+/// coordinate grows with its key (every operation computing it is
+/// monotone), so those keys' corners are the extremes, computed once per
+/// depth at the end instead of in doubles for every leaf.
+#[derive(Clone, Copy)]
+pub(crate) struct LeafExtremes {
+    /// Per depth, lowest and highest key (`u16::MAX` and zero where there
+    /// are no leaves), in four lanes: updated as whole words, a leaf's
+    /// loads never straddle an earlier leaf's stores (with three, a store
+    /// forward failed at every leaf).
+    keys: [([u16; 4], [u16; 4]); 17],
+}
+
+impl LeafExtremes {
+    /// No leaves yet.
+    pub(crate) fn new() -> Self {
+        LeafExtremes { keys: [([u16::MAX; 4], [0; 4]); 17] }
+    }
+
+    /// Adds the leaf at `depth` whose key is `key` (the bits below the
+    /// node zero, the fourth lane anything).
+    #[inline(always)]
+    pub(crate) fn add(&mut self, key: [u16; 4], depth: u8) {
+        let (lo, hi) = &mut self.keys[usize::from(depth)];
+        *lo = std::array::from_fn(|i| lo[i].min(key[i]));
+        *hi = std::array::from_fn(|i| hi[i].max(key[i]));
+    }
+
+    /// Widens `bounds` to the leaves' corners ([`BoundsRule::CenterHalfSize`]).
+    pub(crate) fn widen(&self, keys: &KeySpace, bounds: &mut Bounds) {
+        for (depth, (lo, hi)) in (0u8..).zip(self.keys) {
+            if lo[0] > hi[0] {
+                continue;
+            }
+            let half = keys.node_size(depth) / 2.0;
+            for axis in 0..3 {
+                bounds.min[axis] = bounds.min[axis].min(keys.key_to_coord_at_depth(lo[axis], depth) - half);
+                bounds.max[axis] = bounds.max[axis].max(keys.key_to_coord_at_depth(hi[axis], depth) + half);
+            }
+        }
+    }
+}
+
+/// The key of child `pos` (0..8) at `depth` of the node whose key is
+/// `parent`.
+#[inline(always)]
+pub(crate) fn child_key(parent: [u16; 4], pos: u32, depth: u8) -> [u16; 4] {
+    debug_assert!(pos < 8 && (1..=16).contains(&depth));
+    std::array::from_fn(|axis| parent[axis] | (((pos >> axis) & 1) as u16) << (16 - depth))
+}
+
 /// Gathers a [`TreeSummary`] as a visitor of a pre-order walk (alone, or
 /// beside a writer through [`super::Tee`]).
-///
-/// The bounds come from the lowest and highest key along each axis among
-/// the leaves of each depth: at one depth a leaf's corner coordinate grows
-/// with its key (every operation computing it is monotone), so those keys'
-/// corners are the extremes, computed once per depth at the end instead of
-/// in doubles for every leaf.
 pub struct Summarize {
     keys: KeySpace,
     sensor: SensorModel,
     summary: TreeSummary,
     /// Key of the open node at each depth of the walk's path (the bits
     /// below the node zero).
-    path: [[u16; 3]; 17],
+    path: [[u16; 4]; 17],
     /// Children of the open node at each depth not reached yet.
     rest: [u8; 17],
-    /// Lowest and highest key along each axis of the leaves at each depth
-    /// (`[u16::MAX; 3]` and zeros where there are none).
-    extremes: [([u16; 3], [u16; 3]); 17],
+    extremes: LeafExtremes,
 }
 
 impl Summarize {
@@ -317,43 +353,30 @@ impl Summarize {
             keys: KeySpace::new(map.resolution()),
             sensor: *map.sensor(),
             summary: TreeSummary::empty(map.node_kind(), map.resolution()),
-            path: [[0; 3]; 17],
+            path: [[0; 4]; 17],
             rest: [0; 17],
-            extremes: [([u16::MAX; 3], [0; 3]); 17],
+            extremes: LeafExtremes::new(),
         }
     }
 
     /// The summary of the nodes walked.
     pub fn finish(mut self) -> TreeSummary {
-        let s = &mut self.summary;
-        for (depth, (lo, hi)) in (0u8..).zip(self.extremes) {
-            if lo[0] > hi[0] {
-                continue;
-            }
-            let half = self.keys.node_size(depth) / 2.0;
-            for axis in 0..3 {
-                let low = self.keys.key_to_coord_at_depth(lo[axis], depth) - half;
-                let high = self.keys.key_to_coord_at_depth(hi[axis], depth) + half;
-                s.bounds.min[axis] = s.bounds.min[axis].min(low);
-                s.bounds.max[axis] = s.bounds.max[axis].max(high);
-            }
-        }
+        self.extremes.widen(&self.keys, &mut self.summary.bounds);
         self.summary.finish()
     }
 
     /// Counts `node` and returns its key.
     #[inline(always)]
-    fn reach(&mut self, node: &PreorderNode) -> [u16; 3] {
+    fn reach(&mut self, node: &PreorderNode) -> [u16; 4] {
         self.summary.nodes += 1;
         self.summary.at_threshold += u64::from(self.sensor.is_at_threshold(node.value));
         let d = usize::from(node.depth);
         if d == 0 {
-            return [0; 3];
+            return [0; 4];
         }
         let pos = self.rest[d - 1].trailing_zeros();
         self.rest[d - 1] &= self.rest[d - 1].wrapping_sub(1);
-        let parent = self.path[d - 1];
-        std::array::from_fn(|axis| parent[axis] | (((pos >> axis) & 1) as u16) << (16 - d))
+        child_key(self.path[d - 1], pos, node.depth)
     }
 }
 
@@ -369,13 +392,8 @@ impl PreorderVisitor for Summarize {
 
     fn leaf(&mut self, node: &PreorderNode) -> ControlFlow<Infallible> {
         let key = self.reach(node);
-        self.summary.leaves += 1;
-        self.summary.voxels += u64::from(node.depth == 16);
-        let (lo, hi) = &mut self.extremes[usize::from(node.depth)];
-        for axis in 0..3 {
-            lo[axis] = lo[axis].min(key[axis]);
-            hi[axis] = hi[axis].max(key[axis]);
-        }
+        self.summary.add_leaf(node.depth);
+        self.extremes.add(key, node.depth);
         ControlFlow::Continue(())
     }
 }

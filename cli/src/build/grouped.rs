@@ -128,7 +128,7 @@ pub(super) fn run(a: &Args, t: &Tiling, sensor: SensorModel, format: MapFormat, 
         let phase = spinner("merging the tiles");
         let tree = set.merge()?;
         phase.finish_and_clear();
-        write_tree(tree, format, &a.output)?
+        write_tree(&tree, format, &a.output)?
     } else {
         // the tiles walked one at a time, straight into the file
         let phase = spinner(&format!("writing {} from the tiles", a.output.display()));

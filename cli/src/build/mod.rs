@@ -288,34 +288,23 @@ fn sensor_model(a: &Args) -> Result<SensorModel> {
 }
 
 /// Writes the map `tree` to `output` in `format`, and returns the
-/// statistics of the full and of the maximum-likelihood tree.
-fn write_tree(mut tree: OccupancyTree, format: MapFormat, output: &Path) -> Result<(Value, Value)> {
-    if format != MapFormat::Olm {
-        // one walk of the tree as it is: converting, pruning and
-        // compacting it cost twice as much on a large map
-        let phase = spinner(&format!("writing {}", output.display()));
-        let stats = write_walked(&tree, format, output, None);
-        phase.finish_and_clear();
-        return stats;
-    }
-    // one tree throughout (no copies): peak memory is the tree, compacted
-    // in place, plus a scan's key sets
-    let phase = spinner("compacting the tree");
-    tree.compact();
-    phase.set_message("counting nodes");
-    let full = statistics(&tree);
-    phase.set_message(format!("writing {}", output.display()));
-    save_map(&tree, output)?;
-    phase.set_message("converting to maximum likelihood");
-    tree.to_max_likelihood();
-    phase.set_message("pruning");
-    tree.prune();
-    phase.set_message("compacting the tree");
-    tree.compact();
-    phase.set_message("counting nodes");
-    let ml_stats = statistics(&tree);
+/// statistics of the full and of the maximum-likelihood tree, from the
+/// tree as built: converting, pruning and compacting it in place cost
+/// twice the walks below on a large map.
+fn write_tree(tree: &OccupancyTree, format: MapFormat, output: &Path) -> Result<(Value, Value)> {
+    let phase = spinner(&format!("writing {}", output.display()));
+    let stats = if format == MapFormat::Olm {
+        save_map(tree, output)?;
+        // the maximum-likelihood tree's statistics from its `.bt` records,
+        // as for the other formats
+        let ml = bt::write_map(tree, std::io::sink()).and_then(|mut ml| ml.summary(tree));
+        let ml = ml.context("cannot gather the maximum-likelihood statistics")?;
+        Ok((statistics(tree), summary_statistics(&ml)))
+    } else {
+        write_walked(tree, format, output, None)
+    };
     phase.finish_and_clear();
-    Ok((full, ml_stats))
+    stats
 }
 
 /// Writes a tree, a tiled map or a tile set to `output` (`.ot` or `.bt`)
@@ -859,9 +848,9 @@ pub fn run(a: Args) -> Result<()> {
             phase.finish_and_clear();
             drop(map);
             drop(spill_dir);
-            write_tree(tree, format, &a.output)?
+            write_tree(&tree, format, &a.output)?
         }
-        None => write_tree(tree, format, &a.output)?,
+        None => write_tree(&tree, format, &a.output)?,
     };
     print_build(&a, kind, &input, &tally, (seconds, read_seconds), (&full, &ml_stats));
     Ok(())
