@@ -114,14 +114,18 @@ impl BlockSet {
         Some(&self.words[first..][..WORDS])
     }
 
-    /// The codes in Morton order, less those in `except`.
-    pub fn sorted_codes(&self, except: Option<&BlockSet>) -> Vec<u64> {
-        let mut blocks: Vec<(u64, u32)> = self.index.iter().map(|(&b, &first)| (b, first)).collect();
+    /// The codes in Morton order, less those in `except`. The table of
+    /// blocks goes before the codes' list is made, so that a large scan's
+    /// update does not hold both (the list and the words are the rest).
+    pub fn into_sorted_codes(self, except: Option<&BlockSet>) -> Vec<u64> {
+        let BlockSet { index, recent, words } = self;
+        drop(recent);
+        let mut blocks: Vec<(u64, u32)> = index.into_iter().collect();
         blocks.sort_unstable_by_key(|&(b, _)| b);
-        let count = self.words.iter().map(|&w| crate::arch::count_ones(w) as usize).sum();
+        let count = words.iter().map(|&w| crate::arch::count_ones(w) as usize).sum();
         let mut out = Vec::with_capacity(count);
         for (block, first) in blocks {
-            let words = &self.words[first as usize..][..WORDS];
+            let words = &words[first as usize..][..WORDS];
             let drop = except.and_then(|e| e.get(block));
             for (i, &w) in words.iter().enumerate() {
                 let mut w = w & !drop.map_or(0, |d| d[i]);
@@ -153,21 +157,25 @@ mod tests {
         let (mut set, mut except) = (BlockSet::default(), BlockSet::default());
         let mut model = std::collections::BTreeSet::new();
         let mut dropped = std::collections::BTreeSet::new();
+        let mut codes = Vec::new();
         for i in 0..20_000 {
             // clustered codes (repeats, shared blocks) and scattered ones
             let code = if i % 3 == 0 { next() & ((1 << 48) - 1) } else { (1 << 40) + next() % 30_000 };
             set.insert(code);
+            codes.push(code);
             model.insert(code);
             if i % 7 == 0 {
                 except.insert(code);
                 dropped.insert(code);
             }
         }
+        let mut again = BlockSet::default();
+        again.insert_all(&codes);
         let all: Vec<u64> = model.iter().copied().collect();
-        assert_eq!(set.sorted_codes(None), all);
+        assert_eq!(set.into_sorted_codes(None), all);
         let kept: Vec<u64> = model.difference(&dropped).copied().collect();
-        assert_eq!(set.sorted_codes(Some(&except)), kept);
-        assert_eq!(BlockSet::default().sorted_codes(None), Vec::<u64>::new());
+        assert_eq!(again.into_sorted_codes(Some(&except)), kept);
+        assert_eq!(BlockSet::default().into_sorted_codes(None), Vec::<u64>::new());
     }
 
     /// Codes added a buffer at a time (new blocks, and so reallocations of
@@ -178,6 +186,6 @@ mod tests {
         let (mut one, mut all) = (BlockSet::default(), BlockSet::default());
         codes.iter().for_each(|&c| one.insert(c));
         codes.chunks(512).for_each(|chunk| all.insert_all(chunk));
-        assert_eq!(all.sorted_codes(None), one.sorted_codes(None));
+        assert_eq!(all.into_sorted_codes(None), one.into_sorted_codes(None));
     }
 }

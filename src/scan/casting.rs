@@ -215,13 +215,14 @@ impl Casting {
 
     /// Both sets as sorted lists; the free one keeps the occupied voxels
     /// (another worker's may have them too).
-    fn finish(&self) -> (Vec<u64>, Vec<u64>) {
-        (self.free.sorted_codes(None), self.occupied.sorted_codes(None))
+    fn finish(self) -> (Vec<u64>, Vec<u64>) {
+        (self.free.into_sorted_codes(None), self.occupied.into_sorted_codes(None))
     }
 
     /// The scan's update, when this worker cast all of it.
     fn into_update(self) -> ScanUpdate {
-        ScanUpdate { free: self.free.sorted_codes(Some(&self.occupied)), occupied: self.occupied.sorted_codes(None) }
+        let free = self.free.into_sorted_codes(Some(&self.occupied));
+        ScanUpdate { free, occupied: self.occupied.into_sorted_codes(None) }
     }
 }
 
