@@ -118,8 +118,7 @@ impl BlockSet {
     /// blocks goes before the codes' list is made, so that a large scan's
     /// update does not hold both (the list and the words are the rest).
     pub fn into_sorted_codes(self, except: Option<&BlockSet>) -> Vec<u64> {
-        let BlockSet { index, recent, words } = self;
-        drop(recent);
+        let BlockSet { index, words, .. } = self;
         let mut blocks: Vec<(u64, u32)> = index.into_iter().collect();
         blocks.sort_unstable_by_key(|&(b, _)| b);
         let count = words.iter().map(|&w| crate::arch::count_ones(w) as usize).sum();

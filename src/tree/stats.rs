@@ -79,10 +79,9 @@ impl OccupancyTree {
         b
     }
 
-    /// What [`Summarize`] gathers from a walk of this tree, without the
-    /// walk: the counts by a recursion over the child masks (no key or
-    /// coordinate per leaf, which made the walk cost a third of a large
-    /// build's work after insertion) and the bounds by [`Self::bounds`].
+    /// What [`Summarize`] gathers from a walk of this tree, from the arena:
+    /// the counts by a recursion over the child masks, the bounds by
+    /// [`Self::bounds`].
     pub fn summary(&self) -> TreeSummary {
         let mut s = TreeSummary::empty(self.kind, self.resolution());
         if let Some(a) = self.arena.as_ref() {
