@@ -1,6 +1,6 @@
 //! One large batch update, serial against shared: `cargo run --release -p
-//! octolinear-probes --bin batch_probe -- outdoor|indoor RES SCAN [REPS]` inserts the
-//! bench's scans before `SCAN`, then times applying that scan's free-space
+//! octolinear-probes --bin batch_probe -- outdoor|indoor|FILE.graph RES SCAN [REPS]` inserts the
+//! bench's scans (or a `.graph` file's) before `SCAN`, then times applying that scan's free-space
 //! batch to copies of the tree: with `update_batch`, and with
 //! `update_batch_shared` on pools of one and two threads (one thread shows
 //! what sharing costs, two what it gains). Prints CPU and wall times (the
@@ -17,8 +17,17 @@ fn main() {
     let res: f64 = args.get(1).map_or(0.05, |s| s.parse().expect("RES"));
     let scan: usize = args.get(2).map_or(3, |s| s.parse().expect("SCAN"));
     let reps: usize = args.get(3).map_or(5, |s| s.parse().expect("REPS"));
-    let cfg = if kind == SceneKind::Indoor { LidarConfig::indoor() } else { LidarConfig::outdoor() };
-    let graph = simulate(kind, scan + 1, 7, &cfg).expect("simulate");
+    let graph = match args.first().filter(|a| a.ends_with(".graph")) {
+        Some(file) => {
+            let mut graph = octolinear::formats::graph::read_file(file).expect("read the .graph file");
+            graph.nodes.truncate(scan + 1);
+            graph
+        }
+        None => {
+            let cfg = if kind == SceneKind::Indoor { LidarConfig::indoor() } else { LidarConfig::outdoor() };
+            simulate(kind, scan + 1, 7, &cfg).expect("simulate")
+        }
+    };
     let scans: Vec<_> = graph.nodes.iter().map(|node| node.graph2tree()).collect();
     let mut base = OccupancyTree::new(res).expect("resolution");
     let opts = ScanOptions { threads: Some(1), ..ScanOptions::default() };
