@@ -4,12 +4,14 @@
 //! them. The update goes in three
 //! steps with the result of the serial walk:
 //! 1. *plan*: one thread walks the upper levels, creating missing nodes,
-//!    and lists subtrees with their codes (tasks, [`Split::is_task`]);
+//!    and lists subtrees with their codes (tasks, [`Split::is_task`]); the
+//!    pool's threads then count each task's worst case of new slots
+//!    ([`allocation_bound`], a pass over every code) and make the spare
+//!    slots (new memory, whose page faults are most of their cost);
 //! 2. the tasks, in contiguous parts of about equal code counts, are
 //!    applied by the pool's threads at once, each in its own subtrees of
 //!    the one arena ([`NodeArena::with_shared`]), allocating from free
-//!    lists of their own and from chunks of spare slots made beforehand
-//!    (enough for the worst case, [`allocation_bound`]);
+//!    lists of their own and from chunks of those spare slots;
 //! 3. *finish*: one thread walks the upper levels again, taking each
 //!    subtree's "changed" answer from step 2, and updates and prunes the
 //!    nodes there as the serial walk does after their children.
@@ -22,6 +24,7 @@
 use super::arena::{ArenaFree, SharedArena};
 use super::{Batch, NodeArena, NodeId, ROOT};
 use crate::key::TREE_DEPTH;
+use rayon::prelude::*;
 
 /// Batches with fewer codes are applied by one thread. Splitting costs a
 /// second walk of the upper levels and, above all, memory: the spare slots
@@ -70,7 +73,8 @@ struct Task {
     start: usize,
     end: usize,
     created: bool,
-    /// The most inner-pool and leaf-pool slots the task can allocate.
+    /// The most inner-pool and leaf-pool slots the task can allocate (set
+    /// once planning is done, [`allocation_bound`]).
     bound: (usize, usize),
 }
 
@@ -88,8 +92,7 @@ impl Split {
         match &self.changed {
             None => {
                 let start = (codes.as_ptr() as usize - self.base) / std::mem::size_of::<u64>();
-                let bound = allocation_bound(codes, depth);
-                self.tasks.push(Task { node: n, depth, start, end: start + codes.len(), created, bound });
+                self.tasks.push(Task { node: n, depth, start, end: start + codes.len(), created, bound: (0, 0) });
                 false
             }
             Some(changed) => {
@@ -114,7 +117,10 @@ pub(super) fn apply(
     let max_codes = (codes.len() / (8 * workers * PARTS_PER_WORKER)).max(1024);
     let mut split = Split { max_codes, base: codes.as_ptr() as usize, tasks: Vec::new(), changed: None, next: 0 };
     walk_upper_levels(batch, &mut split, codes, created);
-    let tasks = &std::mem::take(&mut split.tasks)[..];
+    let mut tasks = std::mem::take(&mut split.tasks);
+    // a pass over every code, bound by memory: on the pool's threads
+    tasks.par_iter_mut().for_each(|t| t.bound = allocation_bound(&codes[t.start..t.end], t.depth));
+    let tasks = &tasks[..];
     let parts = partition(tasks, workers * PARTS_PER_WORKER);
     let total = tasks.iter().fold((0, 0), |(i, l), t| (i + t.bound.0, l + t.bound.1));
     let largest = tasks.iter().fold((0, 0), |(i, l), t| (i.max(t.bound.0), l.max(t.bound.1)));

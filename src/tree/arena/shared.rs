@@ -6,6 +6,7 @@ use super::atomic_view::{atomic_f32s, atomic_u32s, atomic_u8s};
 use super::free::FreeRuns;
 use super::store::NodeStore;
 use super::{in_leaf_pool, leaf_index, NodeArena, NodeId, LEAF_POOL, NO_CHILD};
+use rayon::prelude::*;
 use std::sync::atomic::{AtomicU32, AtomicU8, AtomicUsize, Ordering::Relaxed};
 
 /// Spare slots a worker of a parallel update claims at a time.
@@ -96,22 +97,26 @@ impl NodeArena {
             if leaf { (&mut self.leaf_values, &mut self.leaf_extras) } else { (&mut self.values, &mut self.extras) };
         let (len, add) = (values.len(), k - spare);
         let more = if len + add > values.capacity() { add.max(len / 8) } else { 0 };
-        values.reserve_exact(more);
-        values.resize(len + add, 0.0);
+        grow(values, more, add, 0.0);
         if let Some(e) = extra {
-            extras.reserve_exact(more);
-            extras.resize(len + add, e);
+            grow(extras, more, add, e);
         }
         if leaf {
             self.leaf_spare = k;
         } else {
-            self.masks.reserve_exact(more);
-            self.masks.resize(len + add, 0);
-            self.first_child.reserve_exact(more);
-            self.first_child.resize(len + add, NO_CHILD);
+            grow(&mut self.masks, more, add, 0);
+            grow(&mut self.first_child, more, add, NO_CHILD);
             self.spare = k;
         }
     }
+}
+
+/// Appends `add` copies of `fill` to `v`, reserving `more` first. Written
+/// on the pool's threads: the page faults of new memory are most of the
+/// cost of making spare slots.
+fn grow<T: Copy + Send + Sync>(v: &mut Vec<T>, more: usize, add: usize, fill: T) {
+    v.reserve_exact(more);
+    v.par_extend(rayon::iter::repeat_n(fill, add));
 }
 
 /// A worker's free lists, for both pools.
