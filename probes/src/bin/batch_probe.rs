@@ -1,10 +1,10 @@
 //! One large batch update, serial against shared: `cargo run --release -p
-//! octolinear-probes --bin batch_probe -- outdoor|indoor|FILE.graph RES SCAN [REPS]` inserts the
-//! bench's scans (or a `.graph` file's) before `SCAN`, then times applying that scan's free-space
-//! batch to copies of the tree: with `update_batch`, and with
-//! `update_batch_shared` on pools of one and two threads (one thread shows
-//! what sharing costs, two what it gains). Prints CPU and wall times (the
-//! fastest of REPS).
+//! octolinear-probes --bin batch_probe -- outdoor|indoor|FILE.graph RES SCAN
+//! [REPS]` inserts the bench's scans (or a `.graph` file's) before `SCAN`,
+//! then times applying that scan's free-space batch to copies of the tree:
+//! with `update_batch`, and with `update_batch_shared` on pools of one and
+//! two threads (one thread shows what sharing costs, two what it gains).
+//! Prints CPU and wall times (the fastest of REPS).
 
 use octolinear::internals::TreeInternals;
 use octolinear::{InnerNodes, OccupancyTree, ScanOptions};
