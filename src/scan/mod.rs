@@ -46,6 +46,21 @@ pub use casting::ScanUpdate;
 pub(crate) use casting::{compute_update, compute_update_in};
 pub use options::{OutOfMap, ScanError, ScanOptions, ScanReport, UpdateBox};
 
+/// Free-space batches of at least this many codes are shared by the
+/// pipeline's threads even while the next scan is still being cast:
+/// applying one outlasts casting a scan, so the casting threads soon come
+/// to help (outdoors at 0.1 m a scan has 17M). Smaller ones are shared only
+/// when the next scan is cast already: a shared update that no thread helps
+/// with costs a sixth more than the serial walk (`docs/benchmarks.md`,
+/// "Tried and rejected").
+#[cfg(not(test))]
+const ALWAYS_SHARED: usize = 1 << 22;
+/// In tests, between the sharing threshold (2^15 there) and the largest
+/// batch of the sample scans at 0.1 m (50,810 codes), so both rules run.
+#[cfg(test)]
+const ALWAYS_SHARED: usize = 40_000;
+const _: () = assert!(ALWAYS_SHARED > crate::tree::PARALLEL_MIN_CODES);
+
 impl OccupancyTree {
     /// Integrates one scan taken from `origin` (world frame points), with
     /// OctoMap's `insertPointCloud` semantics.
@@ -183,6 +198,7 @@ impl OccupancyTree {
                     Job::Apply((update, report), share) => {
                         let mut guard = tree.lock().unwrap_or_else(|e| e.into_inner());
                         let (tree, after_each) = &mut *guard;
+                        let share = share || update.free.len() >= ALWAYS_SHARED;
                         let report =
                             tree.apply_update_on(&update, report, opts.inner, if share { threads } else { 1 }, &|| {
                                 pipeline.announce()
@@ -407,7 +423,8 @@ mod tests {
             let mut largest = 0;
             let input = scans.iter().map(|(p, o)| (p.as_slice(), *o));
             t.insert_point_clouds(input, &opts, |_, r| largest = largest.max(r.free_updates)).unwrap();
-            assert!(largest >= crate::tree::PARALLEL_MIN_CODES, "{largest} codes: nothing to share");
+            // shared whatever the timing of the casts
+            assert!(largest >= ALWAYS_SHARED, "{largest} codes: nothing to share");
             trees.push(ot(&t));
         }
         assert!(trees[0] == trees[1] && trees[1] == trees[2]);

@@ -37,7 +37,6 @@ pub(crate) use extras::default_extra;
 pub use iter::{KeyBox, NodeItem, NodeIter};
 pub use kind::{NodeKind, TreeKind};
 use level_index::LevelSlot;
-#[cfg(test)]
 pub(crate) use parallel::MIN_CODES as PARALLEL_MIN_CODES;
 pub use preorder::{ChildGroup, NodeRef, PreorderBuilder, PreorderNode, PreorderSource, PreorderVisitor, Tee, TooDeep};
 use search::descend_to;
