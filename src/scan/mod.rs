@@ -52,11 +52,12 @@ pub use options::{OutOfMap, ScanError, ScanOptions, ScanReport, UpdateBox};
 /// to help (outdoors at 0.1 m a scan has 17M). Smaller ones are shared only
 /// when the next scan is cast already: a shared update that no thread helps
 /// with costs a sixth more than the serial walk (`docs/benchmarks.md`,
-/// "Tried and rejected").
+/// "Where the time goes" and "Tried and rejected").
 #[cfg(not(test))]
 const ALWAYS_SHARED: usize = 1 << 22;
 /// In tests, between the sharing threshold (2^15 there) and the largest
-/// batch of the sample scans at 0.1 m (50,810 codes), so both rules run.
+/// batch of the sample scans at 0.1 m (50,810 codes): that batch is shared
+/// whatever the timing of the casts.
 #[cfg(test)]
 const ALWAYS_SHARED: usize = 40_000;
 const _: () = assert!(ALWAYS_SHARED > crate::tree::PARALLEL_MIN_CODES);
