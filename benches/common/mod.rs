@@ -144,3 +144,25 @@ pub fn rays(scans: &[Scan], n: usize, seed: u64) -> (Vec<Point3>, Vec<Point3>) {
         })
         .unzip()
 }
+
+/// The machine's floor for one ray's walk: nanoseconds per link of a chain
+/// of double compares, each choosing what the next dependent add adds (a
+/// DDA step's least work, one after the other), the fastest of seven runs
+/// of 10^8 links.
+pub fn dependent_step_ns() -> f64 {
+    use std::hint::black_box;
+    let n = 100_000_000u64;
+    (0..7)
+        .map(|_| {
+            let t = std::time::Instant::now();
+            // opaque values, in registers
+            let (a, b, limit) = (black_box(1.0e-9f64), black_box(2.0e-9f64), black_box(0.5f64));
+            let mut x = black_box(0.0f64);
+            for _ in 0..n {
+                x += std::hint::select_unpredictable(x < limit, a, b);
+            }
+            black_box(x);
+            t.elapsed().as_secs_f64() * 1e9 / n as f64
+        })
+        .fold(f64::MAX, f64::min)
+}

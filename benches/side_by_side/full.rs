@@ -250,6 +250,11 @@ pub fn run_full(args: &FullArgs) {
         }
     }
     print_tables(&results);
+    println!();
+    println!(
+        "The machine's floor for one ray's step (a chain of dependent double compares and adds): {:.2} ns",
+        super::common::dependent_step_ns()
+    );
 }
 
 fn run_job(args: &FullArgs, kind: SceneKind, res: f64, scans: &[Scan], file: &Path, dir: &Path) -> JobResult {
@@ -374,13 +379,13 @@ fn print_tables(results: &[JobResult]) {
     println!();
     println!(
         "| job | points | nodes | ray steps | voxel updates | OctoMap | 1 thread | speed-up | 2 threads | speed-up \
-         | ns / ray step (1 thread) | points/s | voxel updates/s |"
+         | ns / ray step: OctoMap, 1 thread | ns / voxel update: OctoMap, 1 thread | points/s | voxel updates/s |"
     );
-    println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
+    println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
     for r in results {
         let runs = if r.octomap_runs == 1 { " (1 run)".to_string() } else { String::new() };
         println!(
-            "| {} | {} | {} | {} | {} | {}{runs} | {} | {} | {} | {} | {:.2} | {:.2}M | {:.1}M |",
+            "| {} | {} | {} | {} | {} | {}{runs} | {} | {} | {} | {} | {:.1}, {:.2} | {:.0}, {:.1} | {:.2}M | {:.1}M |",
             r.name,
             r.points,
             r.nodes,
@@ -391,7 +396,10 @@ fn print_tables(results: &[JobResult]) {
             x(r.octomap.median, r.one.median),
             s(r.two.median),
             x(r.octomap.median, r.two.median),
+            secs(r.octomap.median) * 1e9 / r.ray_steps as f64,
             secs(r.one.median) * 1e9 / r.ray_steps as f64,
+            secs(r.octomap.median) * 1e9 / r.updates as f64,
+            secs(r.one.median) * 1e9 / r.updates as f64,
             r.points as f64 / secs(r.two.median) / 1e6,
             r.updates as f64 / secs(r.two.median) / 1e6,
         );

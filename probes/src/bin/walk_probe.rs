@@ -118,16 +118,5 @@ fn main() {
         two * 1e3,
         ns(two, steps)
     );
-    // a chain of compares, each choosing what the next add adds
-    let n = 100_000_000u64;
-    let chain = best(&|| {
-        // (opaque values, in registers)
-        let (a, b, limit) = (black_box(1.0e-9f64), black_box(2.0e-9f64), black_box(0.5f64));
-        let mut t = black_box(0.0f64);
-        for _ in 0..n {
-            t += std::hint::select_unpredictable(t < limit, a, b);
-        }
-        t.to_bits()
-    });
-    println!("a dependent double compare and add, in a chain: {:.2} ns", ns(chain, n));
+    println!("a dependent double compare and add, in a chain: {:.2} ns", common::dependent_step_ns());
 }
