@@ -5,13 +5,17 @@
 //! walk, the scan's sets and their read-out) and applied (`apply_update`,
 //! one thread) apart, timed in thread CPU time (less disturbed than wall
 //! time on a shared machine); REPS=n gives the fastest of n runs per phase.
-//! Then the same scans through `insert_point_clouds` on 1, 2, 4... threads
-//! up to the processor count, in wall time, against the model. A probe,
-//! not a benchmark of record.
+//! The batches large enough to be shared by the threads are also applied
+//! to copies of the tree shared on pools of one and two threads (wall
+//! time), which gives the model their serial and parallel parts. Then the
+//! same scans through `insert_point_clouds` on 1, 2, 4... threads up to
+//! the processor count, in wall time, against the model. A probe, not a
+//! benchmark of record.
 
 #[path = "../../../benches/common/mod.rs"]
 mod common;
 
+use octolinear::internals::TreeInternals;
 use octolinear::{InnerNodes, OccupancyTree, ScanOptions};
 use std::time::Instant;
 
@@ -55,13 +59,31 @@ fn main() {
         100.0 * a / (c + a),
         100.0 * a_shared / a
     );
+    let (serial, one_thread, two_threads) = shared_batches(res, &scans, reps);
+    // a shared batch's time on T threads as a fraction of its serial walk,
+    // `lone + parallel / T`, from its times on one and two threads
+    let lone = (2.0 * two_threads - one_thread).max(0.0) / serial;
+    let parallel = 2.0 * two_threads / serial - 2.0 * lone;
+    if serial > 0.0 {
+        println!(
+            "shared batches: serial {:.1} ms, shared on 1 / 2 threads {:.1} / {:.1} ms (wall): on T threads \
+             {lone:.2} + {parallel:.2} / T of the serial walk",
+            serial * 1e3,
+            one_thread * 1e3,
+            two_threads * 1e3
+        );
+    }
     // the pipeline: scans are cast in parallel and their updates applied in
-    // order, one at a time (shared batches by all threads, at a sixth more
-    // CPU: `docs/benchmarks.md`), so once the casting is spread thin enough
-    // the chain of updates after the first scan's casting bounds the time
+    // order, one at a time (shared batches by all threads), so once the
+    // casting is spread thin enough the chain of updates after the first
+    // scan's casting bounds the time
     let bound = |threads: f64| {
-        let spread = cast[0] + (c - cast[0] + a) / threads;
-        let chain = cast[0] + (a - a_shared) + a_shared * if threads > 1.0 { 7.0 / 6.0 / threads } else { 1.0 };
+        if threads == 1.0 {
+            return c + a;
+        }
+        let shared_cpu = if serial > 0.0 { one_thread / serial } else { 1.0 };
+        let spread = cast[0] + (c - cast[0] + a - a_shared + a_shared * shared_cpu) / threads;
+        let chain = cast[0] + (a - a_shared) + a_shared * (lone + parallel / threads);
         spread.max(chain)
     };
     println!("| threads | model (ms) | measured wall (ms) |");
@@ -85,6 +107,42 @@ fn main() {
         };
         println!("| {threads} | {:.1} | {measured} |", bound(threads as f64) * 1e3);
     }
+}
+
+/// The scans inserted one after the other, each batch of [`SHARED_BATCH`]
+/// codes or more applied to copies of the tree before it: serially, and
+/// shared on pools of one and two threads. The sums of the fastest of
+/// `reps` wall times, in seconds: (serial, one thread, two threads).
+fn shared_batches(res: f64, scans: &[common::Scan], reps: usize) -> (f64, f64, f64) {
+    let pools: Vec<rayon::ThreadPool> =
+        [1, 2].iter().map(|&n| rayon::ThreadPoolBuilder::new().num_threads(n).build().expect("pool")).collect();
+    let one = ScanOptions { threads: Some(1), ..ScanOptions::default() };
+    let mut tree = OccupancyTree::new(res).expect("resolution");
+    let (hit, miss) = (tree.sensor().hit, tree.sensor().miss);
+    let mut sums = (0.0, 0.0, 0.0);
+    for (points, origin) in scans {
+        let (update, report) = tree.compute_update(points, *origin, &one).expect("scan");
+        for (codes, delta) in [(&update.free, miss), (&update.occupied, hit)] {
+            if codes.len() < SHARED_BATCH {
+                continue;
+            }
+            let best = |apply: &dyn Fn(&mut OccupancyTree)| {
+                (0..reps)
+                    .map(|_| {
+                        let mut copy = tree.clone();
+                        let t = Instant::now();
+                        apply(&mut copy);
+                        t.elapsed().as_secs_f64()
+                    })
+                    .fold(f64::MAX, f64::min)
+            };
+            sums.0 += best(&|t| t.update_batch(codes, delta, InnerNodes::Update));
+            sums.1 += best(&|t| pools[0].install(|| t.update_batch_shared(codes, delta, InnerNodes::Update, 2)));
+            sums.2 += best(&|t| pools[1].install(|| t.update_batch_shared(codes, delta, InnerNodes::Update, 2)));
+        }
+        tree.apply_update(&update, report, InnerNodes::Update);
+    }
+    sums
 }
 
 /// CPU time of the calling thread, in seconds.
