@@ -62,8 +62,13 @@ fn main() {
     let (serial, one_thread, two_threads) = shared_batches(res, &scans, reps);
     // a shared batch's time on T threads as a fraction of its serial walk,
     // `lone + parallel / T`, from its times on one and two threads
-    let lone = (2.0 * two_threads - one_thread).max(0.0) / serial;
-    let parallel = 2.0 * two_threads / serial - 2.0 * lone;
+    // (no shared batches: nothing to split, and no 0 / 0 to poison the bound)
+    let (lone, parallel) = if serial > 0.0 {
+        let lone = (2.0 * two_threads - one_thread).max(0.0) / serial;
+        (lone, 2.0 * two_threads / serial - 2.0 * lone)
+    } else {
+        (0.0, 0.0)
+    };
     if serial > 0.0 {
         println!(
             "shared batches: serial {:.1} ms, shared on 1 / 2 threads {:.1} / {:.1} ms (wall): on T threads \
