@@ -249,17 +249,22 @@ fn partition(tasks: &[Task], parts: usize) -> Vec<std::ops::Range<usize>> {
 /// and the nodes a task at `depth` visits are the distinct prefixes of its
 /// codes at depths `depth..=15`.
 fn allocation_bound(codes: &[u64], depth: u8) -> (usize, usize) {
-    // the first code's whole path from the task's node
-    let (mut inner, mut leaf) = (usize::from(TREE_DEPTH - 1 - depth), 1);
+    // per pair of codes, the level of their highest differing bit (bit
+    // 3 * level + 0..3): they share the nodes down to depth 15 - level and
+    // part there, so the second code's path adds level - 1 inner nodes
+    // below the parting one and, when level > 0, a depth-15 node (its
+    // slots in the leaf pool); within a task the pair parts below `depth`
+    let (mut levels, mut parted) = (0usize, 0usize);
     for pair in codes.windows(2) {
-        // the first depth whose node differs: the two codes share the
-        // nodes above it and none from it down
-        let top_bit = 63 - (pair[0] ^ pair[1]).leading_zeros() as usize;
-        let first_new = usize::from(TREE_DEPTH) - top_bit / 3;
-        inner += usize::from(TREE_DEPTH - 1).saturating_sub(first_new.max(usize::from(depth)));
-        leaf += usize::from(first_new <= usize::from(TREE_DEPTH - 1));
+        // codes are strictly increasing, so the xor is never 0 (the `| 1`
+        // only spares `ilog2` the test)
+        let level = ((pair[0] ^ pair[1]) | 1).ilog2() as usize / 3;
+        levels += level;
+        parted += usize::from(level != 0);
     }
-    (8 * inner, 8 * leaf)
+    // the first code's whole path from the task's node
+    let inner = usize::from(TREE_DEPTH - 1 - depth) + levels - parted;
+    (8 * inner, 8 * (1 + parted))
 }
 
 #[cfg(test)]
@@ -406,5 +411,27 @@ mod tests {
         // a task at depth 12: inner nodes at depths 12..=14 only; the
         // second code adds the depth-14 and depth-15 nodes
         assert_eq!(allocation_bound(&[0, 1 << (3 * 2)], 12), (8 * (3 + 1), 16));
+    }
+
+    /// The bound is 8 slots per distinct prefix, counted directly: the
+    /// codes' prefixes at depths `depth..=14` in the inner pool, at depth
+    /// 15 in the leaf pool, for random codes below one node of each depth.
+    #[test]
+    fn the_bound_is_eight_slots_per_distinct_prefix() {
+        let mut rng = SplitMix64(11);
+        for depth in [9u8, 11, 13, 15] {
+            // a node at `depth` spans 2^(16 - depth) voxels a side
+            let side = 1u32 << (16 - depth);
+            for n in [1, 2, 40, 3000] {
+                let codes = random_codes_from(&mut rng, n, 32768 - side, side);
+                let prefixes = |d: u8| {
+                    let shift = 3 * u32::from(TREE_DEPTH - d);
+                    codes.iter().map(|c| c >> shift).collect::<std::collections::HashSet<_>>().len()
+                };
+                let inner: usize = (depth..TREE_DEPTH - 1).map(prefixes).sum();
+                let leaf = prefixes(TREE_DEPTH - 1);
+                assert_eq!(allocation_bound(&codes, depth), (8 * inner, 8 * leaf), "depth {depth}, {n} codes");
+            }
+        }
     }
 }
