@@ -117,8 +117,8 @@ fn main() {
 /// The scans inserted one after the other, each batch of [`SHARED_BATCH`]
 /// codes or more applied to copies of the tree before it: serially, and
 /// shared on pools of one and two threads (the tree itself takes it shared
-/// on two). The sums of the fastest of
-/// `reps` wall times, in seconds: (serial, one thread, two threads).
+/// on two). The sums of the fastest of `reps` wall times, in seconds:
+/// (serial, one thread, two threads).
 fn shared_batches(res: f64, scans: &[common::Scan], reps: usize) -> (f64, f64, f64) {
     let pools: Vec<rayon::ThreadPool> =
         [1, 2].iter().map(|&n| rayon::ThreadPoolBuilder::new().num_threads(n).build().expect("pool")).collect();
@@ -147,10 +147,9 @@ fn shared_batches(res: f64, scans: &[common::Scan], reps: usize) -> (f64, f64, f
             sums.2 += best(&|t| pools[1].install(|| t.update_batch_shared(codes, delta, InnerNodes::Update, 2)));
         }
         // large batches shared on two threads (as a build shares them when a
-        // thread is free), so
-        // that the copies above start with what earlier shared updates
-        // leave (spare slots, the budget from the last one's use) as the
-        // tree of a build does; the map is the same either way
+        // thread is free), so that the copies above start with what earlier
+        // shared updates leave (spare slots, the budget from the last one's
+        // use), as a build's tree does; the map is the same either way
         for (codes, delta) in [(&update.free, miss), (&update.occupied, hit)] {
             if codes.len() < SHARED_BATCH {
                 tree.update_batch(codes, delta, InnerNodes::Update);
