@@ -116,8 +116,7 @@ fn main() {
 
 /// The scans inserted one after the other, each batch of [`SHARED_BATCH`]
 /// codes or more applied to copies of the tree before it: serially, and
-/// shared on pools of one and two threads (the tree itself takes it shared
-/// on two). The sums of the fastest of `reps` wall times, in seconds:
+/// shared on pools of one and two threads. The sums of the fastest of `reps` wall times, in seconds:
 /// (serial, one thread, two threads).
 fn shared_batches(res: f64, scans: &[common::Scan], reps: usize) -> (f64, f64, f64) {
     let pools: Vec<rayon::ThreadPool> =
@@ -128,8 +127,14 @@ fn shared_batches(res: f64, scans: &[common::Scan], reps: usize) -> (f64, f64, f
     let mut sums = (0.0, 0.0, 0.0);
     for (points, origin) in scans {
         let (update, _) = tree.compute_update(points, *origin, &one).expect("scan");
+        // each batch applied in turn, as `apply_update` does; the tree takes
+        // the large ones shared on two threads (as a build shares them when
+        // a thread is free), so that the copies start with what earlier
+        // shared updates leave (spare slots, the budget from the last one's
+        // use), as a build's tree does; the map is the same either way
         for (codes, delta) in [(&update.free, miss), (&update.occupied, hit)] {
             if codes.len() < SHARED_BATCH {
+                tree.update_batch(codes, delta, InnerNodes::Update);
                 continue;
             }
             let best = |apply: &dyn Fn(&mut OccupancyTree)| {
@@ -145,17 +150,7 @@ fn shared_batches(res: f64, scans: &[common::Scan], reps: usize) -> (f64, f64, f
             sums.0 += best(&|t| t.update_batch(codes, delta, InnerNodes::Update));
             sums.1 += best(&|t| pools[0].install(|| t.update_batch_shared(codes, delta, InnerNodes::Update, 2)));
             sums.2 += best(&|t| pools[1].install(|| t.update_batch_shared(codes, delta, InnerNodes::Update, 2)));
-        }
-        // large batches shared on two threads (as a build shares them when a
-        // thread is free), so that the copies above start with what earlier
-        // shared updates leave (spare slots, the budget from the last one's
-        // use), as a build's tree does; the map is the same either way
-        for (codes, delta) in [(&update.free, miss), (&update.occupied, hit)] {
-            if codes.len() < SHARED_BATCH {
-                tree.update_batch(codes, delta, InnerNodes::Update);
-            } else {
-                pools[1].install(|| tree.update_batch_shared(codes, delta, InnerNodes::Update, 2));
-            }
+            pools[1].install(|| tree.update_batch_shared(codes, delta, InnerNodes::Update, 2));
         }
     }
     sums
