@@ -2185,6 +2185,32 @@ fn capped_builds_from_a_file_and_from_standard_input_equal_plain_builds() {
     assert!(!f.path("cut.ot").exists());
 }
 
+/// A capped build reads every group's pass from the input it opened first:
+/// another log renamed over the input's path mid-build (the safe way to
+/// replace a file) changes nothing, so the map is the plain build's of the
+/// original log, wherever in the build the rename lands.
+#[test]
+fn capped_builds_read_the_input_first_opened_to_the_end() {
+    let f = Fixture::new();
+    ok(&["simulate", "--scans", "12", "--beams", "16", "--steps", "240", "-o", f.p("in.graph")]);
+    ok(&["simulate", "--scans", "12", "--beams", "16", "--steps", "240", "--seed", "9", "-o", f.p("other.graph")]);
+    let original = std::fs::read(f.path("in.graph")).unwrap();
+    ok(&["build", f.p("in.graph"), "-o", f.p("plain.ot"), "--res", "0.1"]);
+    let want = std::fs::read(f.path("plain.ot")).unwrap();
+    for (i, delay) in [5u64, 40, 150].into_iter().enumerate() {
+        std::fs::write(f.path("in.graph"), &original).unwrap();
+        std::fs::copy(f.path("other.graph"), f.path("next.graph")).unwrap();
+        let out = f.p(&format!("capped{i}.ot"));
+        let args = ["build", f.p("in.graph"), "-o", out, "--res", "0.1", "--memory-cap", "1", "--tile-depth", "10"];
+        let child = bin().args(args).stderr(std::process::Stdio::piped()).spawn().unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(delay));
+        std::fs::rename(f.path("next.graph"), f.path("in.graph")).unwrap();
+        let done = child.wait_with_output().unwrap();
+        assert!(done.status.success(), "{}", String::from_utf8_lossy(&done.stderr));
+        assert!(std::fs::read(out).unwrap() == want, "renamed after {delay} ms: not the original's map");
+    }
+}
+
 #[test]
 fn damaged_tile_sets_are_errors_naming_the_tile_or_manifest_line() {
     let f = Fixture::new();
@@ -2435,4 +2461,124 @@ fn bad_and_mismatched_plans_are_refused() {
     ok(&["build", g, "-o", set, "--task", "0/2", "--plan", plan]);
     ok(&["build", g, "-o", set, "--task", "1/2", "--tile-depth", "6"]);
     fail(&["tiles", "manifest", set], "task-1-of-2.manifest shares the tiles by hash");
+}
+
+/// Runs and requires a failure as [`fail`] does, within `secs` seconds: a
+/// run still going then is killed and the test fails instead of hanging.
+fn fail_within(secs: u64, args: &[&str], needle: &str) {
+    use std::io::Read;
+    let mut child = bin()
+        .args(args)
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("binary runs");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(secs);
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if std::time::Instant::now() > deadline {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            panic!("{args:?} still ran after {secs} s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    let mut err = String::new();
+    child.stderr.take().unwrap().read_to_string(&mut err).unwrap();
+    assert!(!status.success(), "{args:?} succeeded: {err}");
+    assert!(!err.contains("panicked") && status.code() == Some(1), "{args:?}: {status} {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+    assert!(err.starts_with("octolinear: error: "), "{args:?}: {err}");
+    assert!(err.contains(needle), "{args:?}: {err:?} lacks {needle:?}");
+}
+
+/// A LAS 1.4 file of two points whose header announces one EVLR after
+/// them, of `claim` bytes, and holds only that record's 60-byte header.
+fn las_with_evlr_claim(f: &Fixture, name: &str, claim: u64) -> Vec<u8> {
+    let path = f.path(name);
+    let mut w = las::Writer::from_path(&path, las::Builder::from((1, 4)).into_header().unwrap()).unwrap();
+    for x in [1.0, 2.0] {
+        w.write_point(las::Point { x, y: 1.0, z: 0.5, ..Default::default() }).unwrap();
+    }
+    w.close().unwrap();
+    drop(w);
+    let mut bytes = std::fs::read(&path).unwrap();
+    let start = bytes.len() as u64;
+    bytes[235..243].copy_from_slice(&start.to_le_bytes());
+    bytes[243..247].copy_from_slice(&1u32.to_le_bytes());
+    let mut evlr = [0u8; 60];
+    evlr[20..28].copy_from_slice(&claim.to_le_bytes());
+    bytes.extend_from_slice(&evlr);
+    bytes
+}
+
+#[test]
+fn las_headers_claiming_more_than_the_file_holds_are_refused() {
+    let f = Fixture::new();
+    // the untouched file reads
+    let good = las_with_evlr_claim(&f, "good.las", 0);
+    ok(&["build", "--points", f.write("good.las", &good), "-o", f.p("good.bt")]);
+    for claim in [1u64 << 40, 3 << 30] {
+        let bytes = las_with_evlr_claim(&f, "evlr.las", claim);
+        let len = bytes.len();
+        let path = f.write("evlr.las", &bytes);
+        let started = std::time::Instant::now();
+        let needle = format!("evlr.las: not a valid .las file: EVLR 0's record length ({claim}) runs past the end of the file ({len} bytes)");
+        fail_within(20, &["build", "--points", path, "-o", f.p("x.bt")], &needle);
+        assert!(started.elapsed() < std::time::Duration::from_secs(5), "{claim}: {:?}", started.elapsed());
+        assert!(!f.path("x.bt").exists());
+    }
+    let patched = |at: usize, value: &[u8]| {
+        let mut b = good.clone();
+        b[at..at + value.len()].copy_from_slice(value);
+        b
+    };
+    let len = good.len();
+    let cases: [(&str, Vec<u8>, String); 5] = [
+        ("vlrs.las", patched(100, &u32::MAX.to_le_bytes()), format!("number of VLRs ({}) needs more than the file's {len} bytes", u32::MAX)),
+        ("data.las", patched(96, &(1u32 << 31).to_le_bytes()), format!("offset to point data ({}) lies beyond the end of the file ({len} bytes)", 1u32 << 31)),
+        ("points.las", patched(247, &(1u64 << 40).to_le_bytes()), format!("{} point records of 20 bytes from byte 375 need more than the file's {len} bytes", 1u64 << 40)),
+        ("evlrs.las", patched(243, &u32::MAX.to_le_bytes()), format!("number of EVLRs ({}) needs more than the file's {len} bytes", u32::MAX)),
+        ("start.las", patched(235, &(1u64 << 40).to_le_bytes()), format!("start of the first EVLR ({}) lies beyond the end of the file ({len} bytes)", 1u64 << 40)),
+    ];
+    for (name, bytes, needle) in cases {
+        fail_within(20, &["build", "--points", f.write(name, &bytes), "-o", f.p("x.bt")], &needle);
+    }
+}
+
+#[test]
+fn endless_inputs_are_refused_quickly() {
+    let f = Fixture::new();
+    for name in ["z.xyz", "z.ply", "z.pcd", "z.las", "z.binvox", "z.log", "z.txt"] {
+        std::os::unix::fs::symlink("/dev/zero", f.path(name)).unwrap();
+    }
+    f.write("c.xyz", "1 0 0\n0 1 0\n");
+    let long = format!("line 1 is longer than {} bytes", 1 << 20);
+    let header = format!("header line 1 is longer than {} bytes", 1 << 20);
+    let out = f.p("out.bt");
+    fail_within(20, &["build", "--points", f.p("z.xyz"), "-o", out], &format!("z.xyz: not a valid .xyz file: {long}"));
+    fail_within(20, &["build", "--points", "/dev/zero", "-o", out], &format!("/dev/zero: not a valid xyz file: {long}"));
+    fail_within(20, &["build", "--points", f.p("z.ply"), "-o", out], &format!("z.ply: not a valid .ply file: {header}"));
+    fail_within(20, &["build", "--points", f.p("z.pcd"), "-o", out], &format!("z.pcd: not a valid .pcd file: {header}"));
+    fail_within(20, &["build", "--points", f.p("z.las"), "-o", out], "z.las: not a LAS/LAZ file");
+    fail_within(20, &["build", "--points", f.p("c.xyz"), "--trajectory", f.p("z.txt"), "-o", out], &format!("z.txt {long}"));
+    fail_within(20, &["binvox", f.p("z.binvox"), "-o", out], &format!("z.binvox: not a binvox file: {header}"));
+    assert!(!f.path("out.bt").exists());
+    fail_within(20, &["log2graph", f.p("z.log"), f.p("out.graph")], &format!("z.log: not a valid scan log: {long}"));
+    assert!(!f.path("out.graph").exists());
+    fail_within(20, &["query", f.p("a.bt"), "--points", f.p("z.xyz")], &format!("z.xyz: {long}"));
+    fail_within(20, &["eval", f.p("a.bt"), "/dev/zero"], "/dev/zero holds no scans");
+    fail_within(20, &["eval", "/dev/zero"], "/dev/zero holds no scans");
+}
+
+#[test]
+fn eval_without_known_voxels_is_an_error() {
+    let f = Fixture::new();
+    // one scan far from the map: every voxel it observes is unknown
+    f.write("far.log", "NODE 500 500 500 0 0 0\n501 500 500\n");
+    ok(&["log2graph", f.p("far.log"), f.p("far.graph")]);
+    fail(&["eval", f.p("a.bt"), f.p("far.graph")], "none of them known to the map: the accuracy is undefined");
 }

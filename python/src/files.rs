@@ -8,7 +8,7 @@ use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use octolinear::formats::{bt, graph, ot, pcd, ply, xyz};
 use octolinear::sensor::{SensorModel, SensorProbabilities};
 use octolinear::{InnerNodes, OccupancyTree, OutOfMap, Point3, ScanOptions};
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::prelude::*;
 use std::path::Path;
 
@@ -73,7 +73,7 @@ pub fn read<'py>(py: Python<'py>, path: &Bound<'py, PyAny>) -> PyResult<Bound<'p
         MapFormat::Olm => {
             let map = py.detach(|| octolinear::mapped::open(&path)).map_err(|e| convert::olm_error(&path, e))?;
             if map.view().kind() == octolinear::TreeKind::CountingOcTree {
-                let t = py.detach(|| map.view().to_counting_tree()).map_err(|e| convert::olm_error(&path, e))?;
+                let t = py.detach(|| map.to_counting_tree()).map_err(|e| convert::olm_error(&path, e))?;
                 return Ok(Bound::new(py, crate::kinds::CountingOcTree::from_tree(t))?.into_any());
             }
             let t = py.detach(|| map.to_tree()).map_err(|e| convert::olm_error(&path, e))?;
@@ -102,6 +102,9 @@ pub(crate) fn graph_error(path: &Path, e: graph::GraphError) -> PyErr {
     match e {
         graph::GraphError::Io { source, .. } if source.kind() != std::io::ErrorKind::UnexpectedEof => {
             convert::io_error(path, &source)
+        }
+        e @ (graph::GraphError::Changed { .. } | graph::GraphError::NotRegular) => {
+            PyOSError::new_err(format!("{}: {e}", path.display()))
         }
         other => PyValueError::new_err(format!("{}: {other}", path.display())),
     }
@@ -224,16 +227,25 @@ pub fn build<'py>(
     let mut tree = OccupancyTree::with_sensor(resolution, sensor).map_err(|e| PyValueError::new_err(e.to_string()))?;
     let opts = build_options(max_range, discretize, threads);
     let built = py.detach(|| -> Result<OccupancyTree, PyErr> {
-        let mut reader = graph::open(&path).map_err(|e| graph_error(&path, e))?;
+        let input = graph::GraphInput::open(&path).map_err(|e| convert::io_error(&path, &e))?;
+        // a file truncated under the reader: zeros were read (OSError)
+        let watch = input.watch();
+        let truncated = || watch.check().map_err(|e| convert::truncated_error(&e));
+        let len = input.file_len();
+        let mut reader = graph::ScanReader::with_len(input, len).map_err(|e| {
+            truncated().err().unwrap_or_else(|| graph_error(&path, e))
+        })?;
         let mut failure = None;
         let stream = graph_scans(&mut reader, scans, &mut failure);
-        tree.insert_point_clouds(stream, &opts, |t, _| {
+        let inserted = tree.insert_point_clouds(stream, &opts, |t, _| {
             if compress_ml {
                 t.to_max_likelihood();
                 t.prune();
             }
         })
-        .map_err(|(i, e)| PyValueError::new_err(format!("{}: scan {i}: {e}", path.display())))?;
+        .map_err(|(i, e)| PyValueError::new_err(format!("{}: scan {i}: {e}", path.display())));
+        truncated()?;
+        inserted?;
         if let Some(e) = failure {
             return Err(graph_error(&path, e));
         }

@@ -8,11 +8,11 @@ use crate::convert;
 use crate::files::{build_options, graph_error, graph_scans, sensor_model};
 use octolinear::formats::{bt, graph, ot, write_atomically};
 use octolinear::tiles::{
-    read_manifest, GroupedBuild, GroupedError, Manifest, TaskPart, TileError, TileId, TilePlan, TileSet, TileWork,
-    TiledMap, MANIFEST_FILE,
+    check_set_dir, read_manifest, BuildInput, BuildRecord, GroupedBuild, GroupedError, Manifest, TaskPart, TileError,
+    TileId, TilePlan, TileSet, TileWork, TiledMap, MANIFEST_FILE, MAX_TASKS, PLAN_MAGIC,
 };
 use octolinear::{NodeKind, Point3, TreeKind};
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::Path;
@@ -57,21 +57,47 @@ fn check_build_arguments(tile_depth: u8, max_range: Option<f64>, scans: Option<u
 /// `task=(k, n)` as the library's task part, checked.
 fn task_part(task: (u32, u32)) -> PyResult<TaskPart> {
     let (index, count) = task;
-    if count == 0 || index >= count {
-        return Err(PyValueError::new_err(format!("task must be (k, n) with 0 <= k < n, got ({index}, {count})")));
-    }
-    Ok(TaskPart::hashed(index, count))
+    TaskPart::checked(index, count).ok_or_else(|| {
+        PyValueError::new_err(format!("task must be (k, n) with 0 <= k < n <= {MAX_TASKS}, got ({index}, {count})"))
+    })
 }
 
-/// The manifest (or task part) an earlier build with these parameters
-/// left in `dir`, when every tile it lists is there and verifies fully;
-/// `None` when it is missing, unreadable, of other parameters or its tiles
-/// do not verify (the build then runs again).
+/// The `plan` argument of `build_tiles`: the text of `plan_tiles` (a str
+/// starting with the plan file's first line), or the path of a plan file
+/// (str, bytes or os.PathLike), read as `octolinear build --plan` reads it.
+fn plan_argument(plan: &Bound<'_, PyAny>) -> PyResult<TilePlan> {
+    if let Ok(text) = plan.extract::<String>() {
+        if text.starts_with(PLAN_MAGIC) {
+            return TilePlan::parse(&text).map_err(|e| PyValueError::new_err(format!("plan: {e}")));
+        }
+        if !Path::new(&text).exists() {
+            let shown: String = text.chars().take(60).collect();
+            return Err(PyValueError::new_err(format!(
+                "plan: {shown:?} is neither a plan's text (its first line `{PLAN_MAGIC} ...`, as plan_tiles returns) nor a plan file"
+            )));
+        }
+    }
+    let path = convert::path(plan).map_err(|_| {
+        PyTypeError::new_err(format!(
+            "plan must be the text plan_tiles returns or the path of a plan file (str, bytes or os.PathLike), got {}",
+            plan.get_type().name().map_or_else(|_| "?".to_string(), |n| n.to_string())
+        ))
+    })?;
+    TilePlan::read(&path).map_err(|e| match e {
+        TileError::Io { path, source } => convert::io_error(&path, &source),
+        other => PyValueError::new_err(format!("plan: {other}")),
+    })
+}
+
+/// The manifest (or task part) an earlier build with these parameters and
+/// build record (options, input, plan) left in `dir`, when every tile it
+/// lists is there and verifies fully; `None` when it is missing,
+/// unreadable, built otherwise or its tiles do not verify (the build then
+/// runs again).
 fn finished_build(dir: &Path, wanted: &Manifest) -> Option<Manifest> {
     let name = wanted.task.map_or_else(|| MANIFEST_FILE.to_string(), TaskPart::file_name);
     let found = read_manifest(&dir.join(name)).ok()?;
-    let parameters = Manifest { tiles: Vec::new(), ..found.clone() };
-    if parameters != *wanted {
+    if found.task != wanted.task || found.difference(wanted, "found", "wanted").is_some() {
         return None;
     }
     TileSet::verify_tiles(dir, &found).ok()?;
@@ -121,16 +147,23 @@ fn summary<'py>(
 /// GIL. `resolution`, `max_range`, `discretize`, `sensor`, `clamping`,
 /// `scans` and `threads` as for `build`.
 ///
+/// `out_dir` must be named `NAME.tiles`, or be an empty directory or a
+/// tile set; a `manifest` or part file in it must be a tile set's (the
+/// library's `check_set_dir`). The manifest records how the set was
+/// built: the options, the input's length and modification time, the
+/// plan.
+///
 /// With `task=(k, n)` only task `k`'s share of the tiles is built and its
 /// part file `task-k-of-n.manifest` written (`--task k/n`); once all `n`
-/// tasks are done, `write_tile_manifest` combines the parts. `plan` is the
-/// text of `plan_tiles` for the same `n`, which gives each task a balanced
-/// range of tiles; without it the tiles are shared by a hash of their
-/// position. With `resume=True` a build whose manifest (or part file) is
-/// already in `out_dir` with the same parameters, and whose tiles all
-/// verify (lengths, CRC-32s, structure), is not run again; the input and
-/// the scan options are not recorded there, so resume only with the ones
-/// that built it.
+/// tasks are done, `write_tile_manifest` combines the parts (refusing
+/// parts built otherwise). `plan` is the text of `plan_tiles` for the same
+/// `n`, or the path of a plan file (`octolinear plan -o`), which gives each
+/// task a balanced range of tiles; without it the tiles are shared by a
+/// hash of their position. With `resume=True` a build whose manifest (or
+/// part file) is already in `out_dir`, built with the same parameters,
+/// options, input (length and modification time) and plan, and whose
+/// tiles all verify (lengths, CRC-32s, structure), is not run again; one
+/// built otherwise is built again.
 ///
 /// With `memory_cap` (bytes) the whole set is built within that memory
 /// (`--memory-cap`): in groups of neighbouring tiles, each built from
@@ -158,7 +191,7 @@ pub fn build_tiles<'py>(
     scans: Option<usize>,
     threads: Option<usize>,
     task: Option<(u32, u32)>,
-    plan: Option<&str>,
+    plan: Option<&Bound<'py, PyAny>>,
     resume: bool,
     memory_cap: Option<usize>,
 ) -> PyResult<Bound<'py, PyDict>> {
@@ -172,9 +205,15 @@ pub fn build_tiles<'py>(
         None => {}
     }
     let task = task.map(task_part).transpose()?;
-    let task = match plan {
-        Some(text) => Some(planned_task(text, resolution, tile_depth, task)?),
-        None => task,
+    let (task, plan_identity) = match plan {
+        Some(plan) => {
+            let Some(t) = task else {
+                return Err(PyValueError::new_err("plan needs task=(k, n): the task of the plan to build"));
+            };
+            let plan = plan_argument(plan)?;
+            (Some(planned_task(&plan, resolution, tile_depth, t)?), Some(plan.identity()))
+        }
+        None => (task, None),
     };
     match memory_cap {
         Some(0) => return Err(PyValueError::new_err("memory_cap must be at least 1 byte")),
@@ -188,8 +227,24 @@ pub fn build_tiles<'py>(
     if let Some(t) = task {
         map.set_task(t);
     }
-    let wanted = Manifest { resolution, depth: tile_depth, kind: TreeKind::OcTree, sensor, task, tiles: Vec::new() };
+    check_set_dir(&dir).map_err(tile_error)?;
     let opts = build_options(max_range, discretize, threads);
+    let record = BuildRecord {
+        scans: scans.map(|n| n as u64),
+        input: Some(BuildInput::of_path(&path).map_err(tile_error)?),
+        plan: plan_identity,
+        ..BuildRecord::new(&opts)
+    };
+    map.set_build_record(record.clone());
+    let wanted = Manifest {
+        resolution,
+        depth: tile_depth,
+        kind: TreeKind::OcTree,
+        sensor,
+        task,
+        build: Some(record.clone()),
+        tiles: Vec::new(),
+    };
     type Built = (Manifest, Option<u64>, Option<(usize, usize)>);
     let (manifest, nodes, built) = py.detach(|| -> PyResult<Built> {
         if let Some(found) = resume.then(|| finished_build(&dir, &wanted)).flatten() {
@@ -197,10 +252,12 @@ pub fn build_tiles<'py>(
             return Ok((found, nodes, None));
         }
         if let Some(memory) = memory_cap {
-            let (work, count) = estimate(&path, resolution, tile_depth, max_range, discretize, scans)?;
+            // every pass reads the file opened here, whatever its path names later
+            let file = graph::GraphFile::open(&path).map_err(|e| graph_error(&path, e))?;
+            let (work, count) = estimate(&file, &path, resolution, tile_depth, max_range, discretize, scans)?;
             let grouped = GroupedBuild { resolution, sensor, memory, dir: dir.clone() };
             let read = || -> ScansRead {
-                match graph::open(&path) {
+                match file.reader() {
                     Ok(reader) => Box::new(reader.take(scans.unwrap_or(usize::MAX)).map(|node| {
                         let (cloud, origin) = node?.into_graph2tree();
                         Ok((cloud.points, origin))
@@ -215,9 +272,12 @@ pub fn build_tiles<'py>(
                 }
                 GroupedError::Tiles(e) => tile_error(e),
             })?;
-            remove_unlisted_tiles(&dir, &report.manifest)?;
+            // the grouped build writes no record: the manifest again, with it
+            let manifest = Manifest { build: Some(record), ..report.manifest };
+            manifest.write(&dir.join(MANIFEST_FILE)).map_err(tile_error)?;
+            remove_unlisted_tiles(&dir, &manifest)?;
             let nodes = set_nodes(&dir)?;
-            return Ok((report.manifest, Some(nodes), Some(count)));
+            return Ok((manifest, Some(nodes), Some(count)));
         }
         let mut reader = graph::open(&path).map_err(|e| graph_error(&path, e))?;
         let (mut failure, mut count) = (None, (0, 0));
@@ -281,9 +341,10 @@ pub fn plan_tiles(
 /// from the start.
 type ScansRead = Box<dyn Iterator<Item = Result<(Vec<Point3>, Point3), graph::GraphError>>>;
 
-/// The estimated work per tile of a build of the `.graph` file at `path`,
-/// with the scans and points read.
+/// The estimated work per tile of a build of the `.graph` file `file`
+/// (opened from `path`), with the scans and points read.
 fn estimate(
+    file: &graph::GraphFile,
     path: &Path,
     resolution: f64,
     tile_depth: u8,
@@ -292,7 +353,7 @@ fn estimate(
     scans: Option<usize>,
 ) -> PyResult<(TileWork, (usize, usize))> {
     let mut work = TileWork::new(resolution, tile_depth).map_err(tile_error)?;
-    let mut reader = graph::open(path).map_err(|e| graph_error(path, e))?;
+    let mut reader = file.reader().map_err(|e| graph_error(path, e))?;
     let (mut failure, mut count) = (None, (0, 0));
     for (points, origin) in graph_scans(&mut reader, scans, &mut failure) {
         count = (count.0 + 1, count.1 + points.len());
@@ -304,12 +365,8 @@ fn estimate(
     }
 }
 
-/// Task `task` of the plan `text`, checked against the build's parameters.
-fn planned_task(text: &str, resolution: f64, tile_depth: u8, task: Option<TaskPart>) -> PyResult<TaskPart> {
-    let Some(task) = task else {
-        return Err(PyValueError::new_err("plan needs task=(k, n): the task of the plan to build"));
-    };
-    let plan = TilePlan::parse(text).map_err(|e| PyValueError::new_err(format!("plan: {e}")))?;
+/// Task `task` of `plan`, checked against the build's parameters.
+fn planned_task(plan: &TilePlan, resolution: f64, tile_depth: u8, task: TaskPart) -> PyResult<TaskPart> {
     if plan.resolution != resolution || plan.depth != tile_depth || plan.tasks.len() != task.count as usize {
         return Err(PyValueError::new_err(format!(
             "the plan is for resolution {}, tile_depth {} and {} tasks; the build asks resolution {resolution}, tile_depth {tile_depth}, task ({}, {})",

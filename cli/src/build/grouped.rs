@@ -5,11 +5,12 @@
 //! threads, as many groups at once.
 
 use super::{
-    input, input_name, print_build, print_tile_set, scan_options, tiles, write_tree, write_walked, Args, SpillDir,
+    input_name, print_build, print_tile_set, scan_options, tiles, write_tree, write_walked, Args, SpillDir,
     Tally, Tiling,
 };
 use crate::common::{progress, spinner, MapFormat};
 use anyhow::{Context, Result};
+use octolinear::formats::graph::GraphFile;
 use octolinear::sensor::SensorModel;
 use octolinear::tiles::{GroupedBuild, GroupedError, TileSet, TileWork};
 use octolinear::{KeySpace, NodeKind, Point3};
@@ -29,19 +30,18 @@ pub(super) fn applies(a: &Args, t: &Tiling) -> bool {
 }
 
 /// The scans of the `.graph` input, `n` of them at most, read again from
-/// the start; the time spent reading is added to `reading`.
+/// the start of the file opened first; the time spent reading is added to
+/// `reading`.
 fn read_scans<'a>(
-    a: &'a Args,
+    file: &'a GraphFile,
+    input: &'a str,
     n: usize,
     reading: &'a Mutex<Duration>,
 ) -> impl Iterator<Item = Result<(Vec<Point3>, Point3)>> + 'a {
-    let path = a.input.as_deref().expect("a grouped build reads a .graph file");
-    let opened = input::open_graph(path);
-    let (reader, failed) = match opened {
+    let (reader, failed) = match file.reader() {
         Ok(r) => (Some(r), None),
-        Err(e) => (None, Some(Err(e))),
+        Err(e) => (None, Some(Err(anyhow::Error::new(e).context(format!("cannot read {input}"))))),
     };
-    let input = input::name(path);
     let mut nodes = reader.into_iter().flatten().take(n);
     let scans = std::iter::from_fn(move || {
         let started = Instant::now();
@@ -65,7 +65,10 @@ pub(super) fn run(a: &Args, t: &Tiling, sensor: SensorModel, format: MapFormat, 
 
     // one pass: the scans counted and their work per tile estimated
     let phase = spinner("estimating the tiles' work");
-    let mut reader = input::open_graph(a.input.as_deref().expect("a .graph input"))?;
+    // every pass reads this file, whatever its path names later
+    let path = a.input.as_deref().expect("a grouped build reads a .graph file");
+    let file = GraphFile::open(path).with_context(|| format!("cannot open {input}"))?;
+    let mut reader = file.reader().with_context(|| format!("cannot read {input}"))?;
     let announced = reader.announced() as usize;
     let n = a.scans.map_or(announced, |s| s.min(announced));
     let (keys, mut tally) = (KeySpace::new(a.res), Tally::default());
@@ -98,7 +101,7 @@ pub(super) fn run(a: &Args, t: &Tiling, sensor: SensorModel, format: MapFormat, 
     let built = build.build(
         &work,
         &opts,
-        || read_scans(a, n, &reading),
+        || read_scans(&file, &input, n, &reading),
         |group, done| {
             if latest.fetch_max(group + 1, Ordering::Relaxed) < group + 1 {
                 // a group done has freed its trees and sets: return them

@@ -16,7 +16,7 @@ use std::path::Path;
 
 mod source;
 
-pub use source::{GraphInput, GraphSource, WINDOW};
+pub use source::{GraphFile, GraphInput, GraphSource, WINDOW};
 
 use crate::geometry::{graph2tree_in_place, graph2tree_transform, Point3, PointCloud, Pose6D, Quaternion};
 
@@ -156,6 +156,19 @@ pub enum GraphError {
         /// Bytes left in the input after the count.
         remaining: u64,
     },
+    /// A file read again ([`GraphFile`]) was changed in place since it
+    /// was opened: replace inputs by renaming a new file over them.
+    #[error("the file changed while it was read (length {opened} bytes when opened, {now} now, or a new modification time)")]
+    Changed {
+        /// The length when the file was opened.
+        opened: u64,
+        /// The length now.
+        now: u64,
+    },
+    /// A file to be read more than once ([`GraphFile`]) is a pipe, FIFO,
+    /// socket or device, which cannot be read again.
+    #[error("not a regular file: a file read more than once cannot be a pipe, FIFO or device")]
+    NotRegular,
     /// The memory for what the data holds so far could not be had.
     #[error("at byte offset {offset}, {context}: cannot allocate memory for {count} {what}")]
     OutOfMemory {
