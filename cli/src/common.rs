@@ -113,10 +113,8 @@ pub fn load_any(path: &Path) -> Result<AnyMap> {
 }
 
 /// Memory-maps an `.olm` map and checks its header (O(1); the nodes are
-/// checked by [`verify_olm`] or by the conversion to a tree). Names the file
-/// in the message of [`report_truncated_files`]'s handler first.
+/// checked by [`verify_olm`] or by the conversion to a tree).
 pub fn open_olm(path: &Path) -> Result<MappedMap<memmap2::Mmap>> {
-    name_mapped_file(path);
     match octolinear::mapped::open(path) {
         Err(octolinear::mapped::OlmError::Io(e)) => Err(e).with_context(|| format!("cannot open {}", path.display())),
         opened => opened.with_context(|| format!("{}: not a valid .olm map", path.display())),
@@ -265,72 +263,14 @@ pub fn format_g6(v: f64) -> String {
     }
 }
 
-/// Turns `SIGBUS` into the tool's error line and exit code 1. A file
-/// truncated in place while memory-mapped (by another process; the writers
-/// here rename a new file over the old one, which is safe) raises `SIGBUS`
-/// at the next read past its new end, which would otherwise kill the
-/// process without a word. The mapped files are `.olm` maps and `.graph`
-/// inputs; the handler blames the one named last ([`name_mapped_file`]).
-/// Installed once, at start.
+/// Turns `SIGBUS` from a read of a mapped file truncated in place (by
+/// another process; the writers here rename a new file over the old one,
+/// which is safe) into the tool's error line naming the file and exit code
+/// 1, where it would otherwise kill the process without a word. The mapped
+/// files are `.olm` maps and `.graph` inputs; the library registers each
+/// mapping, so the line names the file the faulting read was in. Installed
+/// once, at start.
 pub fn report_truncated_files() {
-    truncated_map::install();
-}
-
-/// Names `path` in the message of [`report_truncated_files`]'s handler:
-/// called before a file is mapped.
-pub fn name_mapped_file(path: &Path) {
-    truncated_map::name(path);
-}
-
-#[cfg(unix)]
-mod truncated_map {
-    use std::path::Path;
-    use std::sync::atomic::{AtomicPtr, Ordering};
-
-    /// The line for the file mapped last, built before it is mapped (the
-    /// handler may not allocate); null before any file is mapped.
-    static LINE: AtomicPtr<&'static [u8]> = AtomicPtr::new(std::ptr::null_mut());
-
-    const UNNAMED: &[u8] = b"octolinear: error: a file was truncated while memory-mapped \
-        (replace files by renaming a new file over them, never in place)\n";
-
-    pub fn name(path: &Path) {
-        let line = format!(
-            "octolinear: error: {}: the file was truncated while memory-mapped \
-             (replace files by renaming a new file over them, never in place)\n",
-            path.display()
-        );
-        // leaked: the handler may read it at any time (one short line per map opened)
-        let line: &'static [u8] = Box::leak(line.into_bytes().into_boxed_slice());
-        LINE.store(Box::leak(Box::new(line)), Ordering::Release);
-    }
-
-    extern "C" fn on_sigbus(_signal: libc::c_int) {
-        let line = LINE.load(Ordering::Acquire);
-        // SAFETY: non-null values come from `Box::leak` in `name` and are never freed
-        let line: &[u8] = if line.is_null() { UNNAMED } else { unsafe { *line } };
-        // SAFETY: write(2) and _exit(2) are async-signal-safe; the buffer is valid
-        unsafe {
-            libc::write(libc::STDERR_FILENO, line.as_ptr().cast(), line.len());
-            libc::_exit(1);
-        }
-    }
-
-    pub fn install() {
-        // SAFETY: a zeroed sigaction is a valid empty one; the handler only
-        // calls async-signal-safe functions and reads data that is never freed
-        unsafe {
-            let mut action: libc::sigaction = std::mem::zeroed();
-            action.sa_sigaction = on_sigbus as extern "C" fn(libc::c_int) as libc::sighandler_t;
-            action.sa_flags = libc::SA_ONSTACK;
-            libc::sigemptyset(&mut action.sa_mask);
-            libc::sigaction(libc::SIGBUS, &action, std::ptr::null_mut());
-        }
-    }
-}
-
-#[cfg(not(unix))]
-mod truncated_map {
-    pub fn name(_path: &std::path::Path) {}
-    pub fn install() {}
+    // without it a truncated file still ends the run, by the signal
+    let _ = octolinear::mapped::exit_on_truncated_files("octolinear: error: ");
 }

@@ -36,7 +36,6 @@ pub fn open_graph(path: &Path) -> Result<ScanReader<GraphInput>> {
     let input = if is_stdin(path) {
         GraphInput::stream(BufReader::with_capacity(1 << 16, std::io::stdin()))
     } else {
-        crate::common::name_mapped_file(path);
         GraphInput::open(path).with_context(|| format!("cannot open {}", path.display()))?
     };
     let len = input.file_len();

@@ -40,7 +40,8 @@
 //!
 //! Queries on such a map are memory-safe whatever the sections hold: every
 //! read is a bounds-checked copy of bytes into an integer (no pointer casts;
-//! the mapping in [`MappedMap::open`] is the only `unsafe`), a search
+//! the only `unsafe` is the mapping in [`MappedMap::open`] and the
+//! `SIGBUS` handler of [`guard_truncated_files`]), a search
 //! descends at most 16 levels and an iteration visits at most the announced
 //! node count, so no query panics, reads outside the bytes or loops without
 //! bound. What nothing checks is that the bytes are the ones written: in a
@@ -63,12 +64,36 @@
 //! writers here ([`write_file`]) write a temporary file and rename it over
 //! the old one: a mapping of the old file keeps that file (its inode) alive
 //! and unchanged, so replacing a map under a reader is safe. Changing it in
-//! place is not. When another process truncates a mapped file, a read of a
-//! page past its new end raises `SIGBUS`, which kills the process unless it
-//! handles the signal (the `octolinear` tool reports it as an error and
-//! exits with status 1); a file rewritten in place changes the bytes under
-//! the reader, which then answers as from a damaged file (above).
+//! place is not. A file rewritten in place changes the bytes under the
+//! reader, which then answers as from a damaged file (above). When another
+//! process truncates a mapped file, a read of a page past its new end
+//! raises `SIGBUS`, which kills the process unless it handles the signal.
+//!
+//! A program that maps files it does not control (an embedding
+//! interpreter, a server) either reads them instead ([`read_file`], or
+//! [`MappedMap::new`] over the bytes read into memory), or installs the
+//! crate's handler once at start, [`guard_truncated_files`]. The crate
+//! registers every mapping it makes (`.olm` maps opened with [`open`],
+//! the windows of a `.graph` file read through
+//! [`GraphInput`](crate::formats::graph::GraphInput)); with the handler
+//! installed, a read past the end of a truncated registered mapping
+//! completes with zeros instead, and the mapping is marked truncated. The
+//! answers computed from it since are unreliable: after each piece of work
+//! on a mapped map call [`MappedMap::check_mapping`] and discard the work
+//! when it returns [`Truncated`] (later calls return it too, at once);
+//! [`MappedMap::verify`], [`MappedMap::to_tree`] and
+//! [`MappedMap::to_counting_tree`] check it themselves, and a `.graph`
+//! reader fails with an I/O error at its next read
+//! ([`GraphInput::watch`](crate::formats::graph::GraphInput::watch) for the
+//! bytes it has already lent). Reading zeros is safe: every read of the
+//! bytes is bounds-checked (see above). A `SIGBUS` outside the crate's
+//! mappings still goes to the handler installed before, or kills the
+//! process. The `octolinear` tool installs [`exit_on_truncated_files`]
+//! instead, which reports the file and exits with status 1.
 
+// the signal handler and its registry of mappings
+#[allow(unsafe_code)]
+pub(crate) mod fault;
 pub mod format;
 #[allow(unsafe_code)]
 pub(crate) mod mapping;
@@ -78,6 +103,7 @@ mod search_blocks;
 mod verify;
 mod write;
 
+pub use fault::{exit_on_truncated_files, guard_truncated_files, Truncated};
 pub use format::{
     Header, Index, Section, SectionKind, TreeKind, Variant, HEADER_LEN, MAGIC, VERSION_MAJOR, VERSION_MINOR,
 };
@@ -101,6 +127,7 @@ use query::RawIter;
 use search_blocks::SearchBlocks;
 use std::io;
 use std::path::Path;
+use std::sync::Arc;
 
 /// Why an `.olm` file was refused.
 #[derive(Debug, thiserror::Error)]
@@ -178,6 +205,9 @@ pub enum OlmError {
         /// Checksum of the section's bytes as they are.
         computed: u32,
     },
+    /// The mapped file was truncated while it was read ([`guard_truncated_files`]).
+    #[error(transparent)]
+    Truncated(#[from] Truncated),
     /// The nodes do not form a valid tree (found by verification or while
     /// building an in-memory tree).
     #[error("inconsistent tree structure: {0}")]
@@ -204,15 +234,75 @@ fn section_name(kind: u16) -> &'static str {
 /// Construction checks the header only (O(1)); queries go through
 /// [`MappedMap::view`].
 pub struct MappedMap<D> {
+    /// The mapping's registration, dropped before `data` unmaps it
+    /// (fields drop in order); `None` for bytes that are not a mapping.
+    guard: Option<MapGuard>,
     data: D,
     meta: Meta,
+}
+
+/// A mapping's entry in the crate's registry ([`guard_truncated_files`]).
+struct MapGuard {
+    _registration: Option<fault::Registration>,
+    mark: Arc<fault::Mark>,
+}
+
+/// Whether a mapped file was found truncated: a handle that outlives the
+/// mappings of the file (a `.graph` reader maps one window after another),
+/// from [`GraphInput::watch`](crate::formats::graph::GraphInput::watch).
+#[derive(Clone)]
+pub struct MappingWatch(Arc<fault::Mark>);
+
+impl MappingWatch {
+    /// A watch of the file at `path` (`None`: unknown).
+    pub(crate) fn new(path: Option<&Path>) -> Self {
+        MappingWatch(fault::Mark::new(path))
+    }
+
+    /// Registers a mapping of the watched file; drop the registration
+    /// before unmapping it.
+    pub(crate) fn register(&self, bytes: &[u8]) -> Option<fault::Registration> {
+        fault::register(bytes, &self.0)
+    }
+
+    /// `Err` once a read of a mapping of the file faulted past its end
+    /// (only with [`guard_truncated_files`] installed; without it the
+    /// process died).
+    pub fn check(&self) -> Result<(), Truncated> {
+        self.0.check()
+    }
+
+    /// The watched file, when known.
+    pub fn path(&self) -> Option<&Path> {
+        self.0.path()
+    }
+}
+
+impl std::fmt::Debug for MappingWatch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MappingWatch").field("path", &self.path()).field("check", &self.check()).finish()
+    }
 }
 
 impl<D: AsRef<[u8]>> MappedMap<D> {
     /// Checks the header (O(1)) and keeps the bytes.
     pub fn new(data: D) -> Result<Self, OlmError> {
         let meta = format::parse(data.as_ref())?;
-        Ok(MappedMap { data, meta })
+        Ok(MappedMap { guard: None, data, meta })
+    }
+
+    /// `Err(`[`Truncated`]`)` once a read of the map's mapping faulted past
+    /// the end of its file, truncated in place (with
+    /// [`guard_truncated_files`] installed): every answer since may come
+    /// from zeros. `Ok` for a map over bytes in memory.
+    pub fn check_mapping(&self) -> Result<(), Truncated> {
+        self.guard.as_ref().map_or(Ok(()), |g| g.mark.check())
+    }
+
+    /// `result`, unless the mapping was found truncated meanwhile.
+    fn checked<T>(&self, result: Result<T, OlmError>) -> Result<T, OlmError> {
+        self.check_mapping()?;
+        result
     }
 
     /// A cheap, copyable handle for queries. Its answers are those of the
@@ -233,14 +323,18 @@ impl<D: AsRef<[u8]>> MappedMap<D> {
         self.data.as_ref()
     }
 
-    /// Gives back the bytes the map was made from.
+    /// Gives back the bytes the map was made from (a mapping given back
+    /// is no longer registered: see [`guard_truncated_files`]).
     pub fn into_inner(self) -> D {
-        self.data
+        let MappedMap { guard, data, .. } = self;
+        drop(guard);
+        data
     }
 
-    /// See [`MapView::verify`].
+    /// See [`MapView::verify`]; [`OlmError::Truncated`] when the mapping
+    /// was found truncated ([`Self::check_mapping`]).
     pub fn verify(&self) -> Result<VerifyReport, OlmError> {
-        self.view().verify()
+        self.checked(self.view().verify())
     }
 
     /// See [`MapView::search`].
@@ -259,9 +353,16 @@ impl<D: AsRef<[u8]>> MappedMap<D> {
         self.view().search_point(p, depth)
     }
 
-    /// See [`MapView::to_tree`].
+    /// See [`MapView::to_tree`]; [`OlmError::Truncated`] as for
+    /// [`Self::verify`].
     pub fn to_tree(&self) -> Result<OccupancyTree, OlmError> {
-        self.view().to_tree()
+        self.checked(self.view().to_tree())
+    }
+
+    /// See [`MapView::to_counting_tree`]; [`OlmError::Truncated`] as for
+    /// [`Self::verify`].
+    pub fn to_counting_tree(&self) -> Result<CountingTree, OlmError> {
+        self.checked(self.view().to_counting_tree())
     }
 }
 
@@ -271,18 +372,26 @@ impl MappedMap<memmap2::Mmap> {
     /// see the module docs for what an unverified map can answer, and
     /// [`Self::verify`].
     ///
-    /// The mapping is the only `unsafe` in the module. Assumption: the file is
-    /// not truncated or modified in place while mapped. Writers in this
-    /// crate never modify a file in place (they write a temporary file and
-    /// rename it over the old one, so a mapping keeps the old contents).
-    /// If another process breaks the assumption, truncation makes reads
-    /// past the new end fault (`SIGBUS`) and modification makes the bytes
-    /// change under the reader; all reads are bounds-checked copies of
-    /// bytes into integers, so changed contents can only produce wrong
-    /// answers.
+    /// The mapping is made in the module's fenced `unsafe` code.
+    /// Assumption: the file is not truncated or modified in place while
+    /// mapped. Writers in this crate never modify a file in place (they
+    /// write a temporary file and rename it over the old one, so a mapping
+    /// keeps the old contents). If another process breaks the assumption,
+    /// modification makes the bytes change under the reader; all reads are
+    /// bounds-checked copies of bytes into integers, so changed contents
+    /// can only produce wrong answers. Truncation makes reads past the new
+    /// end fault (`SIGBUS`): see the module docs, [`guard_truncated_files`]
+    /// and [`Self::check_mapping`].
     pub fn open(path: &Path) -> Result<Self, OlmError> {
         let file = std::fs::File::open(path)?;
-        Self::new(mapping::map_read_only(&file)?)
+        let data = mapping::map_read_only(&file)?;
+        let watch = MappingWatch::new(Some(path));
+        // declared after `data`, so dropped (unregistered) before it on an error
+        let registration = watch.register(&data);
+        let parsed = format::parse(&data);
+        watch.check()?;
+        let meta = parsed?;
+        Ok(MappedMap { guard: Some(MapGuard { _registration: registration, mark: watch.0 }), data, meta })
     }
 }
 
