@@ -198,6 +198,9 @@ pub fn path(obj: &Bound<'_, PyAny>) -> PyResult<PathBuf> {
 /// An I/O error on `path` as the matching `OSError` subclass, the path in
 /// the message.
 pub fn io_error(path: &std::path::Path, e: &io::Error) -> PyErr {
+    if let Some(t) = e.get_ref().and_then(|inner| inner.downcast_ref::<octolinear::mapped::Truncated>()) {
+        return truncated_error(t);
+    }
     let msg = format!("{}: {e}", path.display());
     match e.kind() {
         io::ErrorKind::NotFound => PyFileNotFoundError::new_err(msg),
@@ -216,10 +219,17 @@ pub fn tree_file_error(path: &std::path::Path, e: octolinear::TreeFileError) -> 
     }
 }
 
+/// A mapped file found truncated under the reader, as `OSError` (the
+/// message names the file).
+pub fn truncated_error(e: &octolinear::mapped::Truncated) -> PyErr {
+    PyOSError::new_err(e.to_string())
+}
+
 /// An `.olm` file that could not be opened or read.
 pub fn olm_error(path: &std::path::Path, e: octolinear::OlmError) -> PyErr {
     match e {
         octolinear::OlmError::Io(io) => io_error(path, &io),
+        octolinear::OlmError::Truncated(t) => truncated_error(&t),
         other => PyValueError::new_err(format!("{}: {other}", path.display())),
     }
 }

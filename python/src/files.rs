@@ -232,18 +232,18 @@ pub fn build<'py>(
         let watch = input.watch();
         let truncated = || watch.check().map_err(|e| convert::truncated_error(&e));
         let len = input.file_len();
-        let mut reader = graph::ScanReader::with_len(input, len).map_err(|e| {
-            truncated().err().unwrap_or_else(|| graph_error(&path, e))
-        })?;
+        let mut reader = graph::ScanReader::with_len(input, len)
+            .map_err(|e| truncated().err().unwrap_or_else(|| graph_error(&path, e)))?;
         let mut failure = None;
         let stream = graph_scans(&mut reader, scans, &mut failure);
-        let inserted = tree.insert_point_clouds(stream, &opts, |t, _| {
-            if compress_ml {
-                t.to_max_likelihood();
-                t.prune();
-            }
-        })
-        .map_err(|(i, e)| PyValueError::new_err(format!("{}: scan {i}: {e}", path.display())));
+        let inserted = tree
+            .insert_point_clouds(stream, &opts, |t, _| {
+                if compress_ml {
+                    t.to_max_likelihood();
+                    t.prune();
+                }
+            })
+            .map_err(|(i, e)| PyValueError::new_err(format!("{}: scan {i}: {e}", path.display())));
         truncated()?;
         inserted?;
         if let Some(e) = failure {

@@ -46,6 +46,10 @@ fn get_num_threads() -> usize {
 
 #[pymodule]
 fn _octolinear(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    // a mapped file truncated under a call raises OSError instead of
+    // killing the interpreter with SIGBUS
+    octolinear::mapped::guard_truncated_files()
+        .map_err(|e| pyo3::exceptions::PyOSError::new_err(format!("cannot install the SIGBUS handler: {e}")))?;
     m.add_class::<octree::OcTree>()?;
     m.add_class::<kinds::ColorOcTree>()?;
     m.add_class::<kinds::OcTreeStamped>()?;

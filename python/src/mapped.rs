@@ -14,7 +14,9 @@ use pyo3::types::PyDict;
 /// `search`, `getLabels`, `castRay`, `occupancy`, `cast_rays`, `leaves`;
 /// `to_tree()` loads it into an `OcTree` for anything else. Answers are
 /// trustworthy for files octolinear wrote; `verify()` checks every byte of
-/// a file that may be damaged.
+/// a file that may be damaged. A file truncated in place while mapped makes
+/// the call that finds it so, and every later one, raise `OSError` naming
+/// the file.
 #[pyclass(module = "octolinear", frozen)]
 pub struct MappedOcTree {
     map: MappedMap<memmap2::Mmap>,
@@ -22,8 +24,22 @@ pub struct MappedOcTree {
 }
 
 impl MappedOcTree {
-    fn view(&self) -> MapView<'_> {
-        self.map.view()
+    /// The map's view, unless its file was found truncated.
+    fn view(&self) -> PyResult<MapView<'_>> {
+        self.intact()?;
+        Ok(self.map.view())
+    }
+
+    /// `OSError` once a read found the file truncated under the mapping.
+    fn intact(&self) -> PyResult<()> {
+        self.map.check_mapping().map_err(|e| convert::truncated_error(&e))
+    }
+
+    /// `answer`, unless the file was found truncated while it was computed
+    /// (then it came from zeros).
+    fn checked<T>(&self, answer: PyResult<T>) -> PyResult<T> {
+        self.intact()?;
+        answer
     }
 }
 
@@ -37,6 +53,7 @@ pub fn open_mapped(py: Python<'_>, path: &Bound<'_, PyAny>, verify: bool) -> PyR
     if verify {
         py.detach(|| map.verify()).map_err(|e| convert::olm_error(&path, e))?;
     }
+    map.check_mapping().map_err(|e| convert::truncated_error(&e))?;
     Ok(MappedOcTree { map, path })
 }
 
@@ -47,22 +64,23 @@ impl MappedOcTree {
     #[pyo3(signature = (value, depth=0))]
     fn search(&self, value: &Bound<'_, PyAny>, depth: u32) -> PyResult<OcTreeNode> {
         let depth = queries::max_depth(Some(depth))?;
-        let view = self.view();
+        let view = self.view()?;
         let key = match value.cast::<OcTreeKey>() {
             Ok(k) => Some(k.borrow().key()),
             Err(_) => view.key(convert::point(value, "value")?).ok(),
         };
-        Ok(key.and_then(|k| view.search(k, depth)).map_or_else(OcTreeNode::null, OcTreeNode::from_found))
+        let found = key.and_then(|k| view.search(k, depth));
+        self.checked(Ok(found.map_or_else(OcTreeNode::null, OcTreeNode::from_found)))
     }
 
     /// Is the node (from `search`) occupied?
     fn isNodeOccupied(&self, node: &Bound<'_, PyAny>) -> PyResult<bool> {
-        Ok(self.view().is_occupied(node_value(node)?))
+        Ok(self.view()?.is_occupied(node_value(node)?))
     }
 
     /// As `OcTree.getLabels`.
     fn getLabels<'py>(&self, py: Python<'py>, points: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyArray1<i32>>> {
-        labels_impl(py, &self.view(), points)
+        self.checked(labels_impl(py, &self.view()?, points))
     }
 
     /// As `OcTree.castRay` (a counting map has no occupancy: `False`).
@@ -75,7 +93,7 @@ impl MappedOcTree {
         ignoreUnknownCells: bool,
         maxRange: f64,
     ) -> PyResult<bool> {
-        cast_ray_into(&self.view(), origin, direction, end, ignoreUnknownCells, maxRange)
+        self.checked(cast_ray_into(&self.view()?, origin, direction, end, ignoreUnknownCells, maxRange))
     }
 
     /// As `OcTree.occupancy`.
@@ -86,7 +104,7 @@ impl MappedOcTree {
         points: &Bound<'py, PyAny>,
         depth: Option<u32>,
     ) -> PyResult<queries::OccupancyArrays<'py>> {
-        occupancy_impl(py, &self.view(), points, depth)
+        self.checked(occupancy_impl(py, &self.view()?, points, depth))
     }
 
     /// As `OcTree.cast_rays`.
@@ -99,7 +117,7 @@ impl MappedOcTree {
         max_range: f64,
         ignore_unknown: bool,
     ) -> PyResult<queries::RayArrays<'py>> {
-        cast_rays_impl(py, &self.view(), origins, directions, max_range, ignore_unknown)
+        self.checked(cast_rays_impl(py, &self.view()?, origins, directions, max_range, ignore_unknown))
     }
 
     /// As `OcTree.leaves`.
@@ -111,33 +129,35 @@ impl MappedOcTree {
         bbox: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let d = queries::max_depth(max_depth)?;
-        let view = self.view();
+        let view = self.view()?;
         let bbx = bbox.map(|b| queries::key_box(view.key_space(), b)).transpose()?;
         let records = py.detach(|| match bbx {
             Some(b) => queries::leaf_records(view.leaves_in_box(b, d)),
             None => queries::leaf_records(view.leaves(d)),
         });
+        self.intact()?;
         queries::leaves_array(py, records)
     }
 
     /// Voxel edge length, metres.
-    fn getResolution(&self) -> f64 {
-        self.view().resolution()
+    fn getResolution(&self) -> PyResult<f64> {
+        Ok(self.view()?.resolution())
     }
 
     /// OctoMap's `size()` of the tree that was written.
-    fn size(&self) -> u64 {
-        self.view().size_counter()
+    fn size(&self) -> PyResult<u64> {
+        Ok(self.view()?.size_counter())
     }
 
     /// The OctoMap type name, as bytes.
-    fn getTreeType<'py>(&self, py: Python<'py>) -> Bound<'py, pyo3::types::PyBytes> {
-        pyo3::types::PyBytes::new(py, self.view().kind().id().as_bytes())
+    fn getTreeType<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyBytes>> {
+        Ok(pyo3::types::PyBytes::new(py, self.view()?.kind().id().as_bytes()))
     }
 
     /// Checks every byte (checksums, index, structure); returns counts as
     /// a dict, raises `ValueError` naming the damage.
     fn verify<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.intact()?;
         let r = py.detach(|| self.map.verify()).map_err(|e| convert::olm_error(&self.path, e))?;
         let d = PyDict::new(py);
         d.set_item("nodes", r.nodes)?;
@@ -150,12 +170,14 @@ impl MappedOcTree {
 
     /// Loads the map into memory as an `OcTree` (verifying it).
     fn to_tree<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        self.intact()?;
         let t = py.detach(|| self.map.to_tree()).map_err(|e| convert::olm_error(&self.path, e))?;
         tree_object(py, t)
     }
 
     fn __repr__(&self) -> String {
-        let v = self.view();
+        // the header's parsed copy: readable after a truncation too
+        let v = self.map.view();
         format!(
             "<octolinear.MappedOcTree {} {} resolution={} nodes={}>",
             self.path.display(),
