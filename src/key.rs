@@ -89,6 +89,57 @@ pub enum KeyError {
         /// The requested depth.
         depth: u8,
     },
+    /// A resolution outside [`MIN_RESOLUTION`]`..=`[`MAX_RESOLUTION`] (see
+    /// [`check_resolution`]).
+    #[error("resolution {value:?} m {}", resolution_problem(*.value))]
+    BadResolution {
+        /// The offending resolution, metres.
+        value: f64,
+    },
+}
+
+/// Smallest usable resolution, metres (2^-125): half a voxel must be a
+/// normal float. Voxel centres are floats (OctoMap's `point3d`) half a
+/// voxel from the faces; with a normal float for that half, every centre
+/// of the ±32768 voxels has 17 significant bits to spare and keys
+/// round-trip through centres at any scale, so float precision never
+/// limits the map above this (each voxel holds at least 256 floats even at
+/// the map's edge); below it, it does.
+pub const MIN_RESOLUTION: f64 = 2.0 * f32::MIN_POSITIVE as f64;
+
+/// Largest usable resolution, metres (`f32::MAX / 32768`, about 1.04e34):
+/// the map's edge, 32768 voxels from its centre, must be a finite float.
+pub const MAX_RESOLUTION: f64 = f32::MAX as f64 / 32768.0;
+
+/// Why [`check_resolution`] refuses `value`.
+fn resolution_problem(value: f64) -> String {
+    if !(value.is_finite() && value > 0.0) {
+        "is not a positive finite number".into()
+    } else if value < MIN_RESOLUTION {
+        format!("is below the smallest usable resolution {MIN_RESOLUTION:?} m (2^-125: half a voxel must be a normal float)")
+    } else {
+        format!(
+            "is above the largest usable resolution {MAX_RESOLUTION:?} m \
+             (f32::MAX / 32768: the map's edge, 32768 voxels out, must be a finite float)"
+        )
+    }
+}
+
+/// The one rule for a map's resolution (voxel edge length, metres), which
+/// every tree, tile set, plan and map file applies: a finite number from
+/// [`MIN_RESOLUTION`] to [`MAX_RESOLUTION`]. Returns the value unchanged.
+///
+/// Within that range the voxel, its half and the map's edge, 32768 voxels
+/// from the centre, are finite non-zero floats (and the extent
+/// `resolution * 2^16` a finite double), so keys and voxel centres convert
+/// both ways; outside it a map's resolution or extent would round to 0 or
+/// infinity and every query of it find nothing.
+pub fn check_resolution(resolution: f64) -> Result<f64, KeyError> {
+    if (MIN_RESOLUTION..=MAX_RESOLUTION).contains(&resolution) {
+        Ok(resolution)
+    } else {
+        Err(KeyError::BadResolution { value: resolution })
+    }
 }
 
 /// `(int) floor(x)` as compiled for x86-64: `cvttsd2si` yields `i32::MIN`
@@ -118,8 +169,16 @@ pub struct KeySpace {
 }
 
 impl KeySpace {
-    /// Creates the key space for a voxel edge length in metres. The value
-    /// is not validated here; [`crate::OccupancyTree`] checks it.
+    /// The key space for a voxel edge length in metres, if
+    /// [`check_resolution`] accepts it.
+    pub fn checked(resolution: f64) -> Result<Self, KeyError> {
+        Ok(Self::new(check_resolution(resolution)?))
+    }
+
+    /// The key space for a voxel edge length in metres, with OctoMap's
+    /// arithmetic for any value (as OctoMap's own conversions take any
+    /// double). Trees, tile sets and map files take only the resolutions
+    /// [`check_resolution`] accepts; [`Self::checked`] applies that rule.
     pub fn new(resolution: f64) -> Self {
         let mut node_sizes = [0.0; 17];
         for (depth, size) in node_sizes.iter_mut().enumerate() {
@@ -418,6 +477,46 @@ mod tests {
         assert_eq!(k.child_index(0), 6);
         let k = Key::new(1, 0, 1);
         assert_eq!(k.child_index(15), 5);
+    }
+
+    /// The rule's bounds are the usable ones: at both, the voxel, its
+    /// half, and the map's extent are finite non-zero floats; one step
+    /// beyond, or at the values that once made maps of resolution 0 or
+    /// infinity, the rule refuses, naming the value and the range.
+    #[test]
+    fn resolutions_outside_the_usable_range_are_refused() {
+        for r in [MIN_RESOLUTION, MAX_RESOLUTION, 0.05, 1.0] {
+            assert_eq!(check_resolution(r), Ok(r));
+            let ks = KeySpace::checked(r).unwrap();
+            let (half, edge) = ((r / 2.0) as f32, (ks.node_size(0) / 2.0) as f32);
+            assert!(half.is_normal() && edge.is_finite() && edge > 0.0, "{r}");
+            assert!((r as f32).is_normal() && ks.node_size(0).is_finite() && ks.tree_center().is_finite());
+        }
+        for r in [
+            0.0,
+            -0.1,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            1e-300,
+            1e300,
+            MIN_RESOLUTION.next_down(),
+            MAX_RESOLUTION.next_up(),
+        ] {
+            let e = check_resolution(r).unwrap_err();
+            assert!(matches!(e, KeyError::BadResolution { value } if value.to_bits() == r.to_bits()), "{r}");
+            let text = e.to_string();
+            assert!(text.starts_with(&format!("resolution {r:?} m is ")), "{text}");
+            let why = if r.is_nan() || r <= 0.0 || r.is_infinite() {
+                "not a positive finite number"
+            } else if r < 1.0 {
+                "below the smallest usable resolution 2.350988701644575e-38 m (2^-125"
+            } else {
+                "above the largest usable resolution 1.0384593098099636e34 m"
+            };
+            assert!(text.contains(why), "{text}");
+            assert!(KeySpace::checked(r).is_err());
+        }
     }
 
     #[test]

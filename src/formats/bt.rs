@@ -127,7 +127,7 @@ fn read_legacy_header<R: BufRead>(r: &mut CountingReader<R>) -> Result<(u64, f64
     let mut b8 = [0u8; 8];
     r.read_exact(&mut b8, "the legacy resolution")?;
     let res = f64::from_le_bytes(b8);
-    if !(res > 0.0 && res.is_finite()) {
+    if crate::key::check_resolution(res).is_err() {
         return Err(TreeFileError::BadResolution { value: res, offset: Some(r.offset - 8) });
     }
     r.read_exact(&mut b4, "the legacy size")?;

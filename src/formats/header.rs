@@ -192,7 +192,7 @@ pub fn read_header<R: BufRead>(r: &mut CountingReader<R>) -> Result<Header, Tree
     if id.is_empty() {
         return Err(TreeFileError::Header { offset: data_offset, reason: "no `id` given".into() });
     }
-    if !(resolution > 0.0 && resolution.is_finite()) {
+    if crate::key::check_resolution(resolution).is_err() {
         return Err(TreeFileError::BadResolution {
             value: resolution,
             offset: Some(res_offset.unwrap_or(data_offset)),

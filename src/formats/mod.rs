@@ -44,10 +44,10 @@ pub enum TreeFileError {
         /// What is wrong with it.
         reason: String,
     },
-    /// The resolution (voxel edge length, metres) is not a positive
-    /// finite number.
+    /// The resolution (voxel edge length, metres) is outside the usable
+    /// range ([`crate::key::check_resolution`]).
     /// `offset` is that of the `res` value; `None` for a message's field.
-    #[error("resolution {value}{} is not a positive finite number", at_byte(.offset))]
+    #[error("{}{}", crate::key::KeyError::BadResolution { value: *.value }, at_byte(.offset))]
     BadResolution {
         /// The resolution read.
         value: f64,

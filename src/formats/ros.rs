@@ -70,7 +70,7 @@ pub fn full_counting_map_to_msg(tree: &CountingTree) -> OctomapMsg {
 /// count from the start of `data`).
 pub fn msg_to_map(msg: &OctomapMsg) -> Result<AnyTree, TreeFileError> {
     let resolution = msg.resolution;
-    if !(resolution > 0.0 && resolution.is_finite()) {
+    if crate::key::check_resolution(resolution).is_err() {
         return Err(TreeFileError::BadResolution { value: resolution, offset: None });
     }
     let mut r = CountingReader::new(&msg.data[..]);

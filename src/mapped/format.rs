@@ -413,7 +413,7 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Meta, OlmError> {
         return Err(bad("rank_block_log2", log2));
     }
     let resolution = f64::from_bits(r64(field::RESOLUTION));
-    if !(resolution.is_finite() && resolution > 0.0) {
+    if crate::key::check_resolution(resolution).is_err() {
         return Err(bad("resolution", resolution));
     }
     let s = |i: usize| f32::from_bits(r32(field::SENSOR + 4 * i));

@@ -226,8 +226,9 @@ impl Manifest {
             }
             None => None,
         };
-        let resolution =
-            lines.value(next, "resolution", |v| hex64(v).map(f64::from_bits).filter(|r| r.is_finite() && *r > 0.0))?;
+        let resolution = lines.value(next, "resolution", |v| {
+            hex64(v).map(f64::from_bits).filter(|&r| crate::key::check_resolution(r).is_ok())
+        })?;
         let depth = lines.field("tile_depth", |v| {
             decimal(v).filter(|d| (1..=u64::from(MAX_TILE_DEPTH)).contains(d)).map(|d| d as u8)
         })?;

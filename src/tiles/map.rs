@@ -107,9 +107,7 @@ impl TiledMap {
         if !(1..=MAX_TILE_DEPTH).contains(&depth) {
             return Err(TileError::BadDepth(depth));
         }
-        if !(resolution.is_finite() && resolution > 0.0) {
-            return Err(TreeError::BadResolution(resolution).into());
-        }
+        crate::key::check_resolution(resolution).map_err(|_| TreeError::BadResolution(resolution))?;
         if kind == NodeKind::Color {
             return Err(TileError::Unsupported(
                 "colour trees cannot be tiled: their colours depend on OctoMap's update order across the whole scan",

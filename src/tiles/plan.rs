@@ -72,9 +72,7 @@ impl TileWork {
         if !(1..=MAX_TILE_DEPTH).contains(&depth) {
             return Err(TileError::BadDepth(depth));
         }
-        if !(resolution.is_finite() && resolution > 0.0) {
-            return Err(TreeError::BadResolution(resolution).into());
-        }
+        crate::key::check_resolution(resolution).map_err(|_| TreeError::BadResolution(resolution))?;
         Ok(TileWork { keys: KeySpace::new(resolution), depth, work: BTreeMap::new(), updates: BTreeMap::new() })
     }
 
@@ -349,9 +347,10 @@ impl TilePlan {
             }
         }
         let res_text = field(1, "resolution")?;
-        let resolution = res_text.parse::<f64>().ok().filter(|r| r.is_finite() && *r > 0.0).ok_or_else(|| {
-            fault(2, format!("resolution `{}`: expected a positive number of metres", clip(res_text)))
-        })?;
+        let resolution = res_text
+            .parse::<f64>()
+            .map_err(|_| fault(2, format!("resolution `{}`: expected a positive number of metres", clip(res_text))))?;
+        crate::key::check_resolution(resolution).map_err(|e| fault(2, e.to_string()))?;
         let depth_text = field(2, "tile_depth")?;
         let depth = decimal(depth_text)
             .filter(|d| (1..=u64::from(MAX_TILE_DEPTH)).contains(d))

@@ -19,9 +19,7 @@ pub struct CountingTree {
 impl CountingTree {
     /// An empty tree; `resolution` is the voxel edge length in metres.
     pub fn new(resolution: f64) -> Result<Self, super::TreeError> {
-        if !(resolution.is_finite() && resolution > 0.0) {
-            return Err(super::TreeError::BadResolution(resolution));
-        }
+        crate::key::check_resolution(resolution).map_err(|_| super::TreeError::BadResolution(resolution))?;
         Ok(CountingTree { keys: KeySpace::new(resolution), arena: None, size: 0 })
     }
 

@@ -70,12 +70,48 @@ pub enum InnerNodes {
     Defer,
 }
 
-/// Why a tree could not be made.
+/// Why a tree could not be made, or an operation was refused.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
 pub enum TreeError {
-    /// The resolution (the value given, metres) is zero, negative, NaN or infinite.
-    #[error("resolution {0} m is not a positive finite number")]
+    /// The resolution (the value given, metres) is outside the usable
+    /// range ([`crate::key::check_resolution`]).
+    #[error("{}", bad_resolution(.0))]
     BadResolution(f64),
+    /// An operation whose output grows with the map's extent would make
+    /// more than its limit: `count` items (nodes or points, as `what`
+    /// says) against `limit` (by default [`OUTPUT_LIMIT`]).
+    #[error("{what}: {count} {items} exceed the limit of {limit}{}; a higher limit allows it", power_of_two(*.limit))]
+    TooLarge {
+        /// The operation refused (`"expand"`, `"point extraction"`, ...).
+        what: &'static str,
+        /// What is counted (`"nodes"`, `"points"`, ...).
+        items: &'static str,
+        /// How many it would make (saturated at `u64::MAX`).
+        count: u64,
+        /// The limit it was given.
+        limit: u64,
+    },
+}
+
+/// The default limit of the operations whose output grows with the map's
+/// extent rather than with its nodes ([`OccupancyTree::expand_within`],
+/// [`OccupancyTree::voxels_within`]): 2^28 nodes or points. A leaf at depth
+/// `d` stands for `8^(16 - d)` voxels, so a file of a few nodes can
+/// describe a map whose expansion needs terabytes; 2^28 points of three
+/// floats take 3 GB, 2^28 nodes up to 2.4 GB.
+pub const OUTPUT_LIMIT: u64 = 1 << 28;
+
+fn bad_resolution(value: &f64) -> KeyError {
+    KeyError::BadResolution { value: *value }
+}
+
+/// " (2^k)" for a power of two `v`, else nothing.
+fn power_of_two(v: u64) -> String {
+    if v.is_power_of_two() {
+        format!(" (2^{})", v.trailing_zeros())
+    } else {
+        String::new()
+    }
 }
 
 /// A node found by a search.
@@ -214,9 +250,7 @@ impl OccupancyTree {
 
     /// An empty tree whose nodes carry what `kind` says.
     pub fn with_kind(resolution: f64, sensor: SensorModel, kind: NodeKind) -> Result<Self, TreeError> {
-        if !(resolution.is_finite() && resolution > 0.0) {
-            return Err(TreeError::BadResolution(resolution));
-        }
+        crate::key::check_resolution(resolution).map_err(|_| TreeError::BadResolution(resolution))?;
         Ok(OccupancyTree {
             keys: KeySpace::new(resolution),
             sensor,

@@ -1,6 +1,7 @@
 //! Whole-tree walks and what they measure: iteration entry points,
 //! node counts, metric bounds and memory usage.
 
+use super::TreeError;
 use super::{default_extra, ArenaUsage, Bounds, BoundsRule, KeyBox, NodeArena, NodeId, NodeIter, NodeKind, NodeRef};
 use super::{
     ChildGroup, OccupancyTree, PreorderNode, PreorderSource, PreorderVisitor, OCTOMAP_TREE_OBJECT_BYTES, ROOT,
@@ -41,6 +42,37 @@ impl OccupancyTree {
     /// Leaves overlapping the key box, as OctoMap's `leaf_bbx_iterator`.
     pub fn leaves_in_box(&self, bbx: KeyBox, max_depth: u8) -> NodeIter<'_> {
         NodeIter::new(self, max_depth, true, Some(bbx))
+    }
+
+    /// How many nodes at `depth` (1..=16; 0 means 16) lie below the leaves
+    /// whose value satisfies `want`, coarser leaves counted as every node
+    /// of `depth` inside them (`8^(depth - d)` for a leaf at depth `d`):
+    /// the points of a point extraction at that depth. Saturates at
+    /// `u64::MAX`; counted from the leaves, without expanding.
+    pub fn voxel_count(&self, depth: u8, want: impl Fn(f32) -> bool) -> u64 {
+        let depth = if depth == 0 { 16 } else { depth.min(16) };
+        self.leaves(depth)
+            .filter(|leaf| want(leaf.value))
+            .map(|leaf| 1u64.checked_shl(3 * u32::from(depth - leaf.depth)).unwrap_or(u64::MAX))
+            .fold(0u64, u64::saturating_add)
+    }
+
+    /// [`Self::voxel_count`] if it is at most `limit` ([`OUTPUT_LIMIT`](super::OUTPUT_LIMIT) is
+    /// the usual limit), else [`TreeError::TooLarge`] naming `what` (the
+    /// operation), the count and the limit: the check an operation that
+    /// makes one point or record per voxel of coarse leaves runs first.
+    pub fn voxels_within(
+        &self,
+        depth: u8,
+        want: impl Fn(f32) -> bool,
+        limit: u64,
+        what: &'static str,
+    ) -> Result<u64, TreeError> {
+        let count = self.voxel_count(depth, want);
+        if count > limit {
+            return Err(TreeError::TooLarge { what, items: "points", count, limit });
+        }
+        Ok(count)
     }
 
     /// Number of leaves (`getNumLeafNodes`).

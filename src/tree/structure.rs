@@ -2,9 +2,17 @@
 //! expansion, deletion, and compaction of the arena.
 
 use super::rules::{prune_node, update_from_children};
-use super::{blocks, level_index, Compaction, NodeArena, NodeId, NodeKind, OccupancyTree, Rules, ROOT};
+use super::ROOT;
+use super::{blocks, level_index, Compaction, NodeArena, NodeId, NodeKind, OccupancyTree, Rules, TreeError};
 use crate::geometry::Point3;
 use crate::key::{Key, KeyError, TREE_DEPTH};
+
+/// Nodes the expansion of a leaf at `depth` adds: `8 + 64 + ... +
+/// 8^(16 - depth)`, at most 8^17 / 7 (a root without children).
+fn added_below(depth: u8) -> u64 {
+    let levels = u32::from(TREE_DEPTH.saturating_sub(depth));
+    (8u64.pow(levels + 1) - 8) / 7
+}
 
 impl OccupancyTree {
     /// Merges complete groups of eight equal leaf children into their
@@ -71,8 +79,40 @@ impl OccupancyTree {
         self.refresh_trunks();
     }
 
+    /// How many nodes [`Self::expand`] would add (saturating at
+    /// `u64::MAX`), counted from the leaves' depths without expanding: a
+    /// leaf at depth `d` gains `8 + 64 + ... + 8^(16 - d)` nodes.
+    pub fn expansion_nodes(&self) -> u64 {
+        fn recurse(a: &NodeArena, n: NodeId, depth: u8) -> u64 {
+            if !a.has_children(n) {
+                return added_below(depth);
+            }
+            let first = a.first_child(n);
+            (0..crate::arch::count_ones(a.mask(n)))
+                .map(|i| recurse(a, first + i, depth + 1))
+                .fold(0, u64::saturating_add)
+        }
+        self.arena.as_ref().map_or(0, |a| recurse(a, ROOT, 0))
+    }
+
+    /// [`Self::expand`] if it adds at most `limit` nodes (counted first by
+    /// [`Self::expansion_nodes`]; [`OUTPUT_LIMIT`](super::OUTPUT_LIMIT) is the usual limit);
+    /// returns the nodes added. Past the limit the tree is left unchanged
+    /// and [`TreeError::TooLarge`] names the count and the limit.
+    pub fn expand_within(&mut self, limit: u64) -> Result<u64, TreeError> {
+        let count = self.expansion_nodes();
+        if count > limit {
+            return Err(TreeError::TooLarge { what: "expand", items: "nodes to add", count, limit });
+        }
+        self.expand();
+        Ok(count)
+    }
+
     /// Gives every leaf above depth 16 eight children holding its value
-    /// (`expand`).
+    /// (`expand`), whatever that costs: a leaf at depth `d` becomes
+    /// `8^(16 - d)` voxels, so a map of a few coarse leaves may need more
+    /// memory than there is. [`Self::expand_within`] counts first and
+    /// refuses past a limit.
     pub fn expand(&mut self) {
         fn recurse(a: &mut NodeArena, n: NodeId, depth: u8, added: &mut usize) {
             if depth >= TREE_DEPTH {
@@ -161,5 +201,100 @@ impl OccupancyTree {
             a.compact_in_place(ROOT);
         }
         self.refresh_trunks();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{PreorderBuilder, OUTPUT_LIMIT};
+    use super::*;
+    use crate::formats::bt;
+    use crate::sensor::SensorModel;
+
+    /// A tree whose root has one occupied child at `depth` 1 or below, a
+    /// leaf standing for `8^(16 - depth)` voxels (a chain of single
+    /// children above it), read back from the `.bt` file the library
+    /// writes of it.
+    fn one_coarse_leaf(depth: u8) -> (OccupancyTree, Vec<u8>) {
+        let mut b = PreorderBuilder::new();
+        for d in 0..=depth {
+            b.push(2.0, if d == depth { 0 } else { 1 }, u64::from(d)).unwrap();
+        }
+        let tree = b.finish(0.1, SensorModel::default()).unwrap().unwrap();
+        let mut file = Vec::new();
+        bt::write(&tree, &mut file).unwrap();
+        (bt::read(&file[..]).unwrap(), file)
+    }
+
+    /// A 138-byte `.bt` whose root has one occupied child at depth 1:
+    /// its expansion would add 8 + 64 + ... + 8^15 nodes. Counted from the
+    /// leaves, it is refused with the count and the limit in the message,
+    /// the tree left as it was.
+    #[test]
+    fn expansion_past_the_limit_is_refused_before_any_node_is_made() {
+        let (mut tree, file) = one_coarse_leaf(1);
+        assert_eq!(file.len(), 138);
+        let want = (8u64.pow(16) - 8) / 7;
+        assert_eq!(tree.expansion_nodes(), want);
+        let err = tree.expand_within(OUTPUT_LIMIT).unwrap_err();
+        assert_eq!(
+            err,
+            TreeError::TooLarge { what: "expand", items: "nodes to add", count: want, limit: OUTPUT_LIMIT }
+        );
+        let text = err.to_string();
+        assert!(text.contains(&want.to_string()) && text.contains("268435456 (2^28)"), "{text}");
+        assert!(text.contains("higher limit"), "{text}");
+        assert_eq!((tree.size(), tree.calc_num_nodes()), (2, 2));
+        // a root without children stands for the whole map
+        let mut root = PreorderBuilder::new();
+        root.push(-2.0, 0, 0).unwrap();
+        let root = root.finish(0.1, SensorModel::default()).unwrap().unwrap();
+        assert_eq!(root.expansion_nodes(), (8u64.pow(17) - 8) / 7);
+    }
+
+    /// Within the limit, `expand_within` is `expand`: same nodes, same
+    /// count, and the count it returns is the nodes added; one node short
+    /// of the limit it refuses.
+    #[test]
+    fn expansion_within_the_limit_is_expand() {
+        for depth in [13, 14, 15, 16] {
+            let (tree, _) = one_coarse_leaf(depth);
+            let added = (8u64.pow(u32::from(16 - depth) + 1) - 8) / 7;
+            assert_eq!(tree.expansion_nodes(), added);
+            let mut plain = tree.clone();
+            plain.expand();
+            let mut within = tree.clone();
+            assert_eq!(within.expand_within(added), Ok(added));
+            assert_eq!(within.size(), tree.size() + added as usize);
+            let nodes = |t: &OccupancyTree| t.nodes(0).map(|n| (n.key, n.depth, n.value.to_bits())).collect::<Vec<_>>();
+            assert_eq!(nodes(&within), nodes(&plain));
+            if added > 0 {
+                let mut short = tree.clone();
+                assert!(matches!(short.expand_within(added - 1), Err(TreeError::TooLarge { .. })));
+                assert_eq!(short.size(), tree.size());
+            }
+        }
+        let mut empty = OccupancyTree::new(0.1).unwrap();
+        assert_eq!(empty.expand_within(0), Ok(0));
+    }
+
+    /// The points of a point extraction are counted from the leaves:
+    /// `8^(depth - d)` per leaf at depth `d`, only the leaves asked for,
+    /// refused past the limit with the operation's name.
+    #[test]
+    fn voxels_of_coarse_leaves_are_counted_and_bounded() {
+        let (tree, _) = one_coarse_leaf(1);
+        assert_eq!(tree.voxel_count(16, |_| true), 8u64.pow(15));
+        assert_eq!(tree.voxel_count(0, |_| true), 8u64.pow(15));
+        assert_eq!(tree.voxel_count(3, |_| true), 64);
+        assert_eq!(tree.voxel_count(16, |v| v < 0.0), 0);
+        let err = tree.voxels_within(16, |_| true, OUTPUT_LIMIT, "extraction").unwrap_err();
+        assert_eq!(
+            err,
+            TreeError::TooLarge { what: "extraction", items: "points", count: 8u64.pow(15), limit: OUTPUT_LIMIT }
+        );
+        assert_eq!(tree.voxels_within(10, |_| true, OUTPUT_LIMIT, "extraction"), Ok(8u64.pow(9)));
+        let (fine, _) = one_coarse_leaf(16);
+        assert_eq!(fine.voxel_count(16, |_| true), 1);
     }
 }
