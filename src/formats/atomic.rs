@@ -9,17 +9,24 @@
 //!   new file gets the mode `File::create` gives (`0666` less the umask).
 //! * Symbolic links: when `NAME` is a symbolic link, the file it finally
 //!   points to is replaced (its temporary file lies beside that file) and
-//!   the link stays; a dangling link's target is created. Anything but a
-//!   regular file (a directory, a device, a FIFO) is never replaced.
+//!   the link stays; a dangling link's target is created. That is right
+//!   for a user's output; inside a directory a writer owns (a tile set),
+//!   [`write_entry_atomically`] replaces the link itself instead, so that
+//!   nothing outside the directory is written. Anything but a regular file
+//!   (a directory, a device, a FIFO) is never replaced.
 //! * Stale temporary files (unix): a process killed outright (SIGKILL, a
 //!   crash) leaves its temporary file behind; the next write to the same
 //!   `NAME` removes those whose process no longer runs. A process on
 //!   another machine sharing the directory, or in another PID namespace,
 //!   looks as if it no longer runs: do not write one file from several
 //!   machines at once.
-//! * Signals (unix): the temporary files of writes in progress are listed
-//!   in a fixed table that [`remove_temp_files`] empties, safely from a
-//!   signal handler. A library must not take over its process's signals,
+//! * Scratch directories: [`ScratchDir`], a hidden directory beside an
+//!   output (`.NAME.spill-<pid>`) for what a write keeps on disk while it
+//!   runs, removed when dropped, on the signals below, and, once its
+//!   process no longer runs, by the next write to the same `NAME`.
+//! * Signals (unix): the temporary files of writes in progress (and the
+//!   scratch directories) are listed in fixed tables that
+//!   [`remove_temp_files`] empties, safely from a signal handler. A library must not take over its process's signals,
 //!   so nothing here installs a handler by itself: an application calls
 //!   [`remove_temp_files_on_signals`] at start (the `octolinear` tool does),
 //!   or [`remove_temp_files`] from a handler of its own.
@@ -36,9 +43,21 @@ pub use signals::{remove_temp_files, remove_temp_files_on_signals};
 /// Without signals there is no table of temporary files to keep.
 #[cfg(not(unix))]
 mod signals {
-    use std::{fs::File, io, path::PathBuf};
+    use std::{fs::File, io, path::Path, path::PathBuf};
 
     pub(super) struct Listed;
+
+    #[derive(Debug)]
+    pub(super) struct ListedDir;
+
+    /// Runs `create` only.
+    pub(super) fn create_listed_dir(
+        _: &Path,
+        create: impl FnOnce() -> io::Result<()>,
+    ) -> io::Result<Option<ListedDir>> {
+        create()?;
+        Ok(None)
+    }
 
     /// Runs `create` only.
     pub(super) fn create_listed(
@@ -61,19 +80,39 @@ use std::path::{Path, PathBuf};
 /// See the [module documentation](self) for permissions, links and
 /// temporary files left by killed processes.
 pub fn write_atomically(path: &Path, write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>) -> io::Result<()> {
-    write_atomically_with(path, true, write)
+    write_atomically_with(path, true, Links::Follow, write)
 }
 
-/// [`write_atomically`] for one of many files written into one directory
-/// together (a tile set's tiles): without the search for stale temporary
-/// files of the name, which lists the directory, and without the sync,
-/// which the writer does once for all of them ([`sync_filesystem`])
-/// before anything refers to them.
-pub(crate) fn write_atomically_batched(
+/// [`write_atomically`] for a file inside a directory the writer owns (a
+/// tile set's manifest and parts): a symbolic link at `path` is itself
+/// replaced by the new file, renamed over it, and whatever it points to
+/// is left alone; the new file gets the mode `File::create` gives.
+pub fn write_entry_atomically(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>,
 ) -> io::Result<()> {
-    write_atomically_with(path, false, write)
+    write_atomically_with(path, true, Links::Replace, write)
+}
+
+/// What a write does with a symbolic link at its path.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Links {
+    /// Replaces the file the link finally points to.
+    Follow,
+    /// Replaces the link itself.
+    Replace,
+}
+
+/// [`write_entry_atomically`] for one of many files written into one
+/// directory together (a tile set's tiles): without the search for stale
+/// temporary files of the name, which lists the directory, and without
+/// the sync, which the writer does once for all of them
+/// ([`sync_filesystem`]) before anything refers to them.
+pub(crate) fn write_entry_batched(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>,
+) -> io::Result<()> {
+    write_atomically_with(path, false, Links::Replace, write)
 }
 
 /// Writes to disk everything written so far to the filesystem holding
@@ -91,14 +130,18 @@ pub(crate) fn sync_filesystem(dir: &Path) -> io::Result<()> {
 }
 
 /// [`write_atomically`], with (`alone`) or without the search for stale
-/// temporary files and the sync.
+/// temporary files and the sync, following links or replacing them.
 fn write_atomically_with(
     path: &Path,
     alone: bool,
+    links: Links,
     write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>,
 ) -> io::Result<()> {
-    let target = final_target(path)?;
-    let written = replace(&target, alone, write);
+    let target = match links {
+        Links::Follow => final_target(path)?,
+        Links::Replace => path.to_path_buf(),
+    };
+    let written = replace(&target, alone, links, write);
     if target == path {
         written
     } else {
@@ -106,7 +149,12 @@ fn write_atomically_with(
     }
 }
 
-fn replace(target: &Path, alone: bool, write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>) -> io::Result<()> {
+fn replace(
+    target: &Path,
+    alone: bool,
+    links: Links,
+    write: impl FnOnce(&mut BufWriter<&File>) -> io::Result<()>,
+) -> io::Result<()> {
     let name = target
         .file_name()
         .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, format!("{} names no file", target.display())))?;
@@ -114,8 +162,14 @@ fn replace(target: &Path, alone: bool, write: impl FnOnce(&mut BufWriter<&File>)
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    let existing = match fs::metadata(target) {
+    let found = match links {
+        Links::Follow => fs::metadata(target),
+        Links::Replace => fs::symlink_metadata(target),
+    };
+    let existing = match found {
         Ok(m) if m.is_file() => Some(m),
+        // a link replaced: the new file is a new one, of the default mode
+        Ok(m) if m.file_type().is_symlink() => None,
         Ok(_) => return Err(io::Error::new(io::ErrorKind::InvalidInput, "exists and is not a regular file")),
         Err(e) if e.kind() == io::ErrorKind::NotFound => None,
         Err(e) => return Err(e),
@@ -123,6 +177,7 @@ fn replace(target: &Path, alone: bool, write: impl FnOnce(&mut BufWriter<&File>)
     #[cfg(unix)]
     if alone {
         remove_stale_temps(dir, name);
+        remove_stale_scratch(dir, name);
     }
     let mut temp = create_temp(dir, name, existing.as_ref())?;
     let mut w = BufWriter::with_capacity(1 << 16, &temp.file);
@@ -134,6 +189,93 @@ fn replace(target: &Path, alone: bool, write: impl FnOnce(&mut BufWriter<&File>)
     fs::rename(&temp.path, target)?;
     temp.renamed = true;
     Ok(())
+}
+
+/// A hidden directory beside an output, `.NAME.spill-<pid>`, for what a
+/// write keeps on disk while it runs (a capped build's tiles, records
+/// waiting for their file). It is removed with everything in it when
+/// dropped, by [`remove_temp_files`] (so on the signals
+/// [`remove_temp_files_on_signals`] handles), and, when its process was
+/// killed outright, by the next [`ScratchDir::beside`] or atomic write of
+/// the same `NAME` (unix: those of processes that no longer run, as for
+/// temporary files).
+#[derive(Debug)]
+pub struct ScratchDir {
+    path: PathBuf,
+    /// Dropped after the directory is removed (see [`TempFile`]).
+    _listed: Option<signals::ListedDir>,
+}
+
+impl ScratchDir {
+    /// Creates `.NAME.spill-<pid>` beside `output` (`NAME` its file name),
+    /// after removing the scratch directories of `NAME` whose processes no
+    /// longer run and anything left at this process's name.
+    pub fn beside(output: &Path) -> io::Result<ScratchDir> {
+        let name = output.file_name().unwrap_or(OsStr::new("map"));
+        let dir = match output.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        #[cfg(unix)]
+        remove_stale_scratch(dir, name);
+        let path = dir.join(scratch_name(name, std::process::id()));
+        // a name of this process's holds nothing of this process's yet
+        match fs::symlink_metadata(&path) {
+            Ok(m) if m.is_dir() => fs::remove_dir_all(&path)?,
+            Ok(_) => fs::remove_file(&path)?,
+            Err(_) => {}
+        }
+        let listed = signals::create_listed_dir(&path, || fs::create_dir(&path))?;
+        Ok(ScratchDir { path, _listed: listed })
+    }
+
+    /// The directory.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for ScratchDir {
+    fn drop(&mut self) {
+        let _ = fs::remove_dir_all(&self.path);
+    }
+}
+
+/// `.NAME.spill-<pid>`.
+fn scratch_name(name: &OsStr, pid: u32) -> OsString {
+    let mut s = OsString::from(".");
+    s.push(name);
+    s.push(format!(".spill-{pid}"));
+    s
+}
+
+/// The process id in `file` if it names a scratch directory of `name`
+/// (`.NAME.spill-<pid>`, the pid decimal and positive).
+#[cfg(unix)]
+fn scratch_pid(name: &OsStr, file: &OsStr) -> Option<libc::pid_t> {
+    let pid =
+        file.as_encoded_bytes().strip_prefix(b".")?.strip_prefix(name.as_encoded_bytes())?.strip_prefix(b".spill-")?;
+    if pid.is_empty() || !pid.iter().all(u8::is_ascii_digit) {
+        return None;
+    }
+    let pid: libc::pid_t = std::str::from_utf8(pid).ok()?.parse().ok()?;
+    (pid > 0).then_some(pid)
+}
+
+/// Removes the scratch directories of `name` in `dir` whose processes no
+/// longer run, with what they hold; never those of running processes,
+/// never anything but directories (a link of that name is left, and
+/// nothing a link inside points to is touched). Best effort.
+#[cfg(unix)]
+fn remove_stale_scratch(dir: &Path, name: &OsStr) {
+    let Ok(entries) = fs::read_dir(dir) else { return };
+    let own = std::process::id();
+    for entry in entries.flatten() {
+        let Some(pid) = scratch_pid(name, &entry.file_name()) else { continue };
+        if pid as u32 != own && !process_runs(pid) && entry.file_type().is_ok_and(|t| t.is_dir()) {
+            let _ = fs::remove_dir_all(entry.path());
+        }
+    }
 }
 
 /// Linux's limit on the links followed in resolving one path.
@@ -409,6 +551,74 @@ mod tests {
         symlink("missing/x.txt", dir.path().join("nowhere")).unwrap();
         let err = write_text(&dir.path().join("nowhere"), "x").unwrap_err();
         assert!(err.to_string().contains("missing/x.txt (the link's target)"), "{err}");
+    }
+
+    #[test]
+    fn entry_writes_replace_a_link_itself_and_leave_its_target_alone() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("outside.txt");
+        write_text(&target, "precious").unwrap();
+        fs::set_permissions(&target, fs::Permissions::from_mode(0o600)).unwrap();
+        let link = dir.path().join("entry");
+        symlink(&target, &link).unwrap();
+        write_entry_atomically(&link, |w| w.write_all(b"new")).unwrap();
+        assert_eq!(fs::read_to_string(&target).unwrap(), "precious");
+        assert!(fs::symlink_metadata(&link).unwrap().is_file());
+        assert_eq!(fs::read_to_string(&link).unwrap(), "new");
+        // dangling: nothing created where it pointed
+        symlink(dir.path().join("nowhere.txt"), dir.path().join("dangling")).unwrap();
+        write_entry_atomically(&dir.path().join("dangling"), |w| w.write_all(b"x")).unwrap();
+        assert!(!dir.path().join("nowhere.txt").exists());
+        // a link to a directory is replaced too; a directory is not
+        fs::create_dir(dir.path().join("d")).unwrap();
+        symlink(dir.path().join("d"), dir.path().join("to-dir")).unwrap();
+        write_entry_atomically(&dir.path().join("to-dir"), |w| w.write_all(b"x")).unwrap();
+        assert!(dir.path().join("d").is_dir());
+        let err = write_entry_atomically(&dir.path().join("d"), |w| w.write_all(b"x")).unwrap_err();
+        assert!(err.to_string().contains("is not a regular file"), "{err}");
+        assert_eq!(names(dir.path()), ["d", "dangling", "entry", "outside.txt", "to-dir"]);
+    }
+
+    #[test]
+    fn scratch_dirs_go_when_dropped_and_dead_processes_ones_at_the_next_write() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("map.ot");
+        let scratch = ScratchDir::beside(&out).unwrap();
+        let own = format!(".map.ot.spill-{}", std::process::id());
+        assert_eq!(scratch.path(), dir.path().join(&own));
+        fs::write(scratch.path().join("d8-1-2-3.olm"), "tile").unwrap();
+        drop(scratch);
+        assert!(names(dir.path()).is_empty());
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        child.wait().unwrap();
+        let (dead, live) = (child.id(), std::os::unix::process::parent_id());
+        let outside = dir.path().join("outside");
+        fs::create_dir(&outside).unwrap();
+        fs::write(outside.join("keep"), "precious").unwrap();
+        let stale = |name: &str| {
+            let d = dir.path().join(name);
+            fs::create_dir(&d).unwrap();
+            fs::write(d.join("d8-1-2-3.olm"), "tile").unwrap();
+            symlink(&outside, d.join("link")).unwrap();
+        };
+        stale(&format!(".map.ot.spill-{dead}"));
+        stale(&format!(".map.ot.spill-{live}"));
+        stale(&format!(".other.ot.spill-{dead}"));
+        symlink(&outside, dir.path().join(format!(".map.ot.spill-{}", dead + 1))).unwrap();
+        let kept = names(dir.path()).into_iter().filter(|n| !n.ends_with(&format!("spill-{dead}"))).collect::<Vec<_>>();
+        write_text(&out, "map").unwrap();
+        let mut want = kept.clone();
+        want.push(format!(".other.ot.spill-{dead}"));
+        want.push("map.ot".into());
+        want.sort();
+        assert_eq!(names(dir.path()), want);
+        assert_eq!(fs::read_to_string(outside.join("keep")).unwrap(), "precious");
+        // a scratch directory beside the output removes them too
+        stale(&format!(".map.ot.spill-{dead}"));
+        let scratch = ScratchDir::beside(&out).unwrap();
+        assert!(!dir.path().join(format!(".map.ot.spill-{dead}")).exists());
+        drop(scratch);
+        assert_eq!(names(dir.path()), want);
     }
 
     #[test]

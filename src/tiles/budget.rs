@@ -5,7 +5,7 @@
 //! read back and not changed since is dropped again without a write.
 
 use super::error::TileError;
-use super::file::{load_tree, open_tile, write_tile};
+use super::file::{load_tree, open_to_read, write_tile};
 use super::id::TileId;
 use super::manifest::TileEntry;
 use super::map::{Tile, TileState, TiledMap};
@@ -68,9 +68,11 @@ impl Budget {
         }
     }
 
-    /// Maps a spilled tile's file (header checks only: this process wrote it).
+    /// Maps a spilled tile's file, checked against what was written (its
+    /// length, node count and CRC-32): a file changed or replaced on disk
+    /// meanwhile is an error naming it, never read into the map.
     pub(super) fn open(&self, entry: &TileEntry) -> Result<MappedMap<memmap2::Mmap>, TileError> {
-        open_tile(&self.dir, entry)
+        open_to_read(&self.dir, entry, None)
     }
 
     /// Reads a spilled tile's tree back, verified.

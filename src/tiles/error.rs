@@ -33,8 +33,8 @@ pub enum TileError {
     /// A ray could not be cast.
     #[error(transparent)]
     Cast(#[from] CastError),
-    /// Reading or writing a file failed.
-    #[error("{}: {source}", path.display())]
+    /// Reading or writing a file failed (the I/O error is the source).
+    #[error("{}", path.display())]
     Io {
         /// The file or directory.
         path: PathBuf,
@@ -76,6 +76,45 @@ pub enum TileError {
         dir: PathBuf,
         /// What is wrong.
         reason: String,
+    },
+    /// A directory cannot receive a tile set: writing one there could
+    /// replace or remove files that are not the set's.
+    #[error("{}: {reason}", dir.display())]
+    SetDir {
+        /// The directory.
+        dir: PathBuf,
+        /// Why not.
+        reason: String,
+    },
+    /// A plan file is malformed.
+    #[error("{}: line {line}: {reason}", path.display())]
+    PlanFile {
+        /// The plan file.
+        path: PathBuf,
+        /// Line number (1-based) of the fault.
+        line: usize,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The tile set's path exists and is not a directory.
+    #[error(
+        "{} exists and is not a directory (a tile set is a directory): remove it or write to another NAME.tiles",
+        dir.display()
+    )]
+    NotADirectory {
+        /// The path.
+        dir: PathBuf,
+    },
+    /// Another writer holds the tile set's lock ([`super::SetLock`]): a
+    /// build of the whole set, or of the same task.
+    #[error("{}: {holder} is writing this tile set (it holds {}); wait for it to end or write to another NAME.tiles", dir.display(), lock.display())]
+    Locked {
+        /// The tile set's directory.
+        dir: PathBuf,
+        /// The lock file held.
+        lock: PathBuf,
+        /// Who holds it, as the message says it.
+        holder: String,
     },
     /// A tile plan is malformed or cannot be made (line 0: not about a
     /// line of a plan file).

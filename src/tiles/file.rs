@@ -13,10 +13,16 @@ use crate::tree::OccupancyTree;
 use std::io::Write;
 use std::path::Path;
 
-/// How much of a tile file is checked when it is mapped.
+/// How much of a tile file is checked when a query maps it. Whatever
+/// this says, a tile whose nodes are read into a merge or an output (a
+/// [`TileSet::merge`](super::TileSet::merge), a walk for the file
+/// writers, a tiled map's tile read back) is checked by its length,
+/// `.olm` header and CRC-32 against the manifest first.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum TileCheck {
-    /// O(1): the length, and the `.olm` header against the manifest.
+    /// O(1): the length, and the `.olm` header against the manifest; the
+    /// bytes are trusted (a file swapped for another of the same length
+    /// and header answers from its own nodes).
     Header,
     /// O(file): also the CRC-32, every `.olm` checksum and the structure,
     /// and the tile root against the manifest.
@@ -30,9 +36,15 @@ pub enum TileCheck {
 pub(crate) fn write_tile(tree: &OccupancyTree, id: TileId, path: &Path) -> Result<TileEntry, TileError> {
     let bytes = mapped::to_bytes(tree, WriteOptions::default()).map_err(|e| TileError::io(path, e))?;
     let entry = describe(id, &bytes).map_err(|reason| TileError::damaged(id, path, reason))?;
-    crate::formats::atomic::write_atomically_batched(path, |w| w.write_all(&bytes))
-        .map_err(|e| TileError::io(path, e))?;
+    write_bytes(path, &bytes)?;
     Ok(entry)
+}
+
+/// Writes a tile file's bytes to `path` inside a tile set or a budget's
+/// directory, atomically, without a sync: a symbolic link at `path` is
+/// replaced, never written through.
+pub(crate) fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), TileError> {
+    crate::formats::atomic::write_entry_batched(path, |w| w.write_all(bytes)).map_err(|e| TileError::io(path, e))
 }
 
 /// The manifest entry of tile `id` whose file holds `bytes` (header and
@@ -105,16 +117,48 @@ pub(crate) fn check_tile<D: AsRef<[u8]>>(
     if check == TileCheck::Header {
         return Ok(());
     }
-    let crc = crc32fast::hash(bytes);
-    if crc != entry.crc32 {
-        return Err(format!("CRC-32 {crc:08x} differs from the manifest's {:08x}", entry.crc32));
-    }
+    check_crc(bytes, entry)?;
     map.verify().map_err(|e| e.to_string())?;
     let root = root_in_view(map.view(), entry.id)?;
     if root_bits(root) != root_bits(entry.root) {
         return Err(format!("tile root {root:?} differs from the manifest's {:?}", entry.root));
     }
     Ok(())
+}
+
+/// The CRC-32 of a tile file's bytes against its manifest entry.
+fn check_crc(bytes: &[u8], entry: &TileEntry) -> Result<(), String> {
+    let crc = crc32fast::hash(bytes);
+    if crc != entry.crc32 {
+        return Err(format!(
+            "CRC-32 {crc:08x} differs from the manifest's {:08x}: the file is not the tile the manifest lists",
+            entry.crc32
+        ));
+    }
+    Ok(())
+}
+
+/// Maps the file of `entry` in `dir` for its nodes to be read into a
+/// merge or an output, checked first against the entry: its length, its
+/// `.olm` header (against `manifest`'s parameters when given, else its
+/// node count) and its CRC-32, so that no other file's bytes go in.
+pub(crate) fn open_to_read(
+    dir: &Path,
+    entry: &TileEntry,
+    manifest: Option<&Manifest>,
+) -> Result<MappedMap<memmap2::Mmap>, TileError> {
+    let map = open_tile(dir, entry)?;
+    let header = match manifest {
+        Some(m) => check_tile(&map, entry, m, TileCheck::Header),
+        None if map.header().node_count != entry.nodes => {
+            Err(format!("holds {} nodes, the tile written held {}", map.header().node_count, entry.nodes))
+        }
+        None => Ok(()),
+    };
+    header
+        .and_then(|()| check_crc(map.bytes(), entry))
+        .map_err(|reason| TileError::damaged(entry.id, dir.join(entry.id.file_name()), reason))?;
+    Ok(map)
 }
 
 /// The in-memory tree of a checked tile file, with its tile root node

@@ -3,10 +3,10 @@
 
 use super::budget::{Budget, MemoryBudget};
 use super::error::TileError;
-use super::file::write_tile;
+use super::file::{write_bytes, write_tile};
 use super::forget::Window;
 use super::id::{code_shift, TileId, MAX_TILE_DEPTH};
-use super::manifest::{Manifest, TaskPart, TileEntry, MANIFEST_FILE};
+use super::manifest::{BuildRecord, Manifest, TaskPart, TileEntry, MANIFEST_FILE};
 use super::top::{root_of, tile_root_node, Top, TopAnswer};
 use crate::geometry::Point3;
 use crate::key::{Key, KeySpace};
@@ -61,6 +61,8 @@ pub struct TiledMap {
     pub(super) uses: u64,
     /// What is forgotten after each scan (`forget.rs`).
     pub(super) window: Option<Window>,
+    /// How the map is built, recorded in the manifest [`Self::flush`] writes.
+    record: Option<BuildRecord>,
 }
 
 /// One tile's tree, in memory or spilled to the budget's directory.
@@ -126,6 +128,7 @@ impl TiledMap {
             budget: None,
             uses: 0,
             window: None,
+            record: None,
         })
     }
 
@@ -135,7 +138,7 @@ impl TiledMap {
         if self.budget.is_some() {
             return Err(TileError::Unsupported("a tiled map's memory budget is set once"));
         }
-        std::fs::create_dir_all(&budget.dir).map_err(|e| TileError::io(&budget.dir, e))?;
+        super::set::create_set_dir(&budget.dir)?;
         let mut b = Budget::new(budget);
         for (&prefix, tile) in &self.tiles {
             if let TileState::Live { bytes, .. } = tile.state {
@@ -152,6 +155,13 @@ impl TiledMap {
     /// prefixes casts only the rays that can reach its tiles.
     pub fn set_task(&mut self, task: TaskPart) {
         self.task = Some(task);
+    }
+
+    /// Records how the map is built (the insertion options, the input,
+    /// the plan) in the manifest or task part [`Self::flush`] writes, so
+    /// that a set or part built otherwise is never taken for this one.
+    pub fn set_build_record(&mut self, record: BuildRecord) {
+        self.record = Some(record);
     }
 
     /// The Morton codes a scan's casting records: the task's tiles' when it
@@ -589,6 +599,7 @@ impl TiledMap {
             kind: TreeKind::of(self.kind),
             sensor: self.sensor,
             task: self.task,
+            build: self.record.clone(),
             tiles: entries,
         };
         let name = self.task.map_or_else(|| MANIFEST_FILE.to_string(), TaskPart::file_name);
@@ -603,7 +614,7 @@ impl TiledMap {
         if self.stale {
             return Err(TileError::StaleInnerNodes);
         }
-        std::fs::create_dir_all(dir).map_err(|e| TileError::io(dir, e))?;
+        super::set::create_set_dir(dir)?;
         let spill_dir_is_dir = self.budget.as_ref().is_some_and(|b| b.is_dir(dir));
         let mut entries = Vec::with_capacity(self.tiles.len());
         for (&prefix, tile) in &self.tiles {
@@ -613,10 +624,9 @@ impl TiledMap {
                 TileState::Live { saved: Some(entry), .. } | TileState::Spilled(entry) if spill_dir_is_dir => *entry,
                 TileState::Live { tree, .. } => write_tile(tree, id, &path)?,
                 TileState::Spilled(entry) => {
-                    let from = self.budget_ref()?.path(entry.id);
-                    let bytes = std::fs::read(&from).map_err(|e| TileError::io(&from, e))?;
-                    crate::formats::atomic::write_atomically_batched(&path, |w| std::io::Write::write_all(w, &bytes))
-                        .map_err(|e| TileError::io(&path, e))?;
+                    // checked against what was spilled before it is copied
+                    let spilled = self.budget_ref()?.open(entry)?;
+                    write_bytes(&path, spilled.bytes())?;
                     *entry
                 }
             };

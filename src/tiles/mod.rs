@@ -82,10 +82,17 @@ pub use file::TileCheck;
 pub use forget::{Beyond, Window};
 pub use grouped::{BuiltGroup, GroupedBuild, GroupedError, GroupedReport, UPDATE_BYTES};
 pub use id::{TileId, MAX_TILE_DEPTH};
-pub use manifest::{task_of, Manifest, ManifestError, TaskPart, TaskTiles, TileEntry, MAGIC, MANIFEST_FILE, VERSION};
+pub use manifest::{
+    check_set_dir, is_tile_set_name, task_of, BuildInput, BuildRecord, Manifest, ManifestError, TaskPart, TaskTiles,
+    TileEntry, MAGIC, MANIFEST_FILE, MAX_LINE_BYTES, MAX_TASKS, VERSION,
+};
 pub use map::{TiledMap, TiledStats};
-pub use plan::{PlannedTask, TilePlan, TileWork, PLAN_MAGIC, PLAN_VERSION, SAMPLE_ABOVE, SAMPLE_STRIDE, UPDATE_COST};
-pub use set::{combine_parts, read_manifest, TileSet, TileSetReport};
+pub use plan::{
+    PlannedTask, TilePlan, TileWork, MAX_PLAN_BYTES, PLAN_MAGIC, PLAN_VERSION, SAMPLE_ABOVE, SAMPLE_STRIDE, UPDATE_COST,
+};
+pub use set::{
+    combine_parts, oversize, read_manifest, remove_unlisted_tiles, Oversize, SetLock, TileSet, TileSetReport, LOCK_FILE,
+};
 pub use top::TileRoot;
 
 #[cfg(test)]

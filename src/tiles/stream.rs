@@ -8,7 +8,7 @@
 //! and [`TileSet::merge`] build the tree from the same walk.
 
 use super::error::TileError;
-use super::file::{check_tile, load_tree, open_tile, root_mask_in_view, TileCheck};
+use super::file::{load_tree, open_to_read, root_mask_in_view};
 use super::id::TileId;
 use super::map::{TileState, TiledMap};
 use super::set::TileSet;
@@ -112,8 +112,9 @@ impl TiledMap {
 
 impl TileSet {
     /// Walks the single tree ([`Self::merge`]'s) in pre-order without
-    /// building it: each tile is mapped, read (its header checked), walked
-    /// and dropped in turn.
+    /// building it: each tile is mapped, checked against the manifest
+    /// (length, header and CRC-32, whatever [`Self::set_check`] says),
+    /// read, walked and dropped in turn.
     pub fn visit_preorder<V: PreorderVisitor>(&self, visitor: &mut V) -> Result<ControlFlow<V::Break>, TileError> {
         let manifest = self.manifest();
         let damaged = |i: usize, reason| {
@@ -122,23 +123,21 @@ impl TileSet {
         };
         let mask = |i: usize| {
             let entry = &manifest.tiles[i];
-            let map = open_tile(self.dir(), entry)?;
-            check_tile(&map, entry, manifest, TileCheck::Header).map_err(|reason| damaged(i, reason))?;
+            let map = open_to_read(self.dir(), entry, Some(manifest))?;
             Ok(root_mask_in_view(map.view(), entry.id))
         };
         self.top().visit(visitor, &mask, &mut |i, visitor| {
             let entry = &manifest.tiles[i];
-            let map = open_tile(self.dir(), entry)?;
-            let tree = check_tile(&map, entry, manifest, TileCheck::Header)
-                .and_then(|()| load_tree(&map, entry))
-                .map_err(|reason| damaged(i, reason))?;
+            let map = open_to_read(self.dir(), entry, Some(manifest))?;
+            let tree = load_tree(&map, entry).map_err(|reason| damaged(i, reason))?;
             drop(map);
             let _loaded = loaded::Tile::new();
             visit_tile(&tree, entry.id, visitor).map_err(|reason| damaged(i, reason))
         })
     }
 
-    /// The single tree, each tile read (and its header checked) in turn.
+    /// The single tree, each tile checked (length, header, CRC-32) and
+    /// read in turn.
     pub fn merge(&self) -> Result<OccupancyTree, TileError> {
         build(self, self.manifest().node_kind(), self.node_count(), |v| self.visit_preorder(v))
     }

@@ -326,3 +326,183 @@ fn a_walk_of_a_spilled_map_or_a_tile_set_holds_one_tile_read_from_disk_at_a_time
     check("spilled map", &|v| map.visit_preorder(v).map(|_| ()));
     check("tile set", &|v| set.visit_preorder(v).map(|_| ()));
 }
+
+/// The set's manifest rewritten with `change` applied to it.
+fn rewrite_manifest(set_dir: &std::path::Path, change: impl FnOnce(&mut Manifest)) {
+    let path = set_dir.join(MANIFEST_FILE);
+    let mut m = read_manifest(&path).unwrap();
+    change(&mut m);
+    std::fs::write(&path, m.to_bytes()).unwrap();
+}
+
+/// A tile file that is not the one its manifest line describes (same
+/// length, node count and root; another CRC-32, as a tile of another build
+/// of the map would be) is refused by the merge, the walk the file writers
+/// take, and queries checked fully, naming the file and the CRC-32.
+#[test]
+fn a_tile_file_other_than_the_manifests_feeds_no_merge_walk_or_query() {
+    let dir = tempfile::tempdir().unwrap();
+    let scans = test_scans();
+    let mut map = tiled(NodeKind::Plain, 5, &scans, &ScanOptions::default());
+    let set_dir = dir.path().join("m.tiles");
+    map.flush(&set_dir).unwrap();
+    let p = Point3::new(1.1, 0.0, 0.3);
+    let reached = TileId::of_key(map.key(p).unwrap(), 5);
+    rewrite_manifest(&set_dir, |m| {
+        let entry = m.tiles.iter_mut().find(|t| t.id == reached).unwrap();
+        entry.crc32 ^= 0x8000_0001;
+    });
+    let file = set_dir.join(reached.file_name());
+    let is_crc_error = |e: &TileError| {
+        matches!(e, TileError::DamagedTile { tile, path, reason }
+            if *tile == reached && *path == file && reason.contains("CRC-32"))
+    };
+    let set = TileSet::open(&set_dir).unwrap();
+    let e = set.merge().unwrap_err();
+    assert!(is_crc_error(&e), "{e}");
+    let e = crate::formats::ot::write_map(&set, std::io::sink()).unwrap_err();
+    let inner = e.get_ref().and_then(|e| e.downcast_ref::<TileError>()).unwrap();
+    assert!(is_crc_error(inner), "{e}");
+    let e = set.search_point(p, 0).unwrap_err();
+    assert!(is_crc_error(&e), "{e}");
+    assert!(is_crc_error(&set.verify().unwrap_err()));
+}
+
+/// A spilled tile's file that no longer holds what was spilled (another
+/// CRC-32 than the one recorded when it was written) is refused when read
+/// back for an update, a merge, a walk or a copy into a set.
+#[test]
+fn a_spilled_tile_changed_on_disk_is_never_read_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let scans = test_scans();
+    let mut map = TiledMap::new(0.1, SensorModel::default(), NodeKind::Plain, 5).unwrap();
+    map.set_budget(MemoryBudget { bytes: 1, dir: dir.path().join("spill") }).unwrap();
+    for (p, o) in &scans {
+        map.insert_point_cloud(p, *o, &ScanOptions::default()).unwrap();
+    }
+    let (&prefix, tile) =
+        map.tiles.iter_mut().find(|(_, t)| matches!(t.state, super::map::TileState::Spilled(_))).unwrap();
+    let super::map::TileState::Spilled(entry) = &mut tile.state else { unreachable!() };
+    // as if the file on disk had been replaced by another of its length
+    entry.crc32 ^= 1;
+    let id = TileId::from_prefix(5, prefix);
+    let refused = |e: TileError| match e {
+        TileError::DamagedTile { tile, reason, .. } => tile == id && reason.contains("CRC-32"),
+        _ => false,
+    };
+    assert!(refused(map.merge().unwrap_err()));
+    let e = crate::formats::ot::write_map(&map, std::io::sink()).unwrap_err();
+    assert!(e.to_string().contains("CRC-32"), "{e}");
+    assert!(refused(map.flush(&dir.path().join("copy.tiles")).unwrap_err()));
+    assert!(refused(map.update_key(id.key_range().0, true, InnerNodes::Update).unwrap_err()));
+}
+
+#[test]
+fn a_set_lock_admits_one_build_of_the_set_or_of_each_task() {
+    let dir = tempfile::tempdir().unwrap();
+    let set = dir.path().join("m.tiles");
+    let locked = |r: Result<SetLock, TileError>| match r {
+        Err(TileError::Locked { dir, lock, holder }) => {
+            assert_eq!(dir, set);
+            format!("{holder} {}", lock.display())
+        }
+        other => panic!("{other:?}"),
+    };
+    let whole = SetLock::acquire(&set).unwrap();
+    assert!(set.join(LOCK_FILE).is_file());
+    assert!(locked(SetLock::acquire(&set)).contains("another build"));
+    assert!(locked(SetLock::acquire_task(&set, TaskPart::hashed(0, 2))).contains("whole set"));
+    drop(whole);
+    // a set the lock created and nothing went into is gone with it
+    assert!(!set.exists());
+    let (t0, t1) = (TaskPart::hashed(0, 2), TaskPart::hashed(1, 2));
+    let first = SetLock::acquire_task(&set, t0).unwrap();
+    let second = SetLock::acquire_task(&set, t1).unwrap();
+    assert!(locked(SetLock::acquire_task(&set, t0)).contains("task 0 of 2"));
+    assert!(locked(SetLock::acquire(&set)).contains("another build"));
+    let mut map = tiled(NodeKind::Plain, 3, &test_scans()[..1], &ScanOptions::default());
+    map.set_task(t0);
+    map.flush(&set).unwrap();
+    drop((first, second));
+    assert!(set.join("task-0-of-2.manifest").is_file(), "a set written into stays");
+    let _whole = SetLock::acquire(&set).unwrap();
+    let e = combine_parts(&set).unwrap_err();
+    assert!(matches!(e, TileError::Locked { .. }), "{e}");
+    // a file where the set should be
+    let file = dir.path().join("f.tiles");
+    std::fs::write(&file, "x").unwrap();
+    let e = SetLock::acquire(&file).unwrap_err();
+    assert!(matches!(e, TileError::NotADirectory { .. }), "{e}");
+    let text = e.to_string();
+    assert!(text.contains("exists and is not a directory") && text.contains("remove it"), "{text}");
+    assert_eq!(text.matches("exists").count(), 1, "{text}");
+}
+
+#[cfg(unix)]
+#[test]
+fn writes_into_a_set_replace_links_and_never_write_through_them() {
+    use std::os::unix::fs::symlink;
+    let dir = tempfile::tempdir().unwrap();
+    let outside = dir.path().join("outside");
+    std::fs::create_dir(&outside).unwrap();
+    let scans = test_scans();
+    let mut map = tiled(NodeKind::Plain, 5, &scans, &ScanOptions::default());
+    let set = dir.path().join("m.tiles");
+    std::fs::create_dir(&set).unwrap();
+    // links named like every file the writers write, and a stale tile
+    let stale = TileId::from_prefix(5, 7).file_name();
+    let mut names: Vec<String> = map.tiles().map(|t| t.file_name()).collect();
+    names.extend([MANIFEST_FILE.to_string(), "task-0-of-2.manifest".into(), stale.clone(), LOCK_FILE.into()]);
+    for name in &names {
+        std::fs::write(outside.join(name), "precious").unwrap();
+        symlink(outside.join(name), set.join(name)).unwrap();
+    }
+    // (a build takes the lock first, which refuses a link named `manifest`)
+    let mut part = tiled(NodeKind::Plain, 5, &scans[..1], &ScanOptions::default());
+    part.set_task(TaskPart::hashed(0, 2));
+    part.flush(&set).unwrap();
+    let manifest = map.flush(&set).unwrap();
+    remove_unlisted_tiles(&set, &manifest).unwrap();
+    drop(SetLock::acquire(&set).unwrap());
+    // a budget's directory too
+    let spill = dir.path().join("spill");
+    std::fs::create_dir(&spill).unwrap();
+    let mut capped = TiledMap::new(0.1, SensorModel::default(), NodeKind::Plain, 5).unwrap();
+    for name in &names[..2] {
+        symlink(outside.join(name), spill.join(name)).unwrap();
+    }
+    capped.set_budget(MemoryBudget { bytes: 1, dir: spill.clone() }).unwrap();
+    for (p, o) in &scans {
+        capped.insert_point_cloud(p, *o, &ScanOptions::default()).unwrap();
+    }
+    for name in &names {
+        assert_eq!(std::fs::read_to_string(outside.join(name)).unwrap(), "precious", "{name} written through");
+        if name != &stale {
+            assert!(!set.join(name).symlink_metadata().unwrap().file_type().is_symlink(), "{name}");
+        }
+    }
+    assert!(!set.join(&stale).exists() && set.join(&stale).symlink_metadata().is_err(), "the stale link stays");
+    for name in &names[..2] {
+        assert!(spill.join(name).symlink_metadata().unwrap().is_file(), "{name}");
+    }
+    let set = TileSet::open(&set).unwrap();
+    assert!(ot(&set.merge().unwrap()) == ot(&map.merge().unwrap()));
+}
+
+/// Far more tile bytes than the merged map's are reported; sensible
+/// depths are not.
+#[test]
+fn oversized_sets_are_those_of_far_more_tile_bytes_than_the_map() {
+    let scans = scans(12);
+    let report = |depth| {
+        let mut map = tiled(NodeKind::Plain, depth, &scans, &ScanOptions::default());
+        let dir = tempfile::tempdir().unwrap();
+        let manifest = map.flush(&dir.path().join("s.tiles")).unwrap();
+        let nodes = TileSet::open(&dir.path().join("s.tiles")).unwrap().node_count();
+        oversize(&manifest, nodes)
+    };
+    assert_eq!(report(8), None);
+    let over = report(15).expect("depth 15 holds far more bytes than the map");
+    assert!(over.tile_bytes > 2 * over.merged_bytes, "{over:?}");
+    assert!(over.to_string().contains("smaller tile depth"), "{over}");
+}

@@ -50,6 +50,9 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 /// Writes in progress at once that a signal cleans up after; further ones
 /// still write atomically but are left to the stale-file removal.
 const SLOTS: usize = 64;
+/// Scratch directories at once that a signal removes; further ones are
+/// left to the stale-directory removal.
+const DIR_SLOTS: usize = 8;
 /// Linux's `PATH_MAX` (with the NUL): longer paths cannot be opened.
 const PATH_CAPACITY: usize = 4096;
 
@@ -70,6 +73,10 @@ unsafe impl Sync for Slot {}
 
 static TABLE: [Slot; SLOTS] =
     [const { Slot { claimed: AtomicBool::new(false), path: UnsafeCell::new([0; PATH_CAPACITY]) } }; SLOTS];
+/// The scratch directories ([`super::ScratchDir`]), listed by the same
+/// protocol as the temporary files.
+static DIR_TABLE: [Slot; DIR_SLOTS] =
+    [const { Slot { claimed: AtomicBool::new(false), path: UnsafeCell::new([0; PATH_CAPACITY]) } }; DIR_SLOTS];
 /// Creation windows open now.
 static CREATING: AtomicUsize = AtomicUsize::new(0);
 /// Set by the cleanup: no temporary file is created from then on.
@@ -81,6 +88,16 @@ pub(super) struct Listed(usize);
 impl Drop for Listed {
     fn drop(&mut self) {
         TABLE[self.0].claimed.store(false, Ordering::Release);
+    }
+}
+
+/// A scratch directory's slot in its table, freed when dropped.
+#[derive(Debug)]
+pub(super) struct ListedDir(usize);
+
+impl Drop for ListedDir {
+    fn drop(&mut self) {
+        DIR_TABLE[self.0].claimed.store(false, Ordering::Release);
     }
 }
 
@@ -127,32 +144,44 @@ pub(super) fn create_listed(
 ) -> io::Result<(PathBuf, File, Option<Listed>)> {
     let _window = Window::open()?;
     let (path, file) = create()?;
-    let listed = list(&path);
+    let listed = list(&TABLE, &path).map(Listed);
     Ok((path, file, listed))
 }
 
-fn list(path: &Path) -> Option<Listed> {
+/// Runs `create` (which creates the directory `path`) in a creation
+/// window and lists the directory; `None` when the table is full or the
+/// path too long for a slot.
+pub(super) fn create_listed_dir(path: &Path, create: impl FnOnce() -> io::Result<()>) -> io::Result<Option<ListedDir>> {
+    let _window = Window::open()?;
+    create()?;
+    Ok(list(&DIR_TABLE, path).map(ListedDir))
+}
+
+/// Claims a free slot of `table` for `path`; its index.
+fn list(table: &[Slot], path: &Path) -> Option<usize> {
     let bytes = path.as_os_str().as_bytes();
     if bytes.len() >= PATH_CAPACITY || bytes.contains(&0) {
         return None;
     }
-    let index = TABLE
+    let index = table
         .iter()
         .position(|s| s.claimed.compare_exchange(false, true, Ordering::Acquire, Ordering::Relaxed).is_ok())?;
     // SAFETY: the slot was claimed just now, inside a creation window:
     // no other thread writes it, and the cleanup does not read it before
     // the window closes.
-    let buffer = unsafe { &mut *TABLE[index].path.get() };
+    let buffer = unsafe { &mut *table[index].path.get() };
     buffer[..bytes.len()].copy_from_slice(bytes);
     buffer[bytes.len()] = 0;
-    Some(Listed(index))
+    Some(index)
 }
 
-/// Removes the temporary files of the atomic writes in progress; their
-/// writes then fail, and writes started later fail at once. Meant for a
-/// signal handler just before the process ends: it is async-signal-safe
-/// (no allocation, no lock; it waits only for other threads to finish
-/// creating a temporary file) and may run in several handlers at once.
+/// Removes the temporary files of the atomic writes in progress, and the
+/// scratch directories ([`super::ScratchDir`]) with the files in them;
+/// their writes then fail, and writes started later fail at once. Meant
+/// for a signal handler just before the process ends: it is
+/// async-signal-safe (no allocation, no lock; it waits only for other
+/// threads to finish creating a temporary file) and may run in several
+/// handlers at once.
 pub fn remove_temp_files() {
     ENDING.store(true, Ordering::SeqCst);
     while CREATING.load(Ordering::SeqCst) != 0 {
@@ -168,6 +197,69 @@ pub fn remove_temp_files() {
                 libc::unlink(slot.path.get().cast());
             }
         }
+    }
+    for slot in &DIR_TABLE {
+        if slot.claimed.load(Ordering::Acquire) {
+            // SAFETY: as above, a claimed slot holds a NUL-terminated path
+            // no window writes any more.
+            unsafe { remove_flat_dir(slot.path.get().cast()) };
+        }
+    }
+}
+
+/// Removes the directory `path` and the files in it (a scratch directory
+/// holds files only), with async-signal-safe calls alone: `open`,
+/// `getdents64` into a buffer on the stack, `unlinkat`, `rmdir`. The
+/// directory is read again from its start until a pass removes nothing
+/// (entries removed while reading may hide others from that pass), a few
+/// passes at most. Elsewhere than on Linux only an empty directory is
+/// removed (the stale-directory removal takes the rest).
+///
+/// # Safety
+///
+/// `path` points to a NUL-terminated path that stays unchanged meanwhile.
+unsafe fn remove_flat_dir(path: *const libc::c_char) {
+    #[cfg(target_os = "linux")]
+    // SAFETY: every call takes this function's descriptor or buffers, and
+    // `path` is a C string (the caller's promise); the records read are
+    // within the bytes getdents64 returned, each `d_reclen` long.
+    unsafe {
+        let fd = libc::open(path, libc::O_RDONLY | libc::O_DIRECTORY | libc::O_NOFOLLOW | libc::O_CLOEXEC);
+        if fd < 0 {
+            return;
+        }
+        // u64s: the records are 8-byte aligned
+        let mut buffer = [0u64; 512];
+        for _ in 0..8 {
+            let mut removed = false;
+            libc::lseek(fd, 0, libc::SEEK_SET);
+            loop {
+                let n = libc::syscall(libc::SYS_getdents64, fd, buffer.as_mut_ptr(), std::mem::size_of_val(&buffer));
+                if n <= 0 {
+                    break;
+                }
+                let mut at = 0usize;
+                while at < n as usize {
+                    let record = buffer.as_ptr().cast::<u8>().add(at).cast::<libc::dirent64>();
+                    let name = (*record).d_name.as_ptr();
+                    let dots = *name == b'.' as libc::c_char
+                        && (*name.add(1) == 0 || (*name.add(1) == b'.' as libc::c_char && *name.add(2) == 0));
+                    if !dots && libc::unlinkat(fd, name, 0) == 0 {
+                        removed = true;
+                    }
+                    at += usize::from((*record).d_reclen);
+                }
+            }
+            if !removed {
+                break;
+            }
+        }
+        libc::close(fd);
+    }
+    // SAFETY: rmdir on the caller's C string; it fails harmlessly on a
+    // directory that is not empty.
+    unsafe {
+        libc::rmdir(path);
     }
 }
 
