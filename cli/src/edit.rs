@@ -34,8 +34,13 @@ pub struct Args {
     #[arg(long)]
     scale: Option<f64>,
     /// Expand every pruned node to full depth (kept in .ot output only).
+    /// A leaf at depth d becomes 8^(16-d) voxels: the nodes to add are
+    /// counted first, and more than --max-nodes are refused.
     #[arg(long)]
     expand: bool,
+    /// Most nodes --expand may add.
+    #[arg(long, value_name = "N", default_value_t = octolinear::tree::OUTPUT_LIMIT)]
+    max_nodes: u64,
     /// Set every node to its clamping bound (occupied or free).
     #[arg(long)]
     max_likelihood: bool,
@@ -198,13 +203,26 @@ fn positive(v: f64, flag: &str) -> Result<f64> {
     Ok(v)
 }
 
+/// The resolution `--res` or `--scale` gives a map of `old` metres, if
+/// the library's rule ([`octolinear::key::check_resolution`]) accepts it.
+fn new_resolution(old: f64, res: Option<f64>, scale: Option<f64>) -> Result<Option<f64>> {
+    let (r, flag) = match (res, scale) {
+        (Some(r), _) => (r, format!("--res {r:?}")),
+        // edit_octree: --scale multiplies the resolution read from the file
+        (None, Some(s)) => (old * s, format!("--scale {s:?} (of resolution {old:?} m)")),
+        _ => return Ok(None),
+    };
+    octolinear::key::check_resolution(r).map(Some).map_err(|e| anyhow::anyhow!("{flag}: {e}"))
+}
+
 pub fn run(a: Args) -> Result<()> {
     super::common::MapFormat::of(a.output.path())?;
-    let new_res = match (a.res, a.scale) {
-        (Some(r), _) => Some(positive(r, "--res")?),
-        (None, Some(s)) => Some(positive(s, "--scale")?),
-        _ => None,
-    };
+    if let Some(r) = a.res {
+        positive(r, "--res")?;
+    }
+    if let Some(s) = a.scale {
+        positive(s, "--scale")?;
+    }
     let corners = match (&a.crop.min, &a.crop.max) {
         (Some(lo), Some(hi)) => Some((point_arg(lo, "--min")?, point_arg(hi, "--max")?)),
         _ => None,
@@ -214,13 +232,11 @@ pub fn run(a: Args) -> Result<()> {
         let kb = key_box(tree.key_space(), lo, hi)?;
         tree = crop(&tree, &kb)?;
     }
-    if let Some(r) = new_res {
-        // edit_octree: --scale multiplies the resolution read from the file
-        let r = if a.scale.is_some() { tree.resolution() * r } else { r };
+    if let Some(r) = new_resolution(tree.resolution(), a.res, a.scale)? {
         tree = with_resolution(&tree, r)?;
     }
     if a.expand {
-        tree.expand();
+        tree.expand_within(a.max_nodes).map_err(|e| anyhow::anyhow!("--expand: {e} (--max-nodes)"))?;
     }
     if a.max_likelihood {
         tree.to_max_likelihood();
@@ -242,6 +258,7 @@ pub fn run_crop(a: CropArgs) -> Result<()> {
         res: None,
         scale: None,
         expand: false,
+        max_nodes: octolinear::tree::OUTPUT_LIMIT,
         max_likelihood: false,
         prune: false,
     })

@@ -35,18 +35,10 @@ pub struct Args {
     ascii: bool,
 }
 
-/// The most points `to-points` writes: 3 GB of coordinates in memory, and
-/// a point count every format's header can hold.
-const MAX_POINTS: u64 = 1 << 28;
-
-/// How many voxels [`for_each_voxel`] gives (saturating: a map of large
-/// free leaves expanded to full depth may hold more than `u64` counts).
-fn count_voxels(tree: &OccupancyTree, depth: u8, want: impl Fn(f32) -> bool) -> u64 {
-    tree.leaves(depth)
-        .filter(|leaf| want(leaf.value))
-        .map(|leaf| 1u64.checked_shl(3 * u32::from(depth - leaf.depth)).unwrap_or(u64::MAX))
-        .fold(0u64, u64::saturating_add)
-}
+/// The most points `to-points` writes: the library's bound on outputs
+/// that grow with the map's extent, 2^28 (3 GB of coordinates in memory,
+/// and a point count every format's header can hold).
+const MAX_POINTS: u64 = octolinear::tree::OUTPUT_LIMIT;
 
 /// Calls `f(key, centre)` for every node at `depth` (expanding coarser
 /// leaves) whose value satisfies `want`, in depth-first child order.
@@ -78,7 +70,7 @@ pub fn run(a: Args) -> Result<()> {
     let tree = load_map(&a.map)?.tree;
     let sensor = *tree.sensor();
     let free = a.free;
-    let count = count_voxels(&tree, depth, |v| sensor.is_occupied(v) != free);
+    let count = tree.voxel_count(depth, |v| sensor.is_occupied(v) != free);
     if count > MAX_POINTS {
         bail!(
             "{} {} voxels at depth {depth} exceed the limit of {MAX_POINTS} (2^28) points; a lower --depth gives fewer",

@@ -1898,9 +1898,12 @@ fn build_streams_graphs_from_pipes_fifos_and_standard_input() {
 fn meaningless_values_are_refused() {
     let f = Fixture::new();
     let (g, out) = (f.p("s.graph"), f.p("x.bt"));
-    fail(&["build", g, "-o", out, "--res", "1e-40"], "--res 1e-40 is below the smallest usable resolution 2.35");
+    fail(
+        &["build", g, "-o", out, "--res", "1e-40"],
+        "--res: resolution 1e-40 m is below the smallest usable resolution 2.35",
+    );
     fail(&["build", g, "-o", out, "--res", "1e40"], "above the largest usable resolution");
-    fail(&["build", g, "-o", out, "--res", "NaN"], "--res must be a positive finite");
+    fail(&["build", g, "-o", out, "--res", "NaN"], "--res: resolution NaN m is not a positive finite number");
     for range in ["-5", "-1", "0", "inf"] {
         fail(&["build", g, "-o", out, "--max-range", range], "--max-range must be a positive finite number");
         fail(&["eval", g, "--max-range", range], "--max-range must be a positive finite number");
@@ -2581,4 +2584,64 @@ fn eval_without_known_voxels_is_an_error() {
     f.write("far.log", "NODE 500 500 500 0 0 0\n501 500 500\n");
     ok(&["log2graph", f.p("far.log"), f.p("far.graph")]);
     fail(&["eval", f.p("a.bt"), f.p("far.graph")], "none of them known to the map: the accuracy is undefined");
+}
+
+/// A map whose root has one occupied child at `depth`, a leaf standing for
+/// `8^(16 - depth)` voxels, as the library writes it (138 bytes at depth 1).
+fn one_coarse_leaf_bt(depth: u8) -> Vec<u8> {
+    let mut b = octolinear::tree::PreorderBuilder::new();
+    for d in 0..=depth {
+        b.push(2.0, if d == depth { 0 } else { 1 }, u64::from(d)).unwrap();
+    }
+    let tree = b.finish(0.1, Default::default()).unwrap().unwrap();
+    let mut file = Vec::new();
+    octolinear::formats::bt::write(&tree, &mut file).unwrap();
+    file
+}
+
+#[test]
+fn expanding_coarse_leaves_is_counted_and_refused_past_the_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let bytes = one_coarse_leaf_bt(1);
+    assert_eq!(bytes.len(), 138);
+    std::fs::write(p("one.bt"), bytes).unwrap();
+    let added = (8u64.pow(16) - 8) / 7;
+    let want = format!("--expand: expand: {added} nodes to add exceed the limit of 268435456 (2^28)");
+    fail(&["edit", &p("one.bt"), &p("x.ot"), "--expand"], &want);
+    fail(&["edit", &p("one.bt"), &p("x.ot"), "--expand"], "--max-nodes");
+    fail(&["edit", &p("one.bt"), &p("x.ot"), "--expand", "--max-nodes", "1000"], "exceed the limit of 1000;");
+    assert!(!dir.path().join("x.ot").exists());
+    fail(&["to-points", &p("one.bt"), "-o", &p("x.xyz")], "exceed the limit of 268435456 (2^28) points");
+    // a leaf at depth 14 adds 8 + 64 nodes: the limit is the nodes added
+    std::fs::write(p("d14.bt"), one_coarse_leaf_bt(14)).unwrap();
+    fail(&["edit", &p("d14.bt"), &p("y.ot"), "--expand", "--max-nodes", "71"], "72 nodes to add exceed the limit of 71");
+    ok(&["edit", &p("d14.bt"), &p("y.ot"), "--expand", "--max-nodes", "72"]);
+    let info = ok(&["info", &p("y.ot"), "--json"]);
+    assert!(info.contains("\"nodes\": 87") || info.contains("\"nodes\":87"), "{info}");
+}
+
+#[test]
+fn resolutions_outside_the_usable_range_are_refused_by_every_command() {
+    let f = Fixture::new();
+    let (a, out) = (f.p("a.bt"), f.p("x.bt"));
+    fail(&["edit", a, out, "--res", "1e-300"], "--res 1e-300: resolution 1e-300 m is below the smallest usable");
+    fail(&["edit", a, out, "--res", "1e300"], "--res 1e300: resolution 1e300 m is above the largest usable");
+    fail(&["edit", a, out, "--scale", "1e300"], "--scale 1e300 (of resolution 0.1 m): resolution 1");
+    fail(&["edit", a, out, "--scale", "1e300"], "m is above the largest usable resolution");
+    fail(&["edit", a, out, "--scale", "1e-300"], "m is below the smallest usable resolution");
+    assert!(!f.path("x.bt").exists());
+    ok(&["edit", a, out, "--scale", "2"]);
+    let (g, plan) = (f.p("s.graph"), f.p("p.plan"));
+    fail(&["plan", g, "--tile-depth", "4", "--tasks", "2", "-o", plan, "--res", "1e-300"], "--res: resolution 1e-300");
+    fail(&["build", g, "-o", f.p("t.tiles"), "--tile-depth", "4", "--res", "1e300"], "--res: resolution 1e300 m");
+    // a map file claiming such a resolution: the value and its offset
+    let good = std::fs::read(f.path("a.bt")).unwrap();
+    let at = good.windows(8).position(|w| w == b"res 0.1\n").unwrap() + 4;
+    let mut bad = good[..at].to_vec();
+    bad.extend_from_slice(b"1e-300");
+    bad.extend_from_slice(&good[at + 3..]);
+    let bad = f.write("bad.bt", bad);
+    fail(&["info", bad], &format!("resolution 1e-300 m is below the smallest usable resolution"));
+    fail(&["info", bad], &format!("at byte {at}"));
 }

@@ -405,33 +405,13 @@ fn print_statistics(title: &str, s: &serde_json::Value) {
     println!("Size: {} x {} x {} m^3\n", m[0], m[1], m[2]);
 }
 
-/// Smallest `--res`: half a voxel must be a normal float. Voxel centres
-/// are floats (OctoMap's point3d) half a voxel from the faces; with a
-/// normal float for that half, every centre of the ±32768 voxels has 17
-/// significant bits to spare and keys round-trip through centres at any
-/// scale, so float precision never limits the map above this (each voxel
-/// holds at least 256 floats even at the map's edge); below it, it does.
-const MIN_RES: f64 = 2.0 * f32::MIN_POSITIVE as f64;
-
-/// Largest `--res`: the map's edge, 32768 voxels from its centre, must be
-/// a finite float.
-const MAX_RES: f64 = f32::MAX as f64 / 32768.0;
-
 /// Most `--threads`: more only share the cores, each with its stack.
 const MAX_THREADS: usize = 1024;
 
-/// Checks a `--res` value (see [`MIN_RES`], [`MAX_RES`]).
+/// Checks a `--res` value by the library's rule
+/// ([`octolinear::key::check_resolution`]).
 pub(super) fn resolution_arg(res: f64) -> Result<f64> {
-    if !(res.is_finite() && res > 0.0) {
-        bail!("--res must be a positive finite resolution in metres, got {res:?}");
-    }
-    if res < MIN_RES {
-        bail!("--res {res:?} is below the smallest usable resolution {MIN_RES:?} m (2^-125: half a voxel must be a normal float)");
-    }
-    if res > MAX_RES {
-        bail!("--res {res:?} is above the largest usable resolution {MAX_RES:?} m (the map's edge, 32768 voxels out, must be a finite float)");
-    }
-    Ok(res)
+    octolinear::key::check_resolution(res).map_err(|e| anyhow::anyhow!("--res: {e}"))
 }
 
 /// Checks a `--max-range` value: positive and finite, as for `raycast`;
