@@ -5,7 +5,7 @@ use super::build::{max_range_arg, resolution_arg, scans_arg};
 use super::input;
 use anyhow::{bail, Context, Result};
 use octolinear::formats::write_atomically;
-use octolinear::tiles::{TilePlan, TileWork, MAX_TILE_DEPTH};
+use octolinear::tiles::{TilePlan, TileWork, MAX_TASKS, MAX_TILE_DEPTH};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -38,7 +38,7 @@ pub struct Args {
     /// Depth of the tiles' roots (1 to 15), as the build's --tile-depth.
     #[arg(long, value_name = "D")]
     tile_depth: u8,
-    /// Number of tasks (1 to 8^D).
+    /// Number of tasks (1 to 8^D, at most 65536).
     #[arg(long, value_name = "N")]
     tasks: u32,
     /// Voxel edge length in metres, as the build's.
@@ -68,9 +68,13 @@ pub fn run(a: Args) -> Result<()> {
     if !(1..=MAX_TILE_DEPTH).contains(&a.tile_depth) {
         bail!("--tile-depth must be between 1 and 15, got {}", a.tile_depth);
     }
-    let prefixes = 1u64 << (3 * u32::from(a.tile_depth));
-    if a.tasks == 0 || u64::from(a.tasks) > prefixes {
-        bail!("--tasks must be between 1 and {prefixes} (the tiles at depth {}), got {}", a.tile_depth, a.tasks);
+    let most = (1u64 << (3 * u32::from(a.tile_depth))).min(u64::from(MAX_TASKS));
+    if a.tasks == 0 || u64::from(a.tasks) > most {
+        bail!(
+            "--tasks must be between 1 and {most} (the tiles at depth {}, at most {MAX_TASKS} tasks), got {}",
+            a.tile_depth,
+            a.tasks
+        );
     }
     let name = input::name(&a.input);
     let mut work = TileWork::new(a.res, a.tile_depth)?;
@@ -126,8 +130,8 @@ pub fn run(a: Args) -> Result<()> {
     Ok(())
 }
 
-/// Reads a plan file; its errors name the file and line.
+/// Reads a plan file (a regular file, [`TilePlan::read`]); its errors
+/// name the file and line.
 pub fn read_plan(path: &Path) -> Result<TilePlan> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read the plan {}", path.display()))?;
-    TilePlan::parse(&text).with_context(|| format!("{} is not a valid plan", path.display()))
+    TilePlan::read(path).with_context(|| format!("cannot read the plan {}", path.display()))
 }

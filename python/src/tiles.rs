@@ -333,7 +333,10 @@ pub fn plan_tiles(
         return Err(PyValueError::new_err("tasks must be at least 1"));
     }
     let path = convert::path(graph_path)?;
-    let (work, _) = py.detach(|| estimate(&path, resolution, tile_depth, max_range, discretize, scans))?;
+    let (work, _) = py.detach(|| {
+        let file = graph::GraphFile::open(&path).map_err(|e| graph_error(&path, e))?;
+        estimate(&file, &path, resolution, tile_depth, max_range, discretize, scans)
+    })?;
     Ok(work.split(tasks).map_err(tile_error)?.to_text())
 }
 

@@ -204,6 +204,7 @@ impl GroupedBuild {
             kind: TreeKind::of(NodeKind::Plain),
             sensor: self.sensor,
             task: None,
+            build: None,
             tiles: entries,
         };
         manifest.write(&self.dir.join(MANIFEST_FILE))?;

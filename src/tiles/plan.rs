@@ -29,7 +29,7 @@
 
 use super::error::TileError;
 use super::id::{TileId, MAX_TILE_DEPTH};
-use super::manifest::{clip, decimal, TaskPart, TaskTiles};
+use super::manifest::{clip, decimal, read_text_file, TaskPart, TaskTiles, MAX_LINE_BYTES, MAX_TASKS};
 use crate::geometry::Point3;
 use crate::key::{KeySpace, KEY_CENTER, TREE_DEPTH};
 use crate::tree::TreeError;
@@ -41,6 +41,9 @@ use std::ops::Range;
 pub const PLAN_MAGIC: &str = "octolinear-tile-plan";
 /// The plan file version this crate writes and reads.
 pub const PLAN_VERSION: u32 = 1;
+/// Largest plan file read: [`MAX_TASKS`] task lines and the header, each
+/// at most [`MAX_LINE_BYTES`].
+pub const MAX_PLAN_BYTES: u64 = (MAX_TASKS as u64 + 4) * (MAX_LINE_BYTES as u64 + 1);
 /// Scans of more points than this are sampled by [`TileWork::add_scan`].
 pub const SAMPLE_ABOVE: usize = 16_384;
 /// One point in this many is walked in a sampled scan.
@@ -216,10 +219,14 @@ impl TileWork {
     /// ranges are few, large cubes).
     pub fn split(&self, tasks: u32) -> Result<TilePlan, TileError> {
         let prefixes = 1u64 << (3 * u32::from(self.depth));
-        if tasks == 0 || u64::from(tasks) > prefixes {
+        let most = prefixes.min(u64::from(MAX_TASKS));
+        if tasks == 0 || u64::from(tasks) > most {
             return Err(TileError::Plan {
                 line: 0,
-                reason: format!("{tasks} tasks: expected 1 to {prefixes} (the tiles at depth {})", self.depth),
+                reason: format!(
+                    "{tasks} tasks: expected 1 to {most} (the tiles at depth {}, at most {MAX_TASKS} tasks)",
+                    self.depth
+                ),
             });
         }
         let tiles: Vec<(u64, u64)> = self.tiles().collect();
@@ -308,6 +315,31 @@ impl TilePlan {
         Ok(TaskPart { index, count, tiles: TaskTiles::Prefixes { start: t.prefixes.start, end: t.prefixes.end } })
     }
 
+    /// The plan's identity: the CRC-32 of its text ([`Self::to_text`]),
+    /// recorded in the parts built from it
+    /// ([`BuildRecord::plan`](super::BuildRecord::plan)).
+    pub fn identity(&self) -> u32 {
+        crc32fast::hash(self.to_text().as_bytes())
+    }
+
+    /// Reads the plan file at `path`: a regular file (a FIFO, device or
+    /// directory is refused before it is opened for reading), of lines no
+    /// longer than [`MAX_LINE_BYTES`] and at most [`MAX_PLAN_BYTES`] in
+    /// all, parsed as [`Self::parse`] does. Errors name the file (and the
+    /// line).
+    pub fn read(path: &std::path::Path) -> Result<TilePlan, TileError> {
+        let bytes = read_text_file(path, "a tile plan", MAX_PLAN_BYTES)?;
+        let text = std::str::from_utf8(&bytes).map_err(|e| TileError::PlanFile {
+            path: path.to_path_buf(),
+            line: 0,
+            reason: format!("not UTF-8 text ({e})"),
+        })?;
+        TilePlan::parse(text).map_err(|e| match e {
+            TileError::Plan { line, reason } => TileError::PlanFile { path: path.to_path_buf(), line, reason },
+            other => other,
+        })
+    }
+
     /// The plan file's text.
     pub fn to_text(&self) -> String {
         let mut s = format!("{PLAN_MAGIC} {PLAN_VERSION}\n");
@@ -325,6 +357,9 @@ impl TilePlan {
     pub fn parse(text: &str) -> Result<TilePlan, TileError> {
         let fault = |line: usize, reason: String| TileError::Plan { line, reason };
         let lines: Vec<&str> = text.lines().collect();
+        if let Some((i, l)) = lines.iter().enumerate().find(|(_, l)| l.len() > MAX_LINE_BYTES) {
+            return Err(fault(i + 1, format!("line of {} bytes, longer than any plan line ({MAX_LINE_BYTES})", l.len())));
+        }
         let line = |i: usize| lines.get(i).copied().ok_or_else(|| fault(i + 1, "the plan ends early".into()));
         let field = |i: usize, name: &str| -> Result<&str, TileError> {
             let l = line(i)?;
@@ -358,10 +393,17 @@ impl TilePlan {
             as u8;
         let prefixes = 1u64 << (3 * u32::from(depth));
         let count_text = field(3, "tasks")?;
-        let count =
-            decimal(count_text).filter(|&n| n >= 1 && n <= prefixes.min(u64::from(u32::MAX))).ok_or_else(|| {
-                fault(4, format!("task count `{}`: expected 1 to {prefixes} at tile depth {depth}", clip(count_text)))
-            })?;
+        let most = prefixes.min(u64::from(MAX_TASKS));
+        let count = decimal(count_text).filter(|&n| n >= 1 && n <= most).ok_or_else(|| {
+            fault(
+                4,
+                format!(
+                    "task count `{}`: expected 1 to {most} at tile depth {depth} (at most {MAX_TASKS} tasks)",
+                    clip(count_text)
+                ),
+            )
+        })?;
+
         let mut tasks = Vec::new();
         let mut next_start = 0;
         for index in 0..count {
@@ -523,6 +565,51 @@ mod tests {
         let text = plan.to_text();
         assert!(text.starts_with("octolinear-tile-plan 1\nresolution 0.1\ntile_depth 3\ntasks 3\ntask 0 0 "));
         assert_eq!(TilePlan::parse(&text).unwrap(), plan);
+    }
+
+    /// Task counts are bounded ([`MAX_TASKS`]) before anything is
+    /// allocated for them, in plans read and in splits asked for.
+    #[test]
+    fn task_counts_are_bounded() {
+        let text = "octolinear-tile-plan 1\nresolution 0.1\ntile_depth 15\ntasks 4294967295\ntask 0 0 1 0 0\n";
+        match TilePlan::parse(text) {
+            Err(TileError::Plan { line: 4, reason }) => assert!(reason.contains("at most 65536 tasks"), "{reason}"),
+            other => panic!("{other:?}"),
+        }
+        let work = work_of(8, &[(5, 10)]);
+        assert!(matches!(work.split(MAX_TASKS + 1), Err(TileError::Plan { .. })));
+        assert_eq!(work_of(6, &[(5, 10)]).split(MAX_TASKS / 2).unwrap().tasks.len(), MAX_TASKS as usize / 2);
+    }
+
+    /// A plan is read from a regular file of bounded lines: a device, a
+    /// FIFO and an endless line are refused at once, naming the file.
+    #[test]
+    fn plans_are_read_from_regular_files_only() {
+        use crate::tiles::manifest::tests::{chain, make_fifo, within_seconds};
+        let dir = tempfile::tempdir().unwrap();
+        let e = within_seconds(|| chain(&TilePlan::read(std::path::Path::new("/dev/zero")).unwrap_err()));
+        assert!(e.contains("/dev/zero") && e.contains("not a regular file"), "{e}");
+        let fifo = dir.path().join("map.plan");
+        make_fifo(&fifo);
+        let path = fifo.clone();
+        let e = within_seconds(move || chain(&TilePlan::read(&path).unwrap_err()));
+        assert!(e.contains("map.plan") && e.contains("a FIFO"), "{e}");
+        let long = dir.path().join("long.plan");
+        std::fs::write(&long, vec![b'7'; 1 << 20]).unwrap();
+        assert!(chain(&TilePlan::read(&long).unwrap_err()).contains("longer than 256 bytes"));
+        let plan = work_of(3, &[(5, 10), (100, 20)]).split(2).unwrap();
+        let good = dir.path().join("good.plan");
+        std::fs::write(&good, plan.to_text()).unwrap();
+        assert_eq!(TilePlan::read(&good).unwrap(), plan);
+        std::fs::write(&good, plan.to_text().replace("tasks 2", "tasks 3")).unwrap();
+        match TilePlan::read(&good) {
+            Err(e @ TileError::PlanFile { line: 7, .. }) => assert!(e.to_string().contains("good.plan: line 7")),
+            other => panic!("{other:?}"),
+        }
+        // a plan's identity follows its text
+        let other = work_of(3, &[(5, 10), (300, 20)]).split(2).unwrap();
+        assert_ne!(plan.identity(), other.identity());
+        assert_eq!(plan.identity(), TilePlan::parse(&plan.to_text()).unwrap().identity());
     }
 
     #[test]
