@@ -267,7 +267,8 @@ impl Format {
                     XyzError::Io { line, .. }
                     | XyzError::TokenCount { line, .. }
                     | XyzError::NotANumber { line, .. }
-                    | XyzError::NotFinite { line, .. } => *line,
+                    | XyzError::NotFinite { line, .. }
+                    | XyzError::LineTooLong { line, .. } => *line,
                 };
                 (e.to_string(), Place::Line(line))
             }),
@@ -277,7 +278,8 @@ impl Format {
                     | LogError::PointBeforeNode { line }
                     | LogError::TooFewTokens { line, .. }
                     | LogError::NotANumber { line, .. }
-                    | LogError::NotFinite { line, .. } => *line,
+                    | LogError::NotFinite { line, .. }
+                    | LogError::LineTooLong { line, .. } => *line,
                 };
                 (e.to_string(), Place::Line(line))
             }),

@@ -4,6 +4,7 @@
 use super::common::{point_arg, save_map};
 use anyhow::{bail, Context, Result};
 use octolinear::formats::binvox::{self, Binvox};
+use octolinear::formats::bounded;
 use octolinear::{InnerNodes, OccupancyTree, Point3};
 use std::path::{Path, PathBuf};
 
@@ -108,8 +109,12 @@ pub fn run(a: Args) -> Result<()> {
     let mut tree = None;
     let mut counts = Counts::default();
     for path in &a.inputs {
-        let bytes = std::fs::read(path).with_context(|| format!("cannot open {}", path.display()))?;
-        let bv = binvox::read(&bytes).with_context(|| format!("{}: not a binvox file", path.display()))?;
+        let bv = binvox::read_file(path).map_err(|e| match e {
+            binvox::BinvoxError::Read(bounded::WholeError::Io(e)) => {
+                anyhow::Error::new(e).context(format!("cannot open {}", path.display()))
+            }
+            e => anyhow::Error::new(e).context(format!("{}: not a binvox file", path.display())),
+        })?;
         insert(&mut tree, &bv, &a, path, &mut counts)?;
     }
     let mut tree = tree.context("no input")?;

@@ -155,6 +155,21 @@ fn build(
     Ok(tree)
 }
 
+/// Refuses an evaluation without a single voxel the map knows: its
+/// accuracy (correct / (correct + wrong)) is not a number.
+fn defined(a: &Accuracy, graph: &std::path::Path) -> Result<()> {
+    if a.correct + a.wrong == 0 {
+        bail!(
+            "{}: the {} evaluated scans ({} points) observe {} voxels, none of them known to the map: the accuracy is undefined",
+            input::name(graph),
+            a.scans,
+            a.points,
+            a.unknown
+        );
+    }
+    Ok(())
+}
+
 fn print(label: &str, a: &Accuracy) {
     println!(
         "{label}: {} scans, {} points. Voxels correct: {} #wrong: {} #unknown: {}. % correct: {}",
@@ -182,12 +197,16 @@ pub fn run(a: Args) -> Result<()> {
         .into_graph()
         .with_context(|| format!("cannot read {}", input::name(graph_path)))?;
     let n = a.scans.unwrap_or(g.nodes.len()).min(g.nodes.len());
+    if n == 0 {
+        bail!("{} holds no scans: there is nothing to evaluate", input::name(graph_path));
+    }
     if a.inputs.len() == 2 {
         phase.set_message(format!("loading {}", a.inputs[0].display()));
         let tree = load_map(&a.inputs[0])?.tree;
         phase.set_message(format!("evaluating {n} scans"));
         let acc = evaluate(&tree, &g, n, max_range, |_| true)?;
         phase.finish_and_clear();
+        defined(&acc, graph_path)?;
         if a.json {
             println!("{}", acc.json());
         } else {
@@ -224,6 +243,7 @@ pub fn run(a: Args) -> Result<()> {
     for r in &results {
         total.add(r);
     }
+    defined(&total, graph_path)?;
     if a.json {
         let out = serde_json::json!({
             "k": k,

@@ -6,10 +6,11 @@
 //! standard input; pipes, FIFOs and `/dev/stdin` are read as streams.
 
 use anyhow::{bail, Context, Result};
+use octolinear::formats::bounded::{self, read_line, LineEnd, MAX_LINE_BYTES};
 use octolinear::formats::graph::{GraphInput, ScanReader};
 use octolinear::formats::{pcd, ply, xyz, ColoredCloud as Scan};
 use octolinear::{Point3, PointCloud, Pose6D};
-use std::io::{BufReader, Read, Seek};
+use std::io::{BufRead, BufReader, Read, Seek};
 use std::path::Path;
 
 /// An RGB colour per point.
@@ -71,10 +72,18 @@ fn sniff(bytes: &[u8]) -> PointFormat {
     }
 }
 
+/// Bytes a stream's format is recognised by when its name has no
+/// extension: its first line, at most [`MAX_LINE_BYTES`].
+const SNIFF_BYTES: usize = MAX_LINE_BYTES;
+
 /// Reads the points of a `--points` argument; with `colors`, also the
 /// points' colours where the format has them (PLY, PCD). The format comes
 /// from the extension; a name without one (`-`, `/dev/stdin`, a `<(...)`
-/// pipe) is recognised by its first bytes (see [`sniff`]).
+/// pipe) is recognised by its first bytes (see [`sniff`]). The file is
+/// opened once: a regular file is read to its length (LAS/LAZ in batches,
+/// its header's offsets and lengths checked against its size first), a
+/// pipe, FIFO or device as a stream, within the bounds of
+/// [`octolinear::formats::bounded`]; text files are read line by line.
 pub fn read_scan(path: &Path, colors: bool) -> Result<Scan> {
     let ext = if path.extension().is_some() && !is_stdin(path) {
         Some(super::common::extension(path, &["ply", "pcd", "las", "laz", "xyz", "txt"])?)
@@ -99,34 +108,53 @@ pub fn read_scan(path: &Path, colors: bool) -> Result<Scan> {
         format!("{name}: not a valid {described} file")
     };
     let plain = |cloud| Scan { cloud, colors: None };
-    // regular LAS/LAZ files are read in batches, text files line by line;
-    // everything else is read whole, which pipes allow
-    let regular = std::fs::metadata(path).is_ok_and(|m| m.is_file());
-    match format {
-        Some(PointFormat::Las) if regular => {
-            let las = without_panics(|| read_las(std::fs::File::open(path)?));
-            return las.map(plain).with_context(|| ctx(PointFormat::Las));
-        }
-        Some(PointFormat::Xyz) => {
-            let f = std::fs::File::open(path).with_context(|| format!("cannot open {name}"))?;
-            let cloud = xyz::read(BufReader::with_capacity(1 << 16, f));
-            return cloud.map(plain).with_context(|| ctx(PointFormat::Xyz));
-        }
-        _ => {}
-    }
-    let bytes = if is_stdin(path) {
-        let mut bytes = Vec::new();
-        std::io::stdin().read_to_end(&mut bytes).context("cannot read standard input")?;
-        bytes
+    let (source, regular): (Box<dyn Read + Send>, Option<std::fs::File>) = if is_stdin(path) {
+        (Box::new(std::io::stdin()), None)
     } else {
-        std::fs::read(path).with_context(|| format!("cannot open {name}"))?
+        let file = std::fs::File::open(path).with_context(|| format!("cannot open {name}"))?;
+        let regular = file.metadata().with_context(|| format!("cannot read {name}"))?.is_file();
+        if regular {
+            let again = file.try_clone().with_context(|| format!("cannot read {name}"))?;
+            (Box::new(file), Some(again))
+        } else {
+            (Box::new(file), None)
+        }
     };
-    let format = format.unwrap_or_else(|| sniff(&bytes));
-    match format {
-        PointFormat::Ply => ply::read(&bytes, colors).map_err(anyhow::Error::from),
-        PointFormat::Pcd => pcd::read(&bytes, colors).map_err(anyhow::Error::from),
-        PointFormat::Las => without_panics(|| read_las(std::io::Cursor::new(bytes))).map(plain),
-        PointFormat::Xyz => xyz::read(&bytes[..]).map(plain).map_err(anyhow::Error::from),
+    let mut reader = BufReader::with_capacity(1 << 16, source);
+    let (format, mut reader): (_, Box<dyn BufRead + Send>) = match format {
+        Some(f) => (f, Box::new(reader)),
+        None => {
+            let mut head = Vec::new();
+            (&mut reader)
+                .take(SNIFF_BYTES as u64)
+                .read_to_end(&mut head)
+                .with_context(|| format!("cannot read {name}"))?;
+            (sniff(&head), Box::new(std::io::Cursor::new(head).chain(reader)))
+        }
+    };
+    let read_whole = |mut reader: Box<dyn BufRead + Send>| -> Result<Vec<u8>> {
+        let mut bytes = Vec::new();
+        reader.read_to_end(&mut bytes).with_context(|| format!("cannot read {name}"))?;
+        Ok(bytes)
+    };
+    match (format, regular) {
+        (PointFormat::Las, Some(file)) => without_panics(|| read_las(file)).map(plain),
+        (PointFormat::Las, None) => {
+            // the signature first: a stream of anything else is not read on
+            let mut signature = Vec::with_capacity(4);
+            (&mut reader).take(4).read_to_end(&mut signature).with_context(|| format!("cannot read {name}"))?;
+            if signature != b"LASF" {
+                bail!("{name}: not a LAS/LAZ file: it does not start with \"LASF\"");
+            }
+            let bytes = bounded::read_stream(std::io::Cursor::new(signature).chain(reader), bounded::MAX_STREAM_BYTES)
+                .with_context(|| ctx(PointFormat::Las))?;
+            without_panics(|| read_las(std::io::Cursor::new(bytes))).map(plain)
+        }
+        (PointFormat::Xyz, _) => xyz::read(&mut reader).map(plain).map_err(anyhow::Error::from),
+        (PointFormat::Ply, Some(_)) => ply::read(&read_whole(reader)?, colors).map_err(anyhow::Error::from),
+        (PointFormat::Ply, None) => ply::read_from(reader, colors).map_err(anyhow::Error::from),
+        (PointFormat::Pcd, Some(_)) => pcd::read(&read_whole(reader)?, colors).map_err(anyhow::Error::from),
+        (PointFormat::Pcd, None) => pcd::read_from(reader, colors).map_err(anyhow::Error::from),
     }
     .with_context(|| ctx(format))
 }
@@ -134,6 +162,7 @@ pub fn read_scan(path: &Path, colors: bool) -> Result<Scan> {
 // ----- LAS / LAZ -----------------------------------------------------------
 
 fn read_las(mut source: impl Read + Seek + Send + Sync + 'static) -> Result<PointCloud> {
+    check_las_layout(&mut source)?;
     check_laz_chunk_table(&mut source)?;
     source.rewind()?;
     let mut reader = las::Reader::new(BufReader::with_capacity(1 << 16, source))?;
@@ -149,6 +178,109 @@ fn read_las(mut source: impl Read + Seek + Send + Sync + 'static) -> Result<Poin
     }
     Ok(cloud)
 }
+
+/// Refuses a LAS/LAZ file whose header places records beyond the file's
+/// end: the las crate allocates what a (extended) variable length record's
+/// length says before reading it, so a 455-byte file claiming 2^40 bytes
+/// would abort the process. Checked against the file's length: the header
+/// size, the offset to the point data, each VLR (54 bytes and its length,
+/// from the end of the header), the point records of an uncompressed file
+/// (count times record length from the offset to the point data), and in
+/// LAS 1.4 each EVLR (60 bytes and its length, from the start of the
+/// first). A file too short for a header, or without the `LASF`
+/// signature, is left to the las crate's own checks.
+fn check_las_layout(f: &mut (impl Read + Seek)) -> Result<()> {
+    use std::io::SeekFrom;
+    let len = f.seek(SeekFrom::End(0))?;
+    f.rewind()?;
+    let mut head = Vec::with_capacity(375);
+    f.by_ref().take(375).read_to_end(&mut head)?;
+    if head.len() < 227 || &head[..4] != b"LASF" {
+        return Ok(());
+    }
+    let le = |at: usize, n: usize| -> Option<u64> {
+        let b = head.get(at..at + n)?;
+        Some(b.iter().rev().fold(0u64, |v, &b| v << 8 | u64::from(b)))
+    };
+    let version = (head[24], head[25]);
+    let version_size = match version {
+        v if v <= (1, 2) => 227,
+        (1, 3) => 235,
+        _ => 375,
+    };
+    let header_size = le(94, 2).expect("in the first 227 bytes");
+    let data = le(96, 4).expect("in the first 227 bytes");
+    let vlrs = le(100, 4).expect("in the first 227 bytes");
+    let compressed = head[104] & 0x80 != 0;
+    let record = le(105, 2).expect("in the first 227 bytes");
+    let beyond = |field: &str, value: u64| {
+        anyhow::anyhow!("the LAS header's {field} ({value}) lies beyond the end of the file ({len} bytes)")
+    };
+    if header_size > len {
+        return Err(beyond("header size", header_size));
+    }
+    if data > len {
+        return Err(beyond("offset to point data", data));
+    }
+    let mut at = header_size.max(version_size);
+    if vlrs > len.saturating_sub(at) / 54 {
+        bail!("the LAS header's number of VLRs ({vlrs}) needs more than the file's {len} bytes (54 bytes a record)");
+    }
+    let mut word = [0u8; 8];
+    let mut length_at = |f: &mut dyn ReadSeek, offset: u64, n: usize| -> Result<u64> {
+        f.seek(SeekFrom::Start(offset))?;
+        f.read_exact(&mut word[..n])?;
+        Ok(word[..n].iter().rev().fold(0u64, |v, &b| v << 8 | u64::from(b)))
+    };
+    for i in 0..vlrs {
+        if at + 54 > len {
+            bail!("VLR {i} at byte {at} runs past the end of the file ({len} bytes)");
+        }
+        let length = length_at(f, at + 20, 2)?;
+        at += 54 + length;
+        if at > len {
+            bail!("VLR {i}'s record length ({length}) runs past the end of the file ({len} bytes)");
+        }
+    }
+    let points = match le(107, 4).expect("in the first 227 bytes") {
+        0 if version >= (1, 4) => le(247, 8).unwrap_or(0),
+        n => n,
+    };
+    if !compressed {
+        let need = points.checked_mul(record).and_then(|b| b.checked_add(data));
+        if need.is_none_or(|end| end > len) {
+            bail!(
+                "the LAS header's {points} point records of {record} bytes from byte {data} need more than the file's {len} bytes"
+            );
+        }
+    }
+    let (Some(start), Some(count)) = (le(235, 8), le(243, 4)) else { return Ok(()) };
+    if version < (1, 4) || start == 0 || count == 0 {
+        return Ok(());
+    }
+    if start > len {
+        return Err(beyond("start of the first EVLR", start));
+    }
+    if count > (len - start) / 60 {
+        bail!("the LAS header's number of EVLRs ({count}) needs more than the file's {len} bytes (60 bytes a record)");
+    }
+    let mut at = start;
+    for i in 0..count {
+        if at + 60 > len {
+            bail!("EVLR {i} at byte {at} runs past the end of the file ({len} bytes)");
+        }
+        let length = length_at(f, at + 20, 8)?;
+        match (at + 60).checked_add(length) {
+            Some(end) if end <= len => at = end,
+            _ => bail!("EVLR {i}'s record length ({length}) runs past the end of the file ({len} bytes)"),
+        }
+    }
+    Ok(())
+}
+
+/// A source the LAS checks read and seek in.
+trait ReadSeek: Read + Seek {}
+impl<T: Read + Seek> ReadSeek for T {}
 
 /// Runs the LAS/LAZ reader, whose decompressor panics on some damaged
 /// data (the laz crate's byte slicing), and makes such a panic an error,
@@ -214,18 +346,29 @@ pub fn pose(v: &[f64]) -> Result<Pose6D> {
 }
 
 /// A trajectory file: one pose `x y z roll pitch yaw` per line (blank
-/// lines and lines starting with `#` skipped).
+/// lines and lines starting with `#` skipped), each line at most
+/// [`MAX_LINE_BYTES`].
 pub fn read_trajectory(path: &Path) -> Result<Vec<Pose6D>> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let file = std::fs::File::open(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let mut reader = BufReader::with_capacity(1 << 16, file);
     let mut poses = Vec::new();
-    for (n, line) in text.lines().enumerate() {
+    let mut buf = Vec::new();
+    for n in 1.. {
+        let end = read_line(&mut reader, &mut buf, MAX_LINE_BYTES)
+            .with_context(|| format!("cannot read {} line {n}", path.display()))?;
+        match end {
+            LineEnd::Eof => break,
+            LineEnd::TooLong => bail!("{} line {n} is longer than {MAX_LINE_BYTES} bytes", path.display()),
+            LineEnd::Newline | LineEnd::Unterminated => {}
+        }
+        let line = std::str::from_utf8(&buf).with_context(|| format!("{} line {n} is not text", path.display()))?;
         let line = line.trim();
         if line.is_empty() || line.starts_with('#') {
             continue;
         }
         let v: Result<Vec<f64>, _> = line.split_whitespace().map(str::parse).collect();
-        let v = v.ok().with_context(|| format!("{} line {}: {line:?} is not six numbers", path.display(), n + 1))?;
-        poses.push(pose(&v).with_context(|| format!("{} line {}", path.display(), n + 1))?);
+        let v = v.ok().with_context(|| format!("{} line {n}: {line:?} is not six numbers", path.display()))?;
+        poses.push(pose(&v).with_context(|| format!("{} line {n}", path.display()))?);
     }
     Ok(poses)
 }

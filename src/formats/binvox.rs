@@ -1,12 +1,24 @@
 //! Patrick Min's binvox voxel grids (see `formats/binvox.md`), as
 //! OctoMap's `binvox2bt` reads them: a text header, then run-length pairs.
 
+use super::bounded::{read_file_headed, read_headed, HeaderShape, WholeError, MAX_STREAM_BYTES};
+use std::io::BufRead;
 use std::ops::Range;
+use std::path::Path;
+
+/// Header lines a stream's header is read in, line by line, before the
+/// rest is read as data.
+const MAX_HEADER_LINES: usize = 10_000;
 
 /// Why a binvox file could not be read. Offsets count bytes from the start
 /// of the file.
 #[derive(Debug, thiserror::Error)]
 pub enum BinvoxError {
+    /// The file could not be read whole: opening or reading failed, a
+    /// header line is longer than [`super::bounded::MAX_LINE_BYTES`], or a stream holds
+    /// more than [`MAX_STREAM_BYTES`].
+    #[error(transparent)]
+    Read(#[from] WholeError),
     /// The file does not start with the token `#binvox`.
     #[error("the first token is {found:?} instead of \"#binvox\"")]
     NotBinvox {
@@ -109,6 +121,26 @@ impl Cursor<'_> {
         let (offset, t) = self.token().ok_or(BinvoxError::HeaderEnds { what })?;
         t.parse().map_err(|_| BinvoxError::NotANumber { offset, what, token: t.to_string() })
     }
+}
+
+/// How a binvox header ends, for reading a stream whole: with the line
+/// holding the `data` token.
+const SHAPE: HeaderShape = HeaderShape {
+    is_last: |line| line.split(|b| b.is_ascii_whitespace()).any(|t| t == b"data"),
+    max_lines: MAX_HEADER_LINES,
+};
+
+/// Reads a binvox file as [`read`] does: a regular file to its length, a
+/// FIFO or device as [`read_from`] reads a stream.
+pub fn read_file(path: impl AsRef<Path>) -> Result<Binvox, BinvoxError> {
+    read(&read_file_headed(path.as_ref(), &SHAPE)?)
+}
+
+/// Reads a binvox stream as [`read`] does: its header line by line (at
+/// most 10 000 lines, each at most [`super::bounded::MAX_LINE_BYTES`]), and the whole
+/// stream at most [`MAX_STREAM_BYTES`].
+pub fn read_from(reader: impl BufRead) -> Result<Binvox, BinvoxError> {
+    read(&read_headed(reader, &SHAPE, MAX_STREAM_BYTES)?)
 }
 
 /// Parses a binvox file's header; its runs are checked by
@@ -216,5 +248,15 @@ mod tests {
         assert!(err(b"#binvox 1\ndim 1 1 1\nscale -1\ndata\n").contains("not usable"));
         assert!(err(b"binvox").contains("instead of"));
         assert!(err(b"#binvox 1\ndim 1 1 1\n").contains("no \"data\" line"));
+    }
+
+    #[test]
+    fn streams_are_read_within_bounds() {
+        let mut f = b"#binvox 1\ndim 1 1 2\ndata\n".to_vec();
+        f.extend_from_slice(&[1, 2, 10, 10]);
+        assert_eq!(read_from(&f[..]).unwrap(), read(&f).unwrap());
+        let endless = read_from(std::io::BufReader::new(std::io::repeat(0))).unwrap_err();
+        let limit = super::super::bounded::MAX_LINE_BYTES;
+        assert_eq!(endless.to_string(), format!("header line 1 is longer than {limit} bytes"));
     }
 }

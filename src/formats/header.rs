@@ -1,6 +1,7 @@
 //! The text header shared by `.bt` and `.ot` files, and a byte-counting
 //! reader so that errors can name the offset where they happened.
 
+use super::bounded::MAX_LINE_BYTES;
 use super::TreeFileError;
 use std::io::{self, BufRead, Write};
 
@@ -74,10 +75,16 @@ impl<R: BufRead> CountingReader<R> {
         Ok(line)
     }
 
-    /// `istream >> std::string`: skips white space, reads up to the next.
+    /// `istream >> std::string`: skips white space (at most
+    /// [`MAX_LINE_BYTES`] of it), reads up to the next.
     fn read_token(&mut self) -> Result<Option<(u64, String)>, TreeFileError> {
+        let space = self.offset;
         while let Some(b) = self.peek_byte()? {
             if b.is_ascii_whitespace() {
+                if self.offset - space >= MAX_LINE_BYTES as u64 {
+                    let reason = format!("more than {MAX_LINE_BYTES} bytes of white space");
+                    return Err(TreeFileError::Header { offset: space, reason });
+                }
                 self.consume();
             } else {
                 break;
@@ -101,9 +108,14 @@ impl<R: BufRead> CountingReader<R> {
         Ok(Some((start, String::from_utf8_lossy(&tok).into_owned())))
     }
 
-    /// Skips to just after the next `\n`.
+    /// Skips to just after the next `\n`, at most [`MAX_LINE_BYTES`] on.
     fn skip_line(&mut self) -> Result<(), TreeFileError> {
+        let start = self.offset;
         while let Some(b) = self.peek_byte()? {
+            if self.offset - start > MAX_LINE_BYTES as u64 {
+                let reason = format!("header line longer than {MAX_LINE_BYTES} bytes");
+                return Err(TreeFileError::Header { offset: start, reason });
+            }
             self.consume();
             if b == b'\n' {
                 break;
@@ -246,6 +258,20 @@ pub fn format_double(x: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn endless_header_lines_and_white_space_are_refused() {
+        use std::io::Read;
+        let header = |rest: Box<dyn Read>| {
+            let start = std::io::Cursor::new(b"id OcTree\n# ".to_vec());
+            let mut r = CountingReader::new(std::io::BufReader::new(start.chain(rest)));
+            read_header(&mut r).unwrap_err().to_string()
+        };
+        let err = header(Box::new(std::io::repeat(b'x')));
+        assert_eq!(err, format!("bad header at byte 11: header line longer than {MAX_LINE_BYTES} bytes"));
+        let err = header(Box::new(std::io::Cursor::new(b"\n".to_vec()).chain(std::io::repeat(b' '))));
+        assert_eq!(err, format!("bad header at byte 13: more than {MAX_LINE_BYTES} bytes of white space"));
+    }
 
     #[test]
     fn doubles_print_like_cpp_streams() {

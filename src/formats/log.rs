@@ -19,6 +19,7 @@
 
 use std::io::{self, BufRead, BufWriter, Write};
 
+use super::bounded::{read_line, LineEnd, MAX_LINE_BYTES};
 use super::graph::ScanGraph;
 use super::xyz::{c_tokens, parse_c_float, parse_point, token_str, FloatError, XyzError};
 use crate::geometry::{PointCloud, Pose6D};
@@ -68,6 +69,14 @@ pub enum LogError {
         /// The token as found.
         token: String,
     },
+    /// A line is longer than [`MAX_LINE_BYTES`] (no `\n` within it).
+    #[error("line {line} is longer than {limit} bytes")]
+    LineTooLong {
+        /// The line.
+        line: u64,
+        /// The bound, in bytes.
+        limit: usize,
+    },
 }
 
 impl From<XyzError> for LogError {
@@ -77,6 +86,7 @@ impl From<XyzError> for LogError {
             XyzError::TokenCount { line, found } => LogError::TooFewTokens { line, expected: 3, found },
             XyzError::NotANumber { line, token } => LogError::NotANumber { line, token },
             XyzError::NotFinite { line, token } => LogError::NotFinite { line, token },
+            XyzError::LineTooLong { line, limit } => LogError::LineTooLong { line, limit },
         }
     }
 }
@@ -88,7 +98,8 @@ fn float(t: &[u8], line: u64) -> Result<f32, LogError> {
     })
 }
 
-/// Parses a log into a graph exactly as `log2graph` builds it.
+/// Parses a log into a graph exactly as `log2graph` builds it. A line
+/// longer than [`MAX_LINE_BYTES`] is an error.
 pub fn read(mut reader: impl BufRead) -> Result<ScanGraph, LogError> {
     let mut graph = ScanGraph::new();
     let mut current: Option<(Pose6D, PointCloud)> = None;
@@ -101,13 +112,15 @@ pub fn read(mut reader: impl BufRead) -> Result<ScanGraph, LogError> {
         }
     };
     loop {
-        buf.clear();
         line += 1;
-        reader.read_until(b'\n', &mut buf).map_err(|source| LogError::Io { line, source })?;
-        // getline hitting EOF (no '\n') ends the loop even if it read text.
-        if buf.last() != Some(&b'\n') {
-            finish(&mut graph, current.take());
-            return Ok(graph);
+        match read_line(&mut reader, &mut buf, MAX_LINE_BYTES).map_err(|source| LogError::Io { line, source })? {
+            LineEnd::Newline => {}
+            LineEnd::TooLong => return Err(LogError::LineTooLong { line, limit: MAX_LINE_BYTES }),
+            // getline hitting EOF (no '\n') ends the loop even if it read text.
+            LineEnd::Eof | LineEnd::Unterminated => {
+                finish(&mut graph, current.take());
+                return Ok(graph);
+            }
         }
         let text = &buf[..buf.len() - 1];
         if text.is_empty() || text[0] == b'#' || text[0] == b' ' {

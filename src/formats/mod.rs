@@ -5,6 +5,7 @@
 
 pub mod atomic;
 pub mod binvox;
+pub mod bounded;
 pub mod bt;
 pub mod graph;
 mod header;

@@ -6,9 +6,13 @@
 //! it, whether typed `F`, `U` or `I`; in ASCII files an `F` field is the
 //! float whose bits are the packed colour, as PCL prints it.
 
+use super::bounded::{read_file_headed, read_headed, HeaderShape, WholeError, MAX_LINE_BYTES, MAX_STREAM_BYTES};
+use super::ply::first_token;
 use super::scalar::{capacity, header_lines, point, HeaderEnd, Scalar};
 use super::ColoredCloud;
 use crate::geometry::PointCloud;
+use std::io::BufRead;
+use std::path::Path;
 
 /// Header lines read at most before `DATA` must have come.
 const MAX_HEADER_LINES: usize = 1000;
@@ -22,6 +26,21 @@ pub enum PcdError {
     HeaderNotText {
         /// Byte offset of the start of that line.
         offset: usize,
+    },
+    /// The file could not be read whole: opening or reading failed, a
+    /// header line is longer than [`MAX_LINE_BYTES`], or a stream holds
+    /// more than [`MAX_STREAM_BYTES`].
+    #[error(transparent)]
+    Read(#[from] WholeError),
+    /// A header line is longer than [`MAX_LINE_BYTES`].
+    #[error("header line {line} (byte {offset}) is longer than {limit} bytes")]
+    HeaderLineTooLong {
+        /// The line's number, from 1.
+        line: usize,
+        /// Byte offset of the start of the line.
+        offset: usize,
+        /// The bound, in bytes.
+        limit: usize,
     },
     /// No line starts with `DATA` within the first 1000 lines.
     #[error("no DATA line within the first {MAX_HEADER_LINES} lines")]
@@ -212,12 +231,30 @@ fn le_u32(b: &[u8]) -> u32 {
     u32::from_le_bytes([b[0], b[1], b[2], b[3]])
 }
 
+/// How a PCD header ends, for reading a stream whole.
+const SHAPE: HeaderShape =
+    HeaderShape { is_last: |line| first_token(line) == Some(b"DATA"), max_lines: MAX_HEADER_LINES };
+
+/// Reads a PCD file as [`read`] does: a regular file to its length, a
+/// FIFO or device as [`read_from`] reads a stream.
+pub fn read_file(path: impl AsRef<Path>, want_colors: bool) -> Result<ColoredCloud, PcdError> {
+    read(&read_file_headed(path.as_ref(), &SHAPE)?, want_colors)
+}
+
+/// Reads a PCD stream as [`read`] does: its header line by line, each at
+/// most [`MAX_LINE_BYTES`], and the whole stream at most
+/// [`MAX_STREAM_BYTES`].
+pub fn read_from(reader: impl BufRead, want_colors: bool) -> Result<ColoredCloud, PcdError> {
+    read(&read_headed(reader, &SHAPE, MAX_STREAM_BYTES)?, want_colors)
+}
+
 /// The x, y, z fields of a PCD file and, with `want_colors`, its `rgb` or
 /// `rgba` field if there is one.
 pub fn read(bytes: &[u8], want_colors: bool) -> Result<ColoredCloud, PcdError> {
     let (lines, data) = header_lines(bytes, "DATA", MAX_HEADER_LINES).map_err(|e| match e {
         HeaderEnd::NotText { offset } => PcdError::HeaderNotText { offset },
         HeaderEnd::Missing => PcdError::NoData,
+        HeaderEnd::LineTooLong { line, offset } => PcdError::HeaderLineTooLong { line, offset, limit: MAX_LINE_BYTES },
     })?;
     let (mut fields, mut sizes, mut types, mut counts) = (vec![], vec![], vec![], vec![]);
     let (mut points, mut width, mut height, mut kind) = (None, None, None, "");
@@ -439,6 +476,19 @@ mod tests {
         assert!(e(&[1, b'a', b'b', 4 << 5, 5], 8).contains("byte 3: a back reference before the start"));
         assert!(e(&[1, b'a'], 2).contains("byte 0: a literal runs past the input"));
         assert!(e(&[0, b'a'], 1 << 20).contains("too short for the announced size"));
+    }
+
+    #[test]
+    fn streams_are_read_within_bounds() {
+        let f = file("ascii", b"1 2 3 4\n5 6 7 8\n");
+        assert_eq!(read_from(&f[..], true).unwrap(), read(&f, true).unwrap());
+        let endless = read_from(std::io::BufReader::new(std::io::repeat(0)), false).unwrap_err();
+        assert_eq!(endless.to_string(), format!("header line 1 is longer than {MAX_LINE_BYTES} bytes"));
+        let mut long = b"# ".to_vec();
+        long.resize(MAX_LINE_BYTES + 1, b'x');
+        long.extend_from_slice(&file("ascii", b"1 2 3 4\n5 6 7 8\n"));
+        let err = read(&long, false).unwrap_err().to_string();
+        assert_eq!(err, format!("header line 1 (byte 0) is longer than {MAX_LINE_BYTES} bytes"));
     }
 
     #[test]

@@ -7,10 +7,12 @@
 //! (scaled by 255 and rounded). They are decoded only when asked for, so a
 //! file with odd colour values still gives its points.
 
+use super::bounded::{read_file_headed, read_headed, HeaderShape, WholeError, MAX_LINE_BYTES, MAX_STREAM_BYTES};
 use super::scalar::{capacity, header_lines, point, HeaderEnd, Scalar};
 use super::ColoredCloud;
 use crate::geometry::{Point3, PointCloud};
-use std::io::{self, Write};
+use std::io::{self, BufRead, Write};
+use std::path::Path;
 
 /// Header lines read at most before `end_header` must have come.
 const MAX_HEADER_LINES: usize = 10_000;
@@ -24,6 +26,21 @@ pub enum PlyError {
     HeaderNotText {
         /// Byte offset of the start of that line.
         offset: usize,
+    },
+    /// The file could not be read whole: opening or reading failed, a
+    /// header line is longer than [`MAX_LINE_BYTES`], or a stream holds
+    /// more than [`MAX_STREAM_BYTES`].
+    #[error(transparent)]
+    Read(#[from] WholeError),
+    /// A header line is longer than [`MAX_LINE_BYTES`].
+    #[error("header line {line} (byte {offset}) is longer than {limit} bytes")]
+    HeaderLineTooLong {
+        /// The line's number, from 1.
+        line: usize,
+        /// Byte offset of the start of the line.
+        offset: usize,
+        /// The bound, in bytes.
+        limit: usize,
     },
     /// No line starts with `end_header` within the first 10 000 lines.
     #[error("the header has no \"end_header\" line within its first {MAX_HEADER_LINES} lines")]
@@ -144,6 +161,7 @@ fn header(bytes: &[u8]) -> Result<Header, PlyError> {
     let (lines, data) = header_lines(bytes, "end_header", MAX_HEADER_LINES).map_err(|e| match e {
         HeaderEnd::NotText { offset } => PlyError::HeaderNotText { offset },
         HeaderEnd::Missing => PlyError::NoEndHeader,
+        HeaderEnd::LineTooLong { line, offset } => PlyError::HeaderLineTooLong { line, offset, limit: MAX_LINE_BYTES },
     })?;
     let mut format = None;
     let mut elements: Vec<Element> = Vec::new();
@@ -223,6 +241,28 @@ fn list_length(v: f64, e: &Element, row: usize) -> Result<usize, PlyError> {
     } else {
         Err(PlyError::BadListLength { element: e.name.clone(), row, value: v })
     }
+}
+
+/// How a PLY header ends, for reading a stream whole.
+const SHAPE: HeaderShape =
+    HeaderShape { is_last: |line| first_token(line) == Some(b"end_header"), max_lines: MAX_HEADER_LINES };
+
+/// A line's first whitespace-separated word.
+pub(crate) fn first_token(line: &[u8]) -> Option<&[u8]> {
+    line.split(|b| b.is_ascii_whitespace()).find(|t| !t.is_empty())
+}
+
+/// Reads a PLY file as [`read`] does: a regular file to its length, a
+/// FIFO or device as [`read_from`] reads a stream.
+pub fn read_file(path: impl AsRef<Path>, want_colors: bool) -> Result<ColoredCloud, PlyError> {
+    read(&read_file_headed(path.as_ref(), &SHAPE)?, want_colors)
+}
+
+/// Reads a PLY stream as [`read`] does: its header line by line, each at
+/// most [`MAX_LINE_BYTES`], and the whole stream at most
+/// [`MAX_STREAM_BYTES`].
+pub fn read_from(reader: impl BufRead, want_colors: bool) -> Result<ColoredCloud, PlyError> {
+    read(&read_headed(reader, &SHAPE, MAX_STREAM_BYTES)?, want_colors)
 }
 
 /// The vertices of a PLY file and, with `want_colors`, their `red`,
@@ -417,6 +457,21 @@ mod tests {
         assert!(err(b"ply\nformat ascii 1.0\nelement vertex x\nend_header\n").contains("header line 3 (byte 21)"));
         assert!(err(b"plyx\n").contains("\"ply\""));
         assert!(err(&ply("binary_big_endian", &[3, 0, 0])).contains("data ends in face 0 of 2 (byte"));
+    }
+
+    #[test]
+    fn streams_are_read_within_bounds() {
+        let file = ply("ascii", b"3 0 1 2\n2 5 6\n1.5 255 -2 0.25 0 7\n-1e3 1 2 3 4 5\n");
+        assert_eq!(read_from(&file[..], true).unwrap(), read(&file, true).unwrap());
+        let endless = read_from(io::BufReader::new(io::repeat(0)), false).unwrap_err();
+        assert_eq!(endless.to_string(), format!("header line 1 is longer than {MAX_LINE_BYTES} bytes"));
+        let mut long = b"ply\ncomment ".to_vec();
+        long.resize(long.len() + MAX_LINE_BYTES, b'x');
+        long.extend_from_slice(b"\nend_header\n");
+        assert_eq!(
+            read(&long, false).unwrap_err().to_string(),
+            format!("header line 2 (byte 4) is longer than {MAX_LINE_BYTES} bytes")
+        );
     }
 
     /// Rows of an element without properties take no data, whatever their

@@ -1,6 +1,7 @@
 //! What the PLY and PCD readers share: the typed values of their binary
 //! data, their text headers, and the cloud they give.
 
+use super::bounded::MAX_LINE_BYTES;
 use crate::geometry::{Point3, PointCloud};
 
 /// The points of a file and, when asked for and present, their colours.
@@ -73,6 +74,9 @@ pub(crate) enum HeaderEnd {
     NotText { offset: usize },
     /// No line starts with the closing keyword within the line limit.
     Missing,
+    /// Line `line` (from 1), starting at byte `offset`, is longer than
+    /// [`MAX_LINE_BYTES`].
+    LineTooLong { line: usize, offset: usize },
 }
 
 /// A header line, trimmed, and the byte offset it starts at.
@@ -80,7 +84,7 @@ pub(crate) type Line<'a> = (usize, &'a str);
 
 /// Splits off the text header whose last line starts with `end`: its
 /// lines and the offset of the data after it. At most `max_lines` lines
-/// are read.
+/// are read, each at most [`MAX_LINE_BYTES`] long.
 pub(crate) fn header_lines<'a>(
     bytes: &'a [u8],
     end: &str,
@@ -89,7 +93,14 @@ pub(crate) fn header_lines<'a>(
     let mut lines = Vec::new();
     let mut at = 0;
     while at < bytes.len() && lines.len() < max_lines {
-        let stop = bytes[at..].iter().position(|&b| b == b'\n').map_or(bytes.len(), |p| at + p);
+        let rest = &bytes[at..bytes.len().min(at.saturating_add(MAX_LINE_BYTES + 1))];
+        let stop = match rest.iter().position(|&b| b == b'\n') {
+            Some(p) => at + p,
+            None if rest.len() > MAX_LINE_BYTES => {
+                return Err(HeaderEnd::LineTooLong { line: lines.len() + 1, offset: at })
+            }
+            None => bytes.len(),
+        };
         let line = std::str::from_utf8(&bytes[at..stop]).map_err(|_| HeaderEnd::NotText { offset: at })?;
         let line = line.trim_end_matches('\r').trim();
         lines.push((at, line));

@@ -11,6 +11,7 @@
 
 use std::io::{self, BufRead, BufWriter, Write};
 
+use super::bounded::{read_line, LineEnd, MAX_LINE_BYTES};
 use crate::geometry::{Point3, PointCloud};
 
 /// Why an `x y z` file could not be read. Lines count from 1.
@@ -49,6 +50,14 @@ pub enum XyzError {
         line: u64,
         /// The value as found.
         token: String,
+    },
+    /// A line is longer than [`MAX_LINE_BYTES`] (no `\n` within it).
+    #[error("line {line} is longer than {limit} bytes")]
+    LineTooLong {
+        /// The line.
+        line: u64,
+        /// The bound, in bytes.
+        limit: usize,
     },
 }
 
@@ -120,17 +129,19 @@ fn values(text: &[u8]) -> Vec<&[u8]> {
 /// Reads a cloud: one point per line, three numbers separated by
 /// whitespace, or by commas or semicolons (whitespace around them
 /// allowed). Blank lines and everything from a `#` to the end of its line
-/// are skipped. Lines are 1-based in errors.
+/// are skipped. Lines are 1-based in errors; a line longer than
+/// [`MAX_LINE_BYTES`] is an error (an endless input without a `\n` is
+/// refused after that many bytes).
 pub fn read(mut reader: impl BufRead) -> Result<PointCloud, XyzError> {
     let mut cloud = PointCloud::new();
     let mut buf = Vec::new();
     let mut line = 0u64;
     loop {
-        buf.clear();
         line += 1;
-        let n = reader.read_until(b'\n', &mut buf).map_err(|source| XyzError::Io { line, source })?;
-        if n == 0 {
-            return Ok(cloud);
+        match read_line(&mut reader, &mut buf, MAX_LINE_BYTES).map_err(|source| XyzError::Io { line, source })? {
+            LineEnd::Eof => return Ok(cloud),
+            LineEnd::TooLong => return Err(XyzError::LineTooLong { line, limit: MAX_LINE_BYTES }),
+            LineEnd::Newline | LineEnd::Unterminated => {}
         }
         let text = buf.split(|&b| b == b'#').next().unwrap_or_default();
         let values = values(text);
@@ -209,5 +220,16 @@ mod tests {
         assert_eq!(error("1,5;2,5;3,5\n"), "line 1: expected 3 numbers, found 6 values");
         assert_eq!(error("1;nan;3\n"), "line 1: \"nan\" is not a decimal number");
         assert_eq!(error("1 2 1e39\n"), "line 1: \"1e39\" is not finite as a float (OctoMap stops reading here)");
+    }
+
+    #[test]
+    fn an_endless_line_is_refused_at_the_bound() {
+        let endless = read(io::BufReader::new(io::repeat(0))).unwrap_err();
+        assert_eq!(endless.to_string(), format!("line 1 is longer than {MAX_LINE_BYTES} bytes"));
+        let long = format!("1 2 3\n{}\n", " ".repeat(MAX_LINE_BYTES + 1));
+        assert_eq!(error(&long), format!("line 2 is longer than {MAX_LINE_BYTES} bytes"));
+        // a line of exactly the bound is read
+        let exact = format!("1 2 3{}\n", " ".repeat(MAX_LINE_BYTES - 5));
+        assert_eq!(points(&exact), [[1.0, 2.0, 3.0]]);
     }
 }
