@@ -232,6 +232,12 @@ fn key_arg(obj: &Bound<'_, PyAny>) -> PyResult<Key> {
     Ok(Key(v))
 }
 
+/// The library's refusal of an output too large for its limit as a
+/// `MemoryError` naming the keyword argument that raises the limit.
+fn output_error(e: octolinear::TreeError, argument: &str) -> PyErr {
+    pyo3::exceptions::PyMemoryError::new_err(format!("{e} ({argument}=...)"))
+}
+
 fn array3<'py>(py: Python<'py>, v: [f64; 3]) -> Bound<'py, PyArray1<f64>> {
     v.to_vec().into_pyarray(py)
 }
@@ -405,12 +411,27 @@ impl OcTree {
     /// each `(N, 3)` float64, leaf by leaf in iteration order; a leaf
     /// coarser than the resolution gives every voxel centre inside it (x,
     /// then y, then z ascending), computed in octomap-python's arithmetic.
-    fn extractPointCloud<'py>(&self, py: Python<'py>) -> PyResult<(queries::Points<'py>, queries::Points<'py>)> {
+    /// A leaf at depth d holds 8^(16-d) voxels: the points are counted
+    /// first, and more than `max_points` (default 2^28, 6 GB of
+    /// coordinates) raise `MemoryError` before anything is allocated.
+    #[pyo3(signature = (*, max_points=octolinear::tree::OUTPUT_LIMIT))]
+    fn extractPointCloud<'py>(
+        &self,
+        py: Python<'py>,
+        max_points: u64,
+    ) -> PyResult<(queries::Points<'py>, queries::Points<'py>)> {
         let tree = &self.tree;
+        let (total, occupied) = py
+            .detach(|| {
+                let total = tree.voxels_within(16, |_| true, max_points, "extractPointCloud")?;
+                Ok((total, tree.voxel_count(16, |v| tree.is_occupied(v))))
+            })
+            .map_err(|e| output_error(e, "max_points"))?;
         let (occ, free) = py.detach(|| {
             // octomap-python holds the resolution in a C float
             let res = f64::from(tree.resolution() as f32);
-            let (mut occ, mut free) = (Vec::new(), Vec::new());
+            let capacity = |n: u64| Vec::with_capacity(3 * n as usize);
+            let (mut occ, mut free) = (capacity(occupied), capacity(total - occupied));
             for n in tree.leaves(0) {
                 let c = n.center_point();
                 let out = if tree.is_occupied(n.value) { &mut occ } else { &mut free };
@@ -650,10 +671,15 @@ impl OcTree {
         py.detach(|| tree.prune());
     }
 
-    /// Splits every pruned node down to the finest level.
-    fn expand(&mut self, py: Python<'_>) {
+    /// Splits every pruned node down to the finest level. A leaf at depth d
+    /// becomes 8^(16-d) voxels: the nodes to add are counted first, and
+    /// more than `max_nodes` (default 2^28) raise `MemoryError`, the tree
+    /// unchanged.
+    #[pyo3(signature = (*, max_nodes=octolinear::tree::OUTPUT_LIMIT))]
+    fn expand(&mut self, py: Python<'_>, max_nodes: u64) -> PyResult<()> {
         let tree = &mut self.tree;
-        py.detach(|| tree.expand());
+        py.detach(|| tree.expand_within(max_nodes)).map_err(|e| output_error(e, "max_nodes"))?;
+        Ok(())
     }
 
     /// Recomputes inner nodes after `lazy_eval` updates.

@@ -78,6 +78,67 @@ def test_bad_resolutions_are_refused(resolution):
         octolinear.build(SAMPLE_GRAPH, resolution=resolution)
 
 
+@pytest.mark.parametrize("resolution", [1e-300, 1e300, 1e-40, 1e40])
+def test_resolutions_outside_the_usable_range_are_refused(resolution, tmp_path, tree):
+    usable = r"resolution .* m is (below the smallest|above the largest) usable resolution"
+    for make in (octolinear.OcTree, octolinear.ColorOcTree, octolinear.OcTreeStamped, octolinear.CountingOcTree):
+        with pytest.raises(ValueError, match=usable):
+            make(resolution)
+    with pytest.raises(ValueError, match=usable):
+        octolinear.build(SAMPLE_GRAPH, resolution=resolution)
+    with pytest.raises(ValueError, match=usable):
+        octolinear.build_tiles(SAMPLE_GRAPH, tmp_path / "t.tiles", resolution=resolution, tile_depth=4)
+    with pytest.raises(ValueError, match=usable):
+        octolinear.plan_tiles(SAMPLE_GRAPH, resolution=resolution, tile_depth=4, tasks=2)
+    before = tree.write()
+    with pytest.raises(ValueError, match=usable):
+        tree.setResolution(resolution)
+    assert tree.getResolution() == 0.1 and tree.write() == before
+
+
+def chain_cut(depth):
+    """The library's `.bt` of one occupied voxel, its chain of single
+    children cut to the last `depth` records (and the header's node count
+    to theirs): a root whose one child is an occupied leaf at `depth`,
+    standing for 8^(16 - depth) voxels."""
+    t = octolinear.OcTree(0.1)
+    t.updateNode(np.array([0.05, 0.05, 0.05]), True)
+    data = t.writeBinary()
+    start = data.index(b"\ndata\n") + 6
+    assert len(data) == start + 2 * 16
+    header = data[:start].replace(b"\nsize 17\n", b"\nsize %d\n" % (depth + 1))
+    return header + data[len(data) - 2 * depth :]
+
+
+def test_outputs_that_grow_with_the_extent_are_counted_and_refused(tmp_path):
+    coarse = chain_cut(1)
+    assert len(coarse) == 138
+    path = tmp_path / "coarse.bt"
+    path.write_bytes(coarse)
+    t = octolinear.OcTree(str(path))
+    assert (t.size(), t.getNumLeafNodes()) == (2, 1)
+    points, nodes = 8**15, (8**16 - 8) // 7
+    with pytest.raises(MemoryError, match=rf"extractPointCloud: {points} points exceed the limit of 268435456 \(2\^28\).*max_points"):
+        t.extractPointCloud()
+    with pytest.raises(MemoryError, match=rf"expand: {nodes} nodes to add exceed the limit of 268435456 \(2\^28\).*max_nodes"):
+        t.expand()
+    with pytest.raises(MemoryError, match="limit of 1000;"):
+        t.expand(max_nodes=1000)
+    assert (t.size(), t.getNumLeafNodes()) == (2, 1)
+    # a leaf at depth 14: 64 voxels, 8 + 64 nodes to add
+    fine = octolinear.OcTree(0.1)
+    assert fine.readBinary(chain_cut(14))
+    with pytest.raises(MemoryError, match="64 points exceed the limit of 63;"):
+        fine.extractPointCloud(max_points=63)
+    occupied, free = fine.extractPointCloud(max_points=64)
+    assert occupied.shape == (64, 3) and free.shape == (0, 3)
+    assert np.array_equal(fine.extractPointCloud()[0], occupied)
+    with pytest.raises(MemoryError, match="72 nodes to add exceed the limit of 71;"):
+        fine.expand(max_nodes=71)
+    fine.expand(max_nodes=72)
+    assert fine.size() == 15 + 72
+
+
 def test_bad_arguments(tree):
     with pytest.raises(TypeError, match="OcTree\\(resolution\\)"):
         octolinear.OcTree(True)
