@@ -179,34 +179,32 @@ impl TileSet {
 /// holds it shared, so that the tasks of a set run at once, and the
 /// task's own lock file `.task-K-of-N.lock` exclusively. A second writer
 /// that would write the same files fails at once with
-/// [`TileError::Locked`]. A set directory the lock created is removed
-/// again on release when nothing but lock files went into it (a build
-/// that failed before writing). Locks are `flock`s (`File::try_lock`): on a
-/// network filesystem they hold only where the filesystem passes them on.
+/// [`TileError::Locked`]. The last holder removes the lock files on
+/// release, and the set's directory when taking the lock created it and
+/// nothing went into it (a build that failed before writing). Locks are
+/// `flock`s (`File::try_lock`): on a network filesystem they hold only
+/// where the filesystem passes them on.
 #[derive(Debug)]
 pub struct SetLock {
-    /// The set's lock file, then the task's; held while open.
-    files: Vec<File>,
-    /// The set's directory, when taking the lock created it: removed again
-    /// on release if nothing but lock files went into it.
+    /// The set's lock file, then the task's, with their paths; held while open.
+    files: Vec<(PathBuf, File)>,
+    /// The set's directory, when taking the lock created it.
     created: Option<PathBuf>,
 }
 
 impl Drop for SetLock {
     fn drop(&mut self) {
-        let Some(dir) = &self.created else { return };
-        // the set's lock exclusively (a task's build upgrades its shared
-        // one), so that no other writer holds it while the files go
-        if self.files.first().is_none_or(|f| f.try_lock().is_err()) {
-            return;
-        }
-        let Ok(listing) = std::fs::read_dir(dir) else { return };
-        let names: Vec<_> = listing.flatten().map(|e| e.file_name()).collect();
-        let is_lock = |n: &std::ffi::OsStr| n.to_str().is_some_and(|n| n.starts_with('.') && n.ends_with("lock"));
-        if names.iter().all(|n| is_lock(n)) {
-            for name in &names {
-                let _ = std::fs::remove_file(dir.join(name));
+        for (path, file) in self.files.iter().rev() {
+            // removed while held exclusively (a task's build upgrades its
+            // shared hold on the set's file, which fails while other tasks
+            // hold it): a writer that opened it meanwhile finds its path
+            // gone once it has the lock, and opens the new one
+            if file.try_lock().is_ok() {
+                let _ = std::fs::remove_file(path);
             }
+        }
+        if let Some(dir) = &self.created {
+            // only when empty
             let _ = std::fs::remove_dir(dir);
         }
     }
@@ -217,9 +215,8 @@ impl SetLock {
     /// whole set, or for [`combine_parts`].
     pub fn acquire(dir: &Path) -> Result<SetLock, TileError> {
         let created = prepare_set_dir(dir)?;
-        let mut held = SetLock { files: Vec::new(), created: None };
+        let mut held = SetLock { files: Vec::new(), created: created.then(|| dir.to_path_buf()) };
         held.files.push(lock(dir, LOCK_FILE, true, "another build (or `tiles manifest`)")?);
-        held.created = created.then(|| dir.to_path_buf());
         Ok(held)
     }
 
@@ -228,43 +225,60 @@ impl SetLock {
     /// build of the whole set or of the same task.
     pub fn acquire_task(dir: &Path, task: TaskPart) -> Result<SetLock, TileError> {
         let created = prepare_set_dir(dir)?;
-        let mut held = SetLock { files: Vec::new(), created: None };
+        let mut held = SetLock { files: Vec::new(), created: created.then(|| dir.to_path_buf()) };
         held.files.push(lock(dir, LOCK_FILE, false, "a build of the whole set (or `tiles manifest`)")?);
         let name = format!(".task-{}-of-{}.lock", task.index, task.count);
         let holder = format!("another build of task {} of {}", task.index, task.count);
         held.files.push(lock(dir, &name, true, &holder)?);
-        held.created = created.then(|| dir.to_path_buf());
         Ok(held)
     }
 }
 
 /// Opens (creating it) and locks the lock file `name` in `dir`,
 /// exclusively or shared, without waiting. A symbolic link of that name
-/// is replaced by a file, never followed.
-fn lock(dir: &Path, name: &str, exclusive: bool, holder: &str) -> Result<File, TileError> {
+/// is replaced by a file, never followed. A file its last holder removed
+/// between the open and the lock is let go and the new one taken.
+fn lock(dir: &Path, name: &str, exclusive: bool, holder: &str) -> Result<(PathBuf, File), TileError> {
     let path = dir.join(name);
-    let open = || {
+    let io = |e| TileError::io(&path, e);
+    for _ in 0..16 {
+        if std::fs::symlink_metadata(&path).is_ok_and(|m| m.file_type().is_symlink()) {
+            std::fs::remove_file(&path).map_err(io)?;
+        }
         let mut options = OpenOptions::new();
         options.read(true).write(true).create(true).truncate(false);
         #[cfg(unix)]
         std::os::unix::fs::OpenOptionsExt::custom_flags(&mut options, libc::O_NOFOLLOW | libc::O_CLOEXEC);
-        options.open(&path)
-    };
-    let file = match std::fs::symlink_metadata(&path) {
-        Ok(m) if m.file_type().is_symlink() => {
-            std::fs::remove_file(&path).map_err(|e| TileError::io(&path, e))?;
-            open()
+        let file = options.open(&path).map_err(io)?;
+        let locked = if exclusive { file.try_lock() } else { file.try_lock_shared() };
+        match locked {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                return Err(TileError::Locked { dir: dir.to_path_buf(), lock: path, holder: holder.to_string() })
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(io(e)),
         }
-        _ => open(),
+        if still_named(&file, &path) {
+            return Ok((path, file));
+        }
     }
-    .map_err(|e| TileError::io(&path, e))?;
-    let locked = if exclusive { file.try_lock() } else { file.try_lock_shared() };
-    match locked {
-        Ok(()) => Ok(file),
-        Err(std::fs::TryLockError::WouldBlock) => {
-            Err(TileError::Locked { dir: dir.to_path_buf(), lock: path, holder: holder.to_string() })
+    Err(io(std::io::Error::other("its lock file keeps being replaced")))
+}
+
+/// True when `path` still names the open `file`.
+fn still_named(file: &File, path: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        match (file.metadata(), std::fs::symlink_metadata(path)) {
+            (Ok(a), Ok(b)) => (a.dev(), a.ino()) == (b.dev(), b.ino()),
+            _ => false,
         }
-        Err(std::fs::TryLockError::Error(e)) => Err(TileError::io(&path, e)),
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = (file, path);
+        true
     }
 }
 
@@ -320,6 +334,10 @@ pub fn remove_unlisted_tiles(dir: &Path, manifest: &Manifest) -> Result<(), Tile
 /// word; a stamped map's nodes 4 bytes more.
 const OLM_NODE_BYTES: [f64; 2] = [5.5, 9.5];
 
+/// Bytes of tile files beyond twice the merged map's that [`oversize`]
+/// lets pass, so that small maps in a few tiles are not reported.
+const OVERSIZE_SLACK: u64 = 256 << 10;
+
 /// A tile set holding far more bytes than its map: [`oversize`]'s report.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Oversize {
@@ -351,15 +369,15 @@ impl std::fmt::Display for Oversize {
 
 /// When a whole set's tile files (`manifest`, `nodes` in the merged map)
 /// hold more than twice the merged map's `.olm` bytes (estimated at
-/// [`OLM_NODE_BYTES`] a node) and over 1 MiB more, how much; `None` for a
-/// set of sensible tiles. The bundled indoor sample, 131,161 nodes, holds
-/// 1.0x its `.olm` in tiles at depths 1 to 10, 1.4x at 13, 3.2x at 14 and
-/// 14.8x (22,853 files) at 15.
+/// [`OLM_NODE_BYTES`] a node) and over [`OVERSIZE_SLACK`] more, how much;
+/// `None` for a set of sensible tiles. The bundled indoor sample, 131,161
+/// nodes, holds 1.0x its `.olm` in tiles at depths 1 to 10, 1.4x at 13
+/// (799 tiles), 3.2x at 14 (3,907) and 14.8x at 15 (22,853).
 pub fn oversize(manifest: &Manifest, nodes: u64) -> Option<Oversize> {
     let per_node = OLM_NODE_BYTES[usize::from(manifest.node_kind() == crate::tree::NodeKind::Stamped)];
     let merged_bytes = (nodes as f64 * per_node) as u64 + crate::mapped::HEADER_LEN as u64;
     let tile_bytes: u64 = manifest.tiles.iter().map(|t| t.bytes).sum();
-    (tile_bytes > merged_bytes.saturating_mul(2).saturating_add(1 << 20)).then_some(Oversize {
+    (tile_bytes > merged_bytes.saturating_mul(2).saturating_add(OVERSIZE_SLACK)).then_some(Oversize {
         tiles: manifest.tiles.len(),
         depth: manifest.depth,
         tile_bytes,

@@ -415,6 +415,9 @@ fn a_set_lock_admits_one_build_of_the_set_or_of_each_task() {
     drop(whole);
     // a set the lock created and nothing went into is gone with it
     assert!(!set.exists());
+    std::fs::create_dir(&set).unwrap();
+    drop(SetLock::acquire(&set).unwrap());
+    assert!(set.is_dir() && std::fs::read_dir(&set).unwrap().next().is_none(), "lock files left");
     let (t0, t1) = (TaskPart::hashed(0, 2), TaskPart::hashed(1, 2));
     let first = SetLock::acquire_task(&set, t0).unwrap();
     let second = SetLock::acquire_task(&set, t1).unwrap();
@@ -423,8 +426,11 @@ fn a_set_lock_admits_one_build_of_the_set_or_of_each_task() {
     let mut map = tiled(NodeKind::Plain, 3, &test_scans()[..1], &ScanOptions::default());
     map.set_task(t0);
     map.flush(&set).unwrap();
-    drop((first, second));
+    drop(first);
+    assert!(set.join(LOCK_FILE).exists(), "task 1 of 2 holds it still");
+    drop(second);
     assert!(set.join("task-0-of-2.manifest").is_file(), "a set written into stays");
+    assert!(!set.join(LOCK_FILE).exists() && !set.join(".task-0-of-2.lock").exists());
     let _whole = SetLock::acquire(&set).unwrap();
     let e = combine_parts(&set).unwrap_err();
     assert!(matches!(e, TileError::Locked { .. }), "{e}");
@@ -477,7 +483,9 @@ fn writes_into_a_set_replace_links_and_never_write_through_them() {
     }
     for name in &names {
         assert_eq!(std::fs::read_to_string(outside.join(name)).unwrap(), "precious", "{name} written through");
-        if name != &stale {
+        if name == LOCK_FILE {
+            assert!(set.join(name).symlink_metadata().is_err(), "the lock file stays after its build");
+        } else if name != &stale {
             assert!(!set.join(name).symlink_metadata().unwrap().file_type().is_symlink(), "{name}");
         }
     }
