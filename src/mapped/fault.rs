@@ -86,14 +86,7 @@ struct Chunk {
 
 impl Chunk {
     const fn new() -> Chunk {
-        const EMPTY: Slot = Slot {
-            taken: AtomicBool::new(false),
-            seq: AtomicUsize::new(0),
-            start: AtomicUsize::new(0),
-            end: AtomicUsize::new(0),
-            mark: AtomicPtr::new(std::ptr::null_mut()),
-        };
-        Chunk { slots: [EMPTY; CHUNK], next: AtomicPtr::new(std::ptr::null_mut()) }
+        Chunk { slots: [const { Slot::empty() }; CHUNK], next: AtomicPtr::new(std::ptr::null_mut()) }
     }
 }
 
@@ -135,6 +128,16 @@ fn claim() -> &'static Slot {
 }
 
 impl Slot {
+    const fn empty() -> Slot {
+        Slot {
+            taken: AtomicBool::new(false),
+            seq: AtomicUsize::new(0),
+            start: AtomicUsize::new(0),
+            end: AtomicUsize::new(0),
+            mark: AtomicPtr::new(std::ptr::null_mut()),
+        }
+    }
+
     /// Sets the range and mark (the slot's owner only).
     fn publish(&self, start: usize, end: usize, mark: *const Mark) {
         let seq = self.seq.load(Ordering::Relaxed);
