@@ -43,8 +43,9 @@ pub enum PointsView<'a> {
 
 impl<'py> PointsArg<'py> {
     /// Accepts a numpy array of shape `(N, 3)` and dtype `float64` or
-    /// `float32`; any other array-like is converted with
-    /// `numpy.asarray(obj, dtype=float64)` first.
+    /// `float32`, in any memory order and either byte order (one not the
+    /// machine's is copied into the machine's first); any other array-like
+    /// is converted with `numpy.asarray(obj, dtype=float64)` first.
     pub fn extract(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<Self> {
         let py = obj.py();
         let numpy = py.import("numpy")?;
@@ -63,6 +64,15 @@ impl<'py> PointsArg<'py> {
         if shape.len() != 2 || shape[1] != 3 {
             return Err(PyValueError::new_err(format!("{name}: expected shape (N, 3), got {}", shape_text(&shape))));
         }
+        // a float array in the other byte order (`>f8` on a little-endian
+        // machine): a copy in the machine's order, same precision
+        let kind = array.getattr("dtype")?;
+        let array =
+            if kind.getattr("kind")?.extract::<String>()? == "f" && !kind.getattr("isnative")?.extract::<bool>()? {
+                array.call_method1("astype", (kind.call_method1("newbyteorder", ("=",))?,))?
+            } else {
+                array
+            };
         if let Ok(a) = array.cast::<PyArray2<f64>>() {
             return Ok(PointsArg::F64(a.try_readonly().map_err(borrow_error)?));
         }

@@ -5,7 +5,8 @@ use numpy::{IntoPyArray, PyArray1};
 use octolinear::key::adjust_key_to_depth;
 use octolinear::sensor::probability;
 use octolinear::tree::unpack_rgb;
-use octolinear::{Found, Key, KeySpace, NodeItem};
+use octolinear::tree::NodeKind;
+use octolinear::{Found, Key, KeySpace, NodeItem, OccupancyTree};
 use pyo3::exceptions::{PyIndexError, PyNotImplementedError, PyTypeError};
 use pyo3::prelude::*;
 use pyo3::pyclass::CompareOp;
@@ -192,21 +193,23 @@ struct Item {
 pub struct NodeIterator {
     items: Vec<Item>,
     keys: KeySpace,
+    /// The kind of the tree iterated.
+    kind: NodeKind,
     pos: usize,
     started: bool,
 }
 
 impl NodeIterator {
-    /// Lists the nodes of `iter`.
-    pub fn new<'a>(keys: &KeySpace, iter: impl Iterator<Item = NodeItem<'a>>) -> Self {
+    /// Lists the nodes of `iter`, from `tree`.
+    pub fn new<'a>(tree: &OccupancyTree, iter: impl Iterator<Item = NodeItem<'a>>) -> Self {
         let items = iter
             .map(|n| Item { key: n.key, depth: n.depth, value: n.value, extra: n.extra, is_leaf: n.is_leaf })
             .collect();
-        NodeIterator { items, keys: keys.clone(), pos: 0, started: false }
+        NodeIterator { items, keys: tree.key_space().clone(), kind: tree.kind(), pos: 0, started: false }
     }
     /// An iterator at its end.
-    pub fn empty(keys: &KeySpace) -> Self {
-        NodeIterator { items: Vec::new(), keys: keys.clone(), pos: 0, started: false }
+    pub fn empty(tree: &OccupancyTree) -> Self {
+        Self::new(tree, std::iter::empty())
     }
     fn current(&self) -> PyResult<&Item> {
         self.items.get(self.pos).ok_or_else(|| NullPointerException::new_err("the iterator is at its end"))
@@ -293,8 +296,12 @@ impl NodeIterator {
     fn getOccupancy(&self) -> PyResult<f64> {
         Ok(probability(f64::from(self.value()?)))
     }
-    /// Colour `(r, g, b)` of the current node of a `ColorOcTree`.
+    /// Colour `(r, g, b)` of the current node of a `ColorOcTree`
+    /// (`TypeError` on another tree's iterator, as octomap-python).
     fn getColor(&self) -> PyResult<(u8, u8, u8)> {
+        if self.kind != NodeKind::Color {
+            return Err(PyTypeError::new_err("getColor() is only available on ColorOcTree iterators"));
+        }
         let [r, g, b] = unpack_rgb(self.current()?.extra);
         Ok((r, g, b))
     }

@@ -108,7 +108,13 @@ pub fn read_bt(py: Python<'_>, obj: &Bound<'_, PyAny>, sensor: octolinear::Senso
 pub fn read_ot(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<ot::AnyTree> {
     match source(obj, OT_MAGIC)? {
         Source::Data(d) => py.detach(|| ot::read(&d[..])).map_err(|e| PyValueError::new_err(format!("map data: {e}"))),
-        Source::File(path) => py.detach(|| ot::read_file(&path)).map_err(|e| convert::tree_file_error(&path, e)),
+        Source::File(path) => py.detach(|| ot::read_file(&path)).map_err(|e| match e {
+            octolinear::TreeFileError::Io(io) => convert::io_error(&path, &io),
+            damaged => pyo3::exceptions::PyOSError::new_err(format!(
+                "failed to read OcTree from '{}': {damaged}",
+                path.display()
+            )),
+        }),
     }
 }
 
@@ -460,13 +466,23 @@ impl OcTree {
     }
 
     /// Reads a `.bt` map (a file name, or `bytes` holding the file) into
-    /// this tree, keeping its sensor model. Returns `True`; a missing file
-    /// raises `FileNotFoundError` and a damaged one `ValueError` (where
-    /// octomap-python prints an error and returns `False`).
+    /// this tree, keeping its sensor model. Returns `True`; as
+    /// octomap-python, `False` when the file cannot be read or the map is
+    /// damaged (a `RuntimeWarning` says why), the tree unchanged.
     fn readBinary(&mut self, py: Python<'_>, filename: &Bound<'_, PyAny>) -> PyResult<bool> {
-        let tree = read_bt(py, filename, *self.tree.sensor())?;
-        self.replace(tree);
-        Ok(true)
+        match read_bt(py, filename, *self.tree.sensor()) {
+            Ok(tree) => {
+                self.replace(tree);
+                Ok(true)
+            }
+            Err(e) if e.is_instance_of::<pyo3::exceptions::PyOSError>(py) || e.is_instance_of::<PyValueError>(py) => {
+                let message = std::ffi::CString::new(format!("readBinary: {e}").replace('\0', "\\0"))?;
+                let category = py.get_type::<pyo3::exceptions::PyRuntimeWarning>();
+                PyErr::warn(py, &category, &message, 1)?;
+                Ok(false)
+            }
+            Err(e) => Err(e),
+        }
     }
 
     /// Writes the `.bt` map to `filename` (atomically; returns `True`) or,
@@ -496,7 +512,10 @@ impl OcTree {
     /// Reads an `.ot` map (a file name, or `bytes` holding the file) and
     /// returns a new tree of the file's type (`OcTree`, `ColorOcTree`,
     /// `OcTreeStamped`, `CountingOcTree`). Call it on the class:
-    /// `OcTree.read(filename)`.
+    /// `OcTree.read(filename)`. As octomap-python: a file that cannot be
+    /// opened raises `OSError` (`FileNotFoundError`, ...), a damaged file
+    /// `OSError` ("failed to read OcTree from ..."), damaged bytes
+    /// `ValueError`.
     #[staticmethod]
     fn read<'py>(py: Python<'py>, filename: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
         match read_ot(py, filename)? {
@@ -511,7 +530,7 @@ impl OcTree {
     fn begin_tree(&self, py: Python<'_>, maxDepth: u32) -> PyResult<NodeIterator> {
         let d = depth_arg(maxDepth)?;
         let tree = &self.tree;
-        Ok(py.detach(|| NodeIterator::new(tree.key_space(), tree.nodes(d))))
+        Ok(py.detach(|| NodeIterator::new(tree, tree.nodes(d))))
     }
 
     /// Iterator over the leaves (nodes at `maxDepth` count as leaves).
@@ -519,11 +538,12 @@ impl OcTree {
     fn begin_leafs(&self, py: Python<'_>, maxDepth: u32) -> PyResult<NodeIterator> {
         let d = depth_arg(maxDepth)?;
         let tree = &self.tree;
-        Ok(py.detach(|| NodeIterator::new(tree.key_space(), tree.leaves(d))))
+        Ok(py.detach(|| NodeIterator::new(tree, tree.leaves(d))))
     }
 
     /// Iterator over the leaves overlapping the box `bbx_min`..`bbx_max`
-    /// (empty if a corner lies outside the map, as in OctoMap).
+    /// (empty if a corner lies outside the map, as in OctoMap; a NaN
+    /// coordinate raises `ValueError`, as `leaves(bbox=...)`).
     #[pyo3(signature = (bbx_min, bbx_max, maxDepth=0))]
     fn begin_leafs_bbx(
         &self,
@@ -535,25 +555,26 @@ impl OcTree {
         let d = depth_arg(maxDepth)?;
         let (lo, hi) = (convert::point(bbx_min, "bbx_min")?, convert::point(bbx_max, "bbx_max")?);
         let tree = &self.tree;
+        queries::reject_nan_corners(tree.key_space(), lo, hi)?;
         Ok(py.detach(|| match (tree.key(lo), tree.key(hi)) {
-            (Ok(min), Ok(max)) => NodeIterator::new(tree.key_space(), tree.leaves_in_box(KeyBox { min, max }, d)),
-            _ => NodeIterator::empty(tree.key_space()),
+            (Ok(min), Ok(max)) => NodeIterator::new(tree, tree.leaves_in_box(KeyBox { min, max }, d)),
+            _ => NodeIterator::empty(tree),
         }))
     }
 
     /// An exhausted tree iterator (octomap-python's `end_tree`).
     fn end_tree(&self) -> NodeIterator {
-        NodeIterator::empty(self.tree.key_space())
+        NodeIterator::empty(&self.tree)
     }
 
     /// An exhausted leaf iterator.
     fn end_leafs(&self) -> NodeIterator {
-        NodeIterator::empty(self.tree.key_space())
+        NodeIterator::empty(&self.tree)
     }
 
     /// An exhausted bounding-box leaf iterator.
     fn end_leafs_bbx(&self) -> NodeIterator {
-        NodeIterator::empty(self.tree.key_space())
+        NodeIterator::empty(&self.tree)
     }
 
     /// Lower corner of the known space, metres (float64, as OctoMap's

@@ -253,10 +253,25 @@ pub fn key_box(keys: &KeySpace, bbox: &Bound<'_, PyAny>) -> PyResult<KeyBox> {
         .map_err(|_| pyo3::exceptions::PyTypeError::new_err("bbox: expected a pair (min, max) of 3-vectors"))?;
     let lo = crate::convert::point(&lo, "bbox min")?;
     let hi = crate::convert::point(&hi, "bbox max")?;
-    let key = |p: Point3, what: &str| {
-        keys.key(p).map_err(|e| PyValueError::new_err(format!("bbox {what} ({}, {}, {}): {e}", p.x, p.y, p.z)))
-    };
-    Ok(KeyBox { min: key(lo, "min")?, max: key(hi, "max")? })
+    Ok(KeyBox { min: corner_key(keys, lo, "min")?, max: corner_key(keys, hi, "max")? })
+}
+
+/// The key of a box corner (`what`: "min" or "max"); `ValueError` naming
+/// the corner when it lies outside the map or is NaN.
+pub fn corner_key(keys: &KeySpace, p: Point3, what: &str) -> PyResult<Key> {
+    keys.key(p).map_err(|e| PyValueError::new_err(format!("bbox {what} ({}, {}, {}): {e}", p.x, p.y, p.z)))
+}
+
+/// `ValueError` (as [`key_box`]'s) when a corner of a box has a NaN
+/// coordinate: such a box has no extent to iterate, where a corner merely
+/// outside the map makes an empty box.
+pub fn reject_nan_corners(keys: &KeySpace, lo: Point3, hi: Point3) -> PyResult<()> {
+    for (p, what) in [(lo, "min"), (hi, "max")] {
+        if [p.x, p.y, p.z].iter().any(|c| c.is_nan()) {
+            corner_key(keys, p, what)?;
+        }
+    }
+    Ok(())
 }
 
 /// `max_depth=None` as the library's 0 (every level), else 1..=16.

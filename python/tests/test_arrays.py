@@ -320,3 +320,20 @@ def test_change_detection(rng):
     for _ in range(5):
         tree.updateNode(np.array([0.25, 0.05, 0.05]), True)
     assert [(tuple(k), c) for k, c in tree.changedKeys()] == [(tuple(tree.coordToKey(np.array([0.25, 0.05, 0.05]))), False)]
+
+
+@pytest.mark.parametrize("dtype", [">f8", ">f4", "<f8", "<f4"])
+def test_points_in_either_byte_order(rng, dtype):
+    points, origin = random_scan(rng, 400)
+    native = octolinear.OcTree(0.1)
+    native.insertPointCloud(points.astype(np.dtype(dtype).newbyteorder("=")), origin)
+    swapped = octolinear.OcTree(0.1)
+    swapped.insertPointCloud(points.astype(dtype), origin.astype(dtype))
+    assert swapped.write() == native.write()
+    queries = rng.uniform(-4, 4, (300, 3))
+    a, b = native.occupancy(queries.astype(dtype).astype("=" + dtype[1:])), native.occupancy(queries.astype(dtype))
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1], equal_nan=True)
+    assert np.array_equal(native.getLabels(queries.astype(dtype)), native.getLabels(queries))
+    directions = rng.normal(size=(300, 3))
+    ra, rb = native.cast_rays(queries, directions), native.cast_rays(queries.astype(">f8"), directions.astype(">f8"))
+    assert np.array_equal(ra[0], rb[0]) and np.array_equal(ra[1], rb[1], equal_nan=True)

@@ -193,7 +193,6 @@ def test_missing_files(tmp_path):
         lambda: octolinear.read(str(missing) + ".bt"),
         lambda: octolinear.read(missing),
         lambda: octolinear.OcTree.read(str(missing) + ".ot"),
-        lambda: octolinear.OcTree(0.1).readBinary(str(missing) + ".bt"),
         lambda: octolinear.OcTree(str(missing) + ".bt"),
         lambda: octolinear.open_mapped(str(missing) + ".olm"),
         lambda: octolinear.read_graph(str(missing) + ".graph"),
@@ -249,5 +248,175 @@ def test_corrupt_files_raise_and_never_crash(tree, tmp_path, rng, suffix):
     assert refused > 20
     with pytest.raises(ValueError, match=r"byte|offset|ends"):
         octolinear.OcTree.read(tree.write()[:-7])
-    with pytest.raises(ValueError, match="binary map data"):
-        octolinear.OcTree(0.1).readBinary(tree.writeBinary()[:-3] + b"\xff" * 1)
+    with pytest.warns(RuntimeWarning, match="binary map data"):
+        assert octolinear.OcTree(0.1).readBinary(tree.writeBinary()[:-3] + b"\xff" * 1) is False
+
+
+def run_isolated(script, cwd, *args):
+    """Runs `script` in a fresh interpreter in `cwd` (away from the source
+    package), so that a death by a signal fails the test instead of ending
+    pytest."""
+    import subprocess
+    import sys
+
+    command = [sys.executable, "-c", script, *map(str, args)]
+    return subprocess.run(command, cwd=cwd, capture_output=True, text=True, timeout=120)
+
+
+TRUNCATED_OLM = r"""
+import faulthandler, os, sys
+import numpy as np
+import octolinear
+# a handler installed after the module's: opening a map puts the guard back in front
+faulthandler.enable()
+path = sys.argv[1]
+rng = np.random.default_rng(5)
+tree = octolinear.OcTree(0.05)
+tree.insertPointCloud(rng.uniform(-3, 3, (20000, 3)), np.zeros(3))
+tree.save(path)
+mapped = octolinear.open_mapped(path)
+points = rng.uniform(-3, 3, (20000, 3))
+mapped.occupancy(points)
+os.truncate(path, 0)
+for name, call in [
+    ("occupancy", lambda: mapped.occupancy(points)),
+    ("leaves", lambda: mapped.leaves()),
+    ("search", lambda: mapped.search(points[0])),
+    ("size", lambda: mapped.size()),
+    ("verify", lambda: mapped.verify()),
+    ("to_tree", lambda: mapped.to_tree()),
+]:
+    try:
+        call()
+        print(name, "answered")
+    except OSError as e:
+        print(name, "OSError", e)
+print("alive", repr(mapped))
+"""
+
+
+def test_a_mapped_file_truncated_under_queries_raises(tmp_path):
+    path = tmp_path / "m.olm"
+    done = run_isolated(TRUNCATED_OLM, tmp_path, path)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert len(lines) == 7 and lines[-1].startswith("alive"), done.stdout
+    for line in lines[:-1]:
+        assert "OSError" in line and f"{path}: the file was truncated while memory-mapped" in line, line
+
+
+TRUNCATED_GRAPH = r"""
+import os, sys, threading, time
+import numpy as np
+import octolinear
+
+path, attempts = sys.argv[1], int(sys.argv[2])
+
+def write_graph(path, scans=3, points=200_000):
+    rng = np.random.default_rng(3)
+    record = np.dtype([("marker", "<i4"), ("xyz", "<f8", 3)])
+    with open(path, "wb") as f:
+        f.write(np.uint32(scans).tobytes())
+        for s in range(scans):
+            cloud = np.zeros(points, record)
+            cloud["marker"] = 3
+            cloud["xyz"] = rng.uniform(-0.3, 0.3, (points, 3)) + [0.5, 0.0, 0.0]
+            f.write(np.uint32(points).tobytes() + cloud.tobytes())
+            pose = np.zeros(1, [("t", record), ("rm", "<i4"), ("q", "<f8", 4), ("id", "<u4")])
+            pose["t"]["marker"], pose["rm"], pose["q"], pose["id"] = 3, 4, [1, 0, 0, 0], s
+            f.write(pose.tobytes())
+        f.write(np.uint32(0).tobytes())
+
+def truncate_once_mapped(real):
+    # waits until build maps the file, then cuts it short
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        with open("/proc/self/maps") as maps:
+            if real in maps.read():
+                os.truncate(real, 8)
+                return
+        time.sleep(0.0005)
+
+for attempt in range(attempts):
+    write_graph(path)
+    real = os.path.realpath(path)
+    cutter = threading.Thread(target=truncate_once_mapped, args=(real,))
+    cutter.start()
+    try:
+        octolinear.build(path, resolution=0.1, threads=1)
+        outcome = "built"
+    except OSError as e:
+        outcome = "OSError " + str(e)
+    cutter.join()
+    print(outcome, flush=True)
+    if outcome.startswith("OSError"):
+        break
+"""
+
+
+def test_a_graph_truncated_during_build_raises(tmp_path):
+    path = tmp_path / "scans.graph"
+    done = run_isolated(TRUNCATED_GRAPH, tmp_path, path, 5)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    # the build may finish before the cut; it never reports anything but the truncation
+    assert lines and all(line == "built" for line in lines[:-1]), done.stdout
+    assert lines[-1] == f"OSError {path}: the file was truncated while memory-mapped " \
+        "(replace files by renaming a new file over them, never in place)", done.stdout
+
+
+def test_read_binary_and_read_fail_as_octomap_python(tree, tmp_path):
+    import octomap
+
+    bad_ot, bad_bt, missing = tmp_path / "bad.ot", tmp_path / "bad.bt", tmp_path / "missing.bt"
+    bad_ot.write_bytes(b"garbage")
+    bad_bt.write_bytes(b"garbage")
+    data = tree.writeBinary()
+    for arg in (b"", "", str(missing).encode(), str(missing), bad_bt, data[:20], data[: len(data) // 2]):
+        theirs, ours = octomap.OcTree(0.1), octolinear.OcTree(0.1)
+        ours.updateNode([1.0, 1.0, 1.0], True)
+        before = ours.write()
+        with pytest.warns(RuntimeWarning, match="readBinary"):
+            assert ours.readBinary(arg) is False
+        assert theirs.readBinary(arg) is False, arg
+        assert ours.write() == before, "a failed read leaves the tree as it was"
+    for arg in (bad_ot, str(bad_ot).encode()):
+        with pytest.raises(OSError, match="failed to read OcTree from"):
+            octomap.OcTree.read(arg)
+        with pytest.raises(OSError, match=f"failed to read OcTree from '{bad_ot}'"):
+            octolinear.OcTree.read(arg)
+    for arg in (b"", str(tmp_path / "missing.ot")):
+        with pytest.raises(FileNotFoundError):
+            octomap.OcTree.read(arg)
+        with pytest.raises(FileNotFoundError):
+            octolinear.OcTree.read(arg)
+    with pytest.raises(TypeError, match="file name"):
+        octolinear.OcTree(0.1).readBinary(42)
+
+
+def test_get_color_needs_a_color_tree_iterator(tree):
+    import octomap
+
+    theirs = octomap.OcTree(0.1)
+    theirs.updateNode(np.array([1.0, 1.0, 1.0]), True)
+    for ours_it, theirs_it in ((tree.begin_leafs(), theirs.begin_leafs()), (tree.begin_tree(), theirs.begin_tree())):
+        with pytest.raises(TypeError, match="only available on ColorOcTree iterators"):
+            next(iter(theirs_it)).getColor()
+        with pytest.raises(TypeError, match="only available on ColorOcTree iterators"):
+            next(iter(ours_it)).getColor()
+    color = octolinear.ColorOcTree(0.1)
+    color.updateNode([1.0, 1.0, 1.0], True)
+    assert next(iter(color.begin_leafs())).getColor() == (255, 255, 255)
+
+
+@pytest.mark.parametrize("corner", [0, 1])
+def test_nan_boxes_raise_in_both_box_queries(tree, corner):
+    box = [np.array([-1.0, -1.0, -1.0]), np.array([1.0, 1.0, 1.0])]
+    box[corner][1] = np.nan
+    with pytest.raises(ValueError, match="bbox (min|max).*NaN") as leaves:
+        tree.leaves(bbox=tuple(box))
+    with pytest.raises(ValueError) as iterated:
+        tree.begin_leafs_bbx(*box)
+    assert str(iterated.value) == str(leaves.value)
+    # a corner merely outside the map still gives an empty iteration, as in OctoMap
+    assert list(tree.begin_leafs_bbx(np.array([-1e9, 0.0, 0.0]), np.array([1.0, 1.0, 1.0]))) == []
