@@ -5,6 +5,7 @@ use crate::convert;
 use crate::octree::{read_bt_path, tree_object};
 use crate::queries;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
+use octolinear::formats::bounded::WholeError;
 use octolinear::formats::{bt, graph, ot, pcd, ply, xyz};
 use octolinear::sensor::{SensorModel, SensorProbabilities};
 use octolinear::{InnerNodes, OccupancyTree, OutOfMap, Point3, ScanOptions};
@@ -262,7 +263,9 @@ pub fn build<'py>(
 /// binary_compressed) or XYZ text (`.xyz`, `.txt`, `.csv`), by extension.
 /// Returns the points, `(N, 3)` float64 holding float32 values; with
 /// `colors=True`, `(points, colors)` where `colors` is `(N, 3)` uint8 or
-/// `None` if the file has none.
+/// `None` if the file has none. A line of an XYZ file or of a PLY or PCD
+/// header longer than 1 MiB, or a pipe or device holding more than 4 GiB,
+/// is a `ValueError`.
 #[pyfunction]
 #[pyo3(signature = (path, colors=false))]
 pub fn read_points<'py>(py: Python<'py>, path: &Bound<'py, PyAny>, colors: bool) -> PyResult<Bound<'py, PyAny>> {
@@ -271,14 +274,16 @@ pub fn read_points<'py>(py: Python<'py>, path: &Bound<'py, PyAny>, colors: bool)
     let read = || -> Result<octolinear::formats::ColoredCloud, PyErr> {
         let bad = |e: &dyn std::fmt::Display| PyValueError::new_err(format!("{}: {e}", path.display()));
         match ext.as_str() {
-            "ply" | "pcd" => {
-                let bytes = std::fs::read(&path).map_err(|e| convert::io_error(&path, &e))?;
-                if ext == "ply" {
-                    ply::read(&bytes, colors).map_err(|e| bad(&e))
-                } else {
-                    pcd::read(&bytes, colors).map_err(|e| bad(&e))
-                }
-            }
+            // a regular file read to its length, a FIFO or device within
+            // the library's bounds; I/O errors are OSError
+            "ply" => ply::read_file(&path, colors).map_err(|e| match e {
+                ply::PlyError::Read(WholeError::Io(e)) => convert::io_error(&path, &e),
+                e => bad(&e),
+            }),
+            "pcd" => pcd::read_file(&path, colors).map_err(|e| match e {
+                pcd::PcdError::Read(WholeError::Io(e)) => convert::io_error(&path, &e),
+                e => bad(&e),
+            }),
             "xyz" | "txt" | "csv" => {
                 let file = std::fs::File::open(&path).map_err(|e| convert::io_error(&path, &e))?;
                 let cloud = xyz::read(std::io::BufReader::new(file)).map_err(|e| bad(&e))?;
