@@ -281,14 +281,15 @@ def build_tiles(
     scans: Optional[int] = None,
     threads: Optional[int] = None,
     task: Optional[Tuple[int, int]] = None,
-    plan: Optional[str] = None,
+    plan: Optional[PathArg] = None,
     resume: bool = False,
     memory_cap: Optional[int] = None,
 ) -> dict[str, Any]:
     """What ``octolinear build IN -o OUT.tiles --tile-depth D [--task K/N]
-    [--memory-cap BYTES]`` does: a tile set (or one task's part of it) from a
-    .graph file. Returns its summary: tiles, bytes, nodes, seconds, task,
-    skipped, scans, points."""
+    [--plan PLAN] [--memory-cap BYTES]`` does: a tile set (or one task's part
+    of it) from a .graph file. ``plan`` is the text of ``plan_tiles`` or the
+    path of a plan file. Returns its summary: tiles, bytes, nodes, seconds,
+    task, skipped, scans, points."""
 
 def plan_tiles(
     graph_path: PathArg,

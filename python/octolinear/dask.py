@@ -1,6 +1,6 @@
 """Tile sets built on a Dask cluster: one Dask task per share of the tiles.
 
-``build_tiles(graph, out_dir, resolution=..., tile_depth=..., client=...)``
+``build_tiles(input, out_dir, resolution=..., tile_depth=..., client=...)``
 runs ``octolinear.build_tiles(..., task=(k, n))`` for every task ``k`` of
 ``n`` on the cluster's workers, then combines their parts into the tile
 set's manifest (``octolinear.write_tile_manifest``). The tile set is the one
@@ -40,7 +40,7 @@ _TILE_TEMP_FILE = re.compile(r"\.d\d+-\d+-\d+-\d+\.olm\.\d+\.\d+\.tmp")
 
 
 def build_tiles(
-    inputs: Union[str, os.PathLike],
+    input: Union[str, os.PathLike],
     out_dir: Union[str, os.PathLike],
     *,
     resolution: float,
@@ -50,9 +50,10 @@ def build_tiles(
     resume: bool = True,
     **build_options: Any,
 ) -> dict[str, Any]:
-    """Builds the tile set of the ``.graph`` file ``inputs`` in ``out_dir`` on
-    the Dask cluster of ``client``, as ``octolinear.build_tiles(inputs,
-    out_dir, resolution=..., tile_depth=...)`` does on one machine.
+    """Builds the tile set of the ``.graph`` file ``input`` (one file: a list
+    of files is a ``TypeError``) in ``out_dir`` on the Dask cluster of
+    ``client``, as ``octolinear.build_tiles(input, out_dir,
+    resolution=..., tile_depth=...)`` does on one machine.
 
     The tiles are shared by ``tasks`` Dask tasks (default: the cluster's
     worker threads), each ``octolinear.build_tiles(..., task=(k, tasks))``
@@ -67,11 +68,13 @@ def build_tiles(
 
     With ``resume`` (the default) a task whose part file
     (``task-K-of-N.manifest``) is already in ``out_dir``, built with the
-    same parameters, and whose tiles all verify (lengths, CRC-32s,
-    structure) is not run again; a task interrupted before its part file
-    was written is, and so is a finished set (its parts combined into the
-    manifest). The input and scan options are not recorded in the part
-    files: resume only a build of the same input and options.
+    same parameters, options (``max_range``, ``discretize``, ``sensor``,
+    ``clamping``, ``scans``), input (its length and modification time) and
+    range of tiles, and whose tiles all verify (lengths, CRC-32s,
+    structure) is not run again; a part built otherwise is built again, and
+    so is a task interrupted before its part file was written, and a
+    finished set (its parts combined into the manifest). ``out_dir`` must be
+    named ``NAME.tiles``, or be an empty directory or a tile set.
 
     ``build_options``: ``max_range``, ``discretize``, ``sensor``,
     ``clamping``, ``scans``, ``threads``, as for ``octolinear.build_tiles``.
@@ -83,6 +86,11 @@ def build_tiles(
     ``tasks``: per task, in task order, ``task``, ``worker`` (its address),
     ``seconds``, ``tiles``, ``bytes``, ``skipped``, ``scans``, ``points``.
     """
+    if isinstance(input, (list, tuple)):
+        raise TypeError(
+            "build_tiles() builds the tile set of one .graph file: input must be a path (str or os.PathLike), "
+            f"got a {type(input).__name__}"
+        )
     unknown = set(build_options) - _BUILD_OPTIONS
     if unknown:
         raise TypeError(f"build_tiles() got unexpected keyword arguments: {', '.join(sorted(unknown))}")
@@ -91,7 +99,7 @@ def build_tiles(
     if not isinstance(tasks, int) or tasks < 1:
         raise ValueError(f"tasks must be a whole number >= 1, got {tasks!r} (a cluster without workers has 0)")
     build_options.setdefault("threads", 1)
-    graph = os.path.abspath(os.fspath(inputs))
+    graph = os.path.abspath(os.fspath(input))
     out = os.path.abspath(os.fspath(out_dir))
     started = time.perf_counter()
     token = uuid.uuid4().hex

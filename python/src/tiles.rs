@@ -8,8 +8,8 @@ use crate::convert;
 use crate::files::{build_options, graph_error, graph_scans, sensor_model};
 use octolinear::formats::{bt, graph, ot, write_atomically};
 use octolinear::tiles::{
-    check_set_dir, read_manifest, BuildInput, BuildRecord, GroupedBuild, GroupedError, Manifest, TaskPart, TileError,
-    TileId, TilePlan, TileSet, TileWork, TiledMap, MANIFEST_FILE, MAX_TASKS, PLAN_MAGIC,
+    read_manifest, remove_unlisted_tiles, BuildInput, BuildRecord, GroupedBuild, GroupedError, Manifest, SetLock,
+    TaskPart, TileError, TilePlan, TileSet, TileWork, TiledMap, MANIFEST_FILE, MAX_TASKS, PLAN_MAGIC,
 };
 use octolinear::{NodeKind, Point3, TreeKind};
 use pyo3::exceptions::{PyTypeError, PyValueError};
@@ -18,12 +18,15 @@ use pyo3::types::PyDict;
 use std::path::Path;
 use std::time::Instant;
 
-/// A tile error as the matching Python exception: `OSError` for I/O,
-/// `ValueError` for anything else (damaged tiles, bad manifests, refused
-/// scans), the file in the message.
+/// A tile error as the matching Python exception: `OSError` for I/O
+/// (`NotADirectoryError` for a set's path that is a file), `ValueError`
+/// for anything else (damaged tiles, bad manifests, refused scans, a
+/// directory that cannot hold a set, a set another build holds), the file
+/// in the message.
 fn tile_error(e: TileError) -> PyErr {
     match e {
         TileError::Io { path, source } => convert::io_error(&path, &source),
+        e @ TileError::NotADirectory { .. } => pyo3::exceptions::PyNotADirectoryError::new_err(e.to_string()),
         other => PyValueError::new_err(other.to_string()),
     }
 }
@@ -104,21 +107,6 @@ fn finished_build(dir: &Path, wanted: &Manifest) -> Option<Manifest> {
     Some(found)
 }
 
-/// Removes the tile files in `dir` that `manifest` does not list (left by
-/// an earlier build), as `octolinear build` does after a whole set.
-fn remove_unlisted_tiles(dir: &Path, manifest: &Manifest) -> PyResult<()> {
-    let listed: std::collections::HashSet<String> = manifest.tiles.iter().map(|t| t.id.file_name()).collect();
-    for item in std::fs::read_dir(dir).map_err(|e| convert::io_error(dir, &e))? {
-        let item = item.map_err(|e| convert::io_error(dir, &e))?;
-        let name = item.file_name();
-        let Some(name) = name.to_str() else { continue };
-        if TileId::from_file_name(name).is_some() && !listed.contains(name) {
-            std::fs::remove_file(item.path()).map_err(|e| convert::io_error(&item.path(), &e))?;
-        }
-    }
-    Ok(())
-}
-
 /// Nodes of the single tree the whole set in `dir` holds.
 fn set_nodes(dir: &Path) -> PyResult<u64> {
     Ok(TileSet::open(dir).map_err(tile_error)?.node_count())
@@ -148,10 +136,12 @@ fn summary<'py>(
 /// `scans` and `threads` as for `build`.
 ///
 /// `out_dir` must be named `NAME.tiles`, or be an empty directory or a
-/// tile set; a `manifest` or part file in it must be a tile set's (the
-/// library's `check_set_dir`). The manifest records how the set was
-/// built: the options, the input's length and modification time, the
-/// plan.
+/// tile set; a `manifest` or part file in it must be a tile set's
+/// (`ValueError` otherwise, nothing written). The build holds the set's
+/// lock (`.lock` in `out_dir`) throughout, as `octolinear build` does: a
+/// second build of the same set, or of the same task, fails at once. The
+/// manifest records how the set was built: the options, the input's length
+/// and modification time, the plan.
 ///
 /// With `task=(k, n)` only task `k`'s share of the tiles is built and its
 /// part file `task-k-of-n.manifest` written (`--task k/n`); once all `n`
@@ -227,7 +217,6 @@ pub fn build_tiles<'py>(
     if let Some(t) = task {
         map.set_task(t);
     }
-    check_set_dir(&dir).map_err(tile_error)?;
     let opts = build_options(max_range, discretize, threads);
     let record = BuildRecord {
         scans: scans.map(|n| n as u64),
@@ -247,6 +236,14 @@ pub fn build_tiles<'py>(
     };
     type Built = (Manifest, Option<u64>, Option<(usize, usize)>);
     let (manifest, nodes, built) = py.detach(|| -> PyResult<Built> {
+        // one build at a time writes the set (a task's beside other
+        // tasks'); taking the lock checks that `dir` may hold a set
+        // (`check_set_dir`) and creates it
+        let _lock = match task {
+            Some(t) => SetLock::acquire_task(&dir, t),
+            None => SetLock::acquire(&dir),
+        }
+        .map_err(tile_error)?;
         if let Some(found) = resume.then(|| finished_build(&dir, &wanted)).flatten() {
             let nodes = if task.is_none() { Some(set_nodes(&dir)?) } else { None };
             return Ok((found, nodes, None));
@@ -275,7 +272,7 @@ pub fn build_tiles<'py>(
             // the grouped build writes no record: the manifest again, with it
             let manifest = Manifest { build: Some(record), ..report.manifest };
             manifest.write(&dir.join(MANIFEST_FILE)).map_err(tile_error)?;
-            remove_unlisted_tiles(&dir, &manifest)?;
+            remove_unlisted_tiles(&dir, &manifest).map_err(tile_error)?;
             let nodes = set_nodes(&dir)?;
             return Ok((manifest, Some(nodes), Some(count)));
         }
@@ -292,7 +289,7 @@ pub fn build_tiles<'py>(
         }
         let manifest = map.flush(&dir).map_err(tile_error)?;
         if task.is_none() {
-            remove_unlisted_tiles(&dir, &manifest)?;
+            remove_unlisted_tiles(&dir, &manifest).map_err(tile_error)?;
         }
         let nodes = task.is_none().then(|| map.stats().nodes);
         Ok((manifest, nodes, Some(count)))

@@ -173,6 +173,31 @@ def test_an_interrupted_build_resumes(clients, reference, tmp_path):
     assert leftovers(out) == []
 
 
+def test_parts_built_with_other_options_are_built_again(clients, reference, tmp_path):
+    from octolinear.dask import build_tiles
+
+    out = tmp_path / "map.tiles"
+    # what a build with max_range=20 left, on the tiles of the plan the
+    # build below makes (max_range=5): every part, none combined yet
+    plan = octolinear.plan_tiles(SAMPLE_GRAPH, tasks=2, **MAP, **OPTIONS)
+    for k in range(2):
+        octolinear.build_tiles(SAMPLE_GRAPH, out, task=(k, 2), plan=plan, **MAP, max_range=20.0)
+    summary = build_tiles(SAMPLE_GRAPH, out, client=clients("threads"), tasks=2, **MAP, **OPTIONS)
+    assert summary["skipped"] == [] and [t["scans"] for t in summary["tasks"]] == [6, 6]
+    assert converted(out, tmp_path) == reference
+    assert leftovers(out) == []
+
+
+def test_the_input_is_one_graph_file(clients, tmp_path):
+    from octolinear.dask import build_tiles
+
+    with pytest.raises(TypeError, match="one .graph file: input must be a path"):
+        build_tiles([SAMPLE_GRAPH, SAMPLE_GRAPH], tmp_path / "a.tiles", client=clients("threads"), **MAP)
+    assert not (tmp_path / "a.tiles").exists()
+    summary = build_tiles(input=SAMPLE_GRAPH, out_dir=tmp_path / "b.tiles", client=clients("threads"), tasks=2, **MAP)
+    assert summary["tiles"] > 0
+
+
 def test_errors_of_tasks_reach_the_caller(clients, tmp_path):
     from octolinear.dask import build_tiles
 

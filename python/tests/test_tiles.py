@@ -4,7 +4,10 @@ gives the bytes of build;
 resume keeps only builds whose tiles verify; bad arguments and damaged
 sets are exceptions naming the problem."""
 
+import os
 import re
+import time
+import zlib
 
 import pytest
 from conftest import SAMPLE_GRAPH
@@ -135,7 +138,7 @@ def test_resume_keeps_only_builds_that_verify(tmp_path):
         (dict(tile_depth=8, max_range=-1.0), "max_range must be a positive"),
         (dict(tile_depth=8, scans=0), "scans must be at least 1"),
         (dict(tile_depth=8, threads=0), "threads must be at least 1"),
-        (dict(tile_depth=8, task=(2, 2)), r"0 <= k < n, got \(2, 2\)"),
+        (dict(tile_depth=8, task=(2, 2)), r"0 <= k < n <= 65536, got \(2, 2\)"),
         (dict(tile_depth=8, task=(0, 0)), r"got \(0, 0\)"),
         (dict(tile_depth=8, plan="plan"), "plan needs task"),
         (dict(tile_depth=8, sensor=(0.9, 0.7)), "prob_miss = 0.9"),
@@ -170,7 +173,7 @@ def test_plans_that_do_not_fit_the_build_are_refused(tmp_path):
         (dict(tile_depth=12, task=(0, 2), plan=plan), "3 tasks"),
         (dict(tile_depth=11, task=(0, 3), plan=plan), "tile_depth 12"),
         (dict(tile_depth=12, task=(0, 3), resolution=0.2, plan=plan), "resolution 0.1"),
-        (dict(tile_depth=12, task=(0, 3), plan="not a plan"), "plan: "),
+        (dict(tile_depth=12, task=(0, 3), plan="not a plan"), "plan: \"not a plan\" is neither"),
     ]:
         with pytest.raises(ValueError, match=message):
             octolinear.build_tiles(SAMPLE_GRAPH, out, **arguments)
@@ -208,3 +211,108 @@ def test_incomplete_or_damaged_sets_are_refused(tmp_path):
         with pytest.raises(ValueError, match=tile.stem):
             octolinear.convert_tiles(out, tmp_path / f"map.{ext}")
         assert not (tmp_path / f"map.{ext}").exists()
+
+
+def test_a_part_built_otherwise_is_built_again_and_never_combined(tmp_path):
+    graph = tmp_path / "scans.graph"
+    graph.write_bytes(SAMPLE_GRAPH.read_bytes())
+    out = tmp_path / "map.tiles"
+    assert not octolinear.build_tiles(graph, out, tile_depth=12, task=(0, 2), max_range=20.0, resume=True)["skipped"]
+    assert octolinear.build_tiles(graph, out, tile_depth=12, task=(0, 2), max_range=20.0, resume=True)["skipped"]
+    part = (out / "task-0-of-2.manifest").read_text()
+    assert part.startswith("octolinear-tiles 2\ntask 0 2\n") and "\nmax_range 4034000000000000\n" in part
+    # another max range, scan count or input: not the same part
+    for options in (dict(), dict(max_range=5.0), dict(max_range=20.0, scans=3), dict(max_range=20.0, discretize=True)):
+        again = octolinear.build_tiles(graph, out, tile_depth=12, task=(0, 2), resume=True, **options)
+        assert not again["skipped"], options
+    octolinear.build_tiles(graph, out, tile_depth=12, task=(0, 2), max_range=20.0)
+    stat = graph.stat()
+    os.utime(graph, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1_000_000_000))
+    assert not octolinear.build_tiles(graph, out, tile_depth=12, task=(0, 2), max_range=20.0, resume=True)["skipped"]
+    # parts of other options are not combined: the option is named
+    octolinear.build_tiles(graph, out, tile_depth=12, task=(1, 2), max_range=5.0)
+    with pytest.raises(ValueError, match=r"max_range: 5 m in task-1-of-2\.manifest, 20 m in task-0-of-2\.manifest"):
+        octolinear.write_tile_manifest(out)
+    assert not (out / "manifest").exists()
+    octolinear.build_tiles(graph, out, tile_depth=12, task=(1, 2), max_range=20.0)
+    octolinear.write_tile_manifest(out)
+    assert converted_bytes(out, tmp_path) == built_bytes(tmp_path, dict(max_range=20.0))
+    # a whole set resumes only with its options too
+    assert octolinear.build_tiles(graph, out, tile_depth=12, max_range=20.0)["nodes"] > 0
+    assert octolinear.build_tiles(graph, out, tile_depth=12, max_range=20.0, resume=True)["skipped"]
+    assert not octolinear.build_tiles(graph, out, tile_depth=12, resume=True)["skipped"]
+    capped = octolinear.build_tiles(graph, out, tile_depth=12, memory_cap=1 << 30)
+    assert octolinear.build_tiles(graph, out, tile_depth=12, memory_cap=1 << 30, resume=True)["skipped"]
+    assert converted_bytes(out, tmp_path) == built_bytes(tmp_path, {}) and capped["nodes"] > 0
+
+
+def test_build_tiles_writes_only_where_a_set_belongs(tmp_path):
+    user = tmp_path / "mine"
+    user.mkdir()
+    (user / "manifest").write_text("my own manifest\n")
+    (user / "d12-2048-2048-2048.olm").write_bytes(b"my own map")
+    for out in (user, tmp_path / "mine.tiles"):
+        if out.name == "mine.tiles":
+            out.mkdir()
+            (out / "manifest").write_text("my own manifest\n")
+        with pytest.raises(ValueError, match="not a tile set's manifest"):
+            octolinear.build_tiles(SAMPLE_GRAPH, out, tile_depth=12)
+        assert (out / "manifest").read_text() == "my own manifest\n"
+    assert (user / "d12-2048-2048-2048.olm").read_bytes() == b"my own map"
+    (user / "manifest").unlink()
+    with pytest.raises(ValueError, match="neither named NAME.tiles nor empty nor a tile set"):
+        octolinear.build_tiles(SAMPLE_GRAPH, user, tile_depth=12)
+    assert sorted(p.name for p in user.iterdir()) == ["d12-2048-2048-2048.olm"]
+    with pytest.raises(ValueError, match=r"x\.bt: a tile set is a directory named NAME\.tiles"):
+        octolinear.build_tiles(SAMPLE_GRAPH, tmp_path / "x.bt", tile_depth=12)
+    assert not (tmp_path / "x.bt").exists()
+    (tmp_path / "file.tiles").write_bytes(b"a file")
+    with pytest.raises(NotADirectoryError, match="file.tiles exists and is not a directory"):
+        octolinear.build_tiles(SAMPLE_GRAPH, tmp_path / "file.tiles", tile_depth=12)
+    # an empty directory, or a set already there, of any name
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert octolinear.build_tiles(SAMPLE_GRAPH, empty, tile_depth=12)["tiles"] > 0
+    assert octolinear.build_tiles(SAMPLE_GRAPH, empty, tile_depth=12, resume=True)["skipped"]
+
+
+def test_a_plan_is_its_text_or_its_file(tmp_path):
+    text = octolinear.plan_tiles(SAMPLE_GRAPH, tile_depth=12, tasks=2)
+    plan = tmp_path / "map.plan"
+    plan.write_text(text)
+    out = tmp_path / "planned.tiles"
+    octolinear.build_tiles(SAMPLE_GRAPH, out, tile_depth=12, task=(0, 2), plan=plan)
+    octolinear.build_tiles(SAMPLE_GRAPH, out, tile_depth=12, task=(1, 2), plan=str(plan))
+    assert "prefixes" in (out / "task-1-of-2.manifest").read_text()
+    octolinear.write_tile_manifest(out)
+    assert converted_bytes(out, tmp_path) == built_bytes(tmp_path, {})
+    with pytest.raises(TypeError, match="plan must be the text plan_tiles returns or the path of a plan file"):
+        octolinear.build_tiles(SAMPLE_GRAPH, out, tile_depth=12, task=(0, 2), plan=2)
+    with pytest.raises(ValueError, match="neither a plan's text"):
+        octolinear.build_tiles(SAMPLE_GRAPH, out, tile_depth=12, task=(0, 2), plan="missing.plan")
+    with pytest.raises(FileNotFoundError, match="missing.plan"):
+        octolinear.build_tiles(SAMPLE_GRAPH, out, tile_depth=12, task=(0, 2), plan=tmp_path / "missing.plan")
+    (tmp_path / "bad.plan").write_text(text.replace("tasks 2", "tasks 3"))
+    with pytest.raises(ValueError, match=r"bad\.plan: line 7"):
+        octolinear.build_tiles(SAMPLE_GRAPH, out, tile_depth=12, task=(0, 3), plan=tmp_path / "bad.plan")
+    with pytest.raises(OSError, match="/dev/zero.*not a regular file"):
+        octolinear.build_tiles(SAMPLE_GRAPH, out, tile_depth=12, task=(0, 2), plan="/dev/zero")
+
+
+def test_counts_and_files_a_part_claims_are_bounded(tmp_path):
+    out = tmp_path / "claims.tiles"
+    octolinear.build_tiles(SAMPLE_GRAPH, out, tile_depth=12, task=(0, 2))
+    part = (out / "task-0-of-2.manifest").read_text()
+    body = part[: part.rindex("crc32 ")].replace("task 0 2\n", "task 0 4294967295\n")
+    (out / "task-0-of-2.manifest").unlink()
+    (out / "task-0-of-4294967295.manifest").write_text(body + f"crc32 {zlib.crc32(body.encode()):08x}\n")
+    started = time.monotonic()
+    with pytest.raises(ValueError, match="line 2: expected `task K N`"):
+        octolinear.write_tile_manifest(out)
+    assert time.monotonic() - started < 5
+    (out / "task-0-of-4294967295.manifest").unlink()
+    with pytest.raises(ValueError, match=r"task must be \(k, n\) with 0 <= k < n <= 65536"):
+        octolinear.build_tiles(SAMPLE_GRAPH, out, tile_depth=12, task=(0, 65537))
+    os.mkfifo(out / "manifest")
+    with pytest.raises(OSError, match="a FIFO, not a regular file"):
+        octolinear.convert_tiles(out, tmp_path / "map.ot")
