@@ -106,6 +106,7 @@ pub fn run(a: Args) -> Result<()> {
         s.into()
     });
     super::common::MapFormat::of(&output)?;
+    super::input::check_read_once(&a.inputs, "binvox")?;
     let mut tree = None;
     let mut counts = Counts::default();
     for path in &a.inputs {

@@ -159,6 +159,31 @@ pub fn read_scan(path: &Path, colors: bool) -> Result<Scan> {
     .with_context(|| ctx(format))
 }
 
+/// Refuses a pipe, FIFO or device (or `-`) named more than once among
+/// `paths` (the arguments of `flag`): it can be read only once, and a
+/// FIFO opened again would wait for a writer that never comes. Regular
+/// files may repeat.
+pub fn check_read_once(paths: &[impl AsRef<Path>], flag: &str) -> Result<()> {
+    use std::os::unix::fs::MetadataExt;
+    let mut seen = std::collections::HashSet::new();
+    for path in paths {
+        let path = path.as_ref();
+        let id = if is_stdin(path) {
+            None
+        } else {
+            match std::fs::metadata(path) {
+                Ok(m) if !m.is_file() => Some((m.dev(), m.ino())),
+                // regular files, and names that opening will report
+                _ => continue,
+            }
+        };
+        if !seen.insert(id) {
+            bail!("{flag} names {} more than once: a pipe, FIFO or device is read only once", name(path));
+        }
+    }
+    Ok(())
+}
+
 // ----- LAS / LAZ -----------------------------------------------------------
 
 fn read_las(mut source: impl Read + Seek + Send + Sync + 'static) -> Result<PointCloud> {

@@ -2685,3 +2685,21 @@ fn resolutions_outside_the_usable_range_are_refused_by_every_command() {
     fail(&["info", bad], &format!("resolution 1e-300 m is below the smallest usable resolution"));
     fail(&["info", bad], &format!("at byte {at}"));
 }
+
+#[test]
+fn a_fifo_named_twice_is_refused_before_it_is_opened() {
+    let f = Fixture::new();
+    let fifo = f.path("points.xyz");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let p = f.p("points.xyz");
+    // no writer ever opens the FIFO: opening it would wait for ever
+    fail_within(20, &["build", "--points", p, "--points", p, "-o", f.p("x.bt")], "--points names");
+    fail_within(20, &["build", "--points", "-", "--points", "-", "-o", f.p("x.bt")], "more than once");
+    std::os::unix::fs::symlink("/dev/zero", f.path("z.binvox")).unwrap();
+    fail_within(
+        20,
+        &["binvox", f.p("z.binvox"), "/dev/zero", "-o", f.p("x.bt")],
+        "binvox names /dev/zero more than once",
+    );
+    assert!(!f.path("x.bt").exists());
+}

@@ -484,6 +484,7 @@ fn point_files(a: &Args) -> Result<Scans<'_>> {
     if a.points.iter().filter(|p| p.as_os_str() == "-").count() > 1 {
         bail!("--points names standard input (-) more than once");
     }
+    input::check_read_once(&a.points, "--points")?;
     let scans = a.points.iter().zip(poses).enumerate().map(|(i, (path, pose))| {
         let scan = input::read_scan(path, a.color)?;
         let colors = if a.color {
