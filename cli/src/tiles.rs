@@ -33,6 +33,7 @@ enum TilesCommand {
 pub fn run(a: Args) -> Result<()> {
     match a.command {
         TilesCommand::Manifest { dir } => {
+            // takes the set's lock itself: not beside a build into the set
             let manifest = combine_parts(&dir)?;
             let nodes: u64 = manifest.tiles.iter().map(|t| t.nodes).sum();
             eprintln!(
@@ -41,14 +42,19 @@ pub fn run(a: Args) -> Result<()> {
                 manifest.tiles.len(),
                 manifest.depth
             );
+            let merged = TileSet::open(&dir)?.node_count();
+            if let Some(over) = octolinear::tiles::oversize(&manifest, merged) {
+                eprintln!("octolinear: warning: {}: {over} (see build --help, --tile-depth)", dir.display());
+            }
             Ok(())
         }
     }
 }
 
-/// True when `path` names a tile set (extension `.tiles`).
+/// True when `path` names a tile set (extension `.tiles`, the library's
+/// [`octolinear::tiles::is_tile_set_name`]).
 pub fn is_tile_set(path: &Path) -> bool {
-    path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case("tiles"))
+    octolinear::tiles::is_tile_set_name(path)
 }
 
 /// Opens a tile set (its manifest only).
@@ -152,9 +158,9 @@ pub fn search_all(set: &TileSet, keys: &[Key]) -> Result<Vec<Option<octolinear::
 /// `--task K/N`: this process's share of a tile set built in parts.
 pub fn task_arg(s: &str) -> Result<TaskPart> {
     let parsed = s.split_once('/').and_then(|(k, n)| Some((k.parse::<u32>().ok()?, n.parse::<u32>().ok()?)));
-    match parsed {
-        Some((index, count)) if count >= 1 && index < count => Ok(TaskPart::hashed(index, count)),
-        _ => bail!("--task must be K/N with 0 <= K < N, got {s:?}"),
+    match parsed.and_then(|(index, count)| TaskPart::checked(index, count)) {
+        Some(task) => Ok(task),
+        None => bail!("--task must be K/N with 0 <= K < N <= {}, got {s:?}", octolinear::tiles::MAX_TASKS),
     }
 }
 
@@ -183,18 +189,10 @@ pub fn size_arg(s: &str) -> Result<usize> {
 }
 
 /// Removes the tile files in `dir` that the set's manifest does not list
-/// (left by an earlier build); other files are left alone.
+/// (left by an earlier build), as the library does
+/// ([`octolinear::tiles::remove_unlisted_tiles`]); other files are left alone.
 pub fn remove_unlisted_tiles(dir: &Path, set: &octolinear::tiles::Manifest) -> Result<()> {
-    let listed: std::collections::HashSet<String> = set.tiles.iter().map(|t| t.id.file_name()).collect();
-    for item in std::fs::read_dir(dir).with_context(|| format!("cannot list {}", dir.display()))? {
-        let item = item.with_context(|| format!("cannot list {}", dir.display()))?;
-        let name = item.file_name();
-        let Some(name) = name.to_str() else { continue };
-        if octolinear::tiles::TileId::from_file_name(name).is_some() && !listed.contains(name) {
-            std::fs::remove_file(item.path()).with_context(|| format!("cannot remove {}", item.path().display()))?;
-        }
-    }
-    Ok(())
+    Ok(octolinear::tiles::remove_unlisted_tiles(dir, set)?)
 }
 
 #[cfg(test)]

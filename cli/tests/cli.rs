@@ -2428,7 +2428,8 @@ fn planned_tasks_combine_to_the_plain_build() {
         assert!(ok(&args).contains(&format!("task {k} of 3")));
     }
     let part = std::fs::read_to_string(f.path("planned.tiles/task-1-of-3.manifest")).unwrap();
-    assert!(part.starts_with("octolinear-tiles 1\ntask 1 3 prefixes "), "{part}");
+    assert!(part.starts_with("octolinear-tiles 2\ntask 1 3 prefixes "), "{part}");
+    assert!(part.contains("\nmax_range 4018000000000000\n") && part.contains("\ninput file "), "{part}");
     ok(&["tiles", "manifest", set]);
     assert!(converted(&f, set, "planned.ot") == want_ot);
     assert!(converted(&f, set, "planned.bt") == want_bt);
@@ -2464,6 +2465,43 @@ fn bad_and_mismatched_plans_are_refused() {
     ok(&["build", g, "-o", set, "--task", "0/2", "--plan", plan]);
     ok(&["build", g, "-o", set, "--task", "1/2", "--tile-depth", "6"]);
     fail(&["tiles", "manifest", set], "task-1-of-2.manifest shares the tiles by hash");
+}
+
+/// Parts built with other options are not combined: the option is named;
+/// a part claiming four billion tasks is refused as it is read; a plan or
+/// manifest that is a device or a FIFO is refused at once.
+#[test]
+fn parts_built_otherwise_and_files_that_are_not_files_are_refused() {
+    let f = Fixture::new();
+    let g = f.p("s.graph");
+    let set = f.p("m.tiles");
+    ok(&["build", g, "-o", set, "--task", "0/2", "--tile-depth", "6", "--max-range", "20"]);
+    ok(&["build", g, "-o", set, "--task", "1/2", "--tile-depth", "6"]);
+    fail(&["tiles", "manifest", set], "max_range: none in task-1-of-2.manifest, 20 m in task-0-of-2.manifest");
+    ok(&["build", g, "-o", set, "--task", "1/2", "--tile-depth", "6", "--max-range", "20", "--simple"]);
+    fail(&["tiles", "manifest", set], "insertion: rays in task-1-of-2.manifest, sets in task-0-of-2.manifest");
+    ok(&["build", g, "-o", set, "--task", "1/2", "--tile-depth", "6", "--max-range", "20", "--scans", "2"]);
+    fail(&["tiles", "manifest", set], "scans: 2 in task-1-of-2.manifest, all in task-0-of-2.manifest");
+    ok(&["build", g, "-o", set, "--task", "1/2", "--tile-depth", "6", "--max-range", "20"]);
+    ok(&["tiles", "manifest", set]);
+    // a part claiming 2^32 - 1 tasks
+    let part = f.path("n.tiles/task-0-of-4294967295.manifest");
+    std::fs::create_dir(f.path("n.tiles")).unwrap();
+    let body = "octolinear-tiles 1\ntask 0 4294967295\nresolution 3fb999999999999a\ntile_depth 6\ntree_kind OcTree\n\
+                hit 3f333333\nmiss bf0a3d71\nclamping_min c0000000\nclamping_max 40000000\n\
+                occupancy_threshold 00000000\ntiles 0\n";
+    std::fs::write(&part, format!("{body}crc32 {:08x}\n", crc32fast::hash(body.as_bytes()))).unwrap();
+    fail_within(10, &["tiles", "manifest", f.p("n.tiles")], "line 2: expected `task K N`");
+    fail(&["build", g, "-o", set, "--task", "0/65537"], "--task must be K/N with 0 <= K < N <= 65536");
+    fail(&["plan", g, "--tile-depth", "8", "--tasks", "65537"], "--tasks must be between 1 and 65536");
+    // devices and FIFOs
+    fail_within(10, &["build", g, "-o", f.p("p.tiles"), "--task", "0/2", "--plan", "/dev/zero"], "not a regular file");
+    let fifo = f.path("fifo.plan");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    fail_within(10, &["build", g, "-o", f.p("p.tiles"), "--task", "0/2", "--plan", s(&fifo)], "a FIFO");
+    std::fs::create_dir(f.path("q.tiles")).unwrap();
+    assert!(Command::new("mkfifo").arg(f.path("q.tiles/manifest")).status().unwrap().success());
+    fail_within(10, &["info", f.p("q.tiles")], "a FIFO, not a regular file");
 }
 
 /// Runs and requires a failure as [`fail`] does, within `secs` seconds: a
@@ -2655,10 +2693,37 @@ fn expanding_coarse_leaves_is_counted_and_refused_past_the_limit() {
     fail(&["to-points", &p("one.bt"), "-o", &p("x.xyz")], "exceed the limit of 268435456 (2^28) points");
     // a leaf at depth 14 adds 8 + 64 nodes: the limit is the nodes added
     std::fs::write(p("d14.bt"), one_coarse_leaf_bt(14)).unwrap();
-    fail(&["edit", &p("d14.bt"), &p("y.ot"), "--expand", "--max-nodes", "71"], "72 nodes to add exceed the limit of 71");
+    fail(
+        &["edit", &p("d14.bt"), &p("y.ot"), "--expand", "--max-nodes", "71"],
+        "72 nodes to add exceed the limit of 71",
+    );
     ok(&["edit", &p("d14.bt"), &p("y.ot"), "--expand", "--max-nodes", "72"]);
     let info = ok(&["info", &p("y.ot"), "--json"]);
     assert!(info.contains("\"nodes\": 87") || info.contains("\"nodes\":87"), "{info}");
+}
+
+#[test]
+fn cropping_through_coarse_leaves_is_counted_and_refused_past_the_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    std::fs::write(p("one.bt"), one_coarse_leaf_bt(1)).unwrap();
+    let (one, out) = (p("one.bt"), p("x.ot"));
+    // a box whose faces cut the depth-1 leaf: 3600743495 nodes along them
+    let big = ["--min", "-2000.05", "-2000.05", "-2000.05", "--max", "-0.15", "-0.15", "-0.15"];
+    let args: Vec<&str> = ["crop", &one, &out].into_iter().chain(big).collect();
+    fail(&args, "crop: splitting the pruned nodes that straddle the box makes 3600743495 nodes, more than the limit");
+    let args: Vec<&str> = ["edit", &one, &out].into_iter().chain(big).collect();
+    fail(&args, "of 268435456; a higher --max-nodes allows it");
+    assert!(!dir.path().join("x.ot").exists());
+    // the count is exact: the root and the leaf, and the split nodes
+    let small = ["--min", "-10.05", "-3.35", "-7.15", "--max", "-0.15", "-0.25", "-1.05"];
+    let with = |limit: &'static str| -> Vec<&str> {
+        ["crop", one.as_str(), out.as_str()].into_iter().chain(small).chain(["--max-nodes", limit]).collect()
+    };
+    fail(&with("11540"), "makes 11541 nodes, more than the limit of 11540;");
+    ok(&with("11541"));
+    let info = ok(&["info", &out, "--json"]);
+    assert!(info.contains("\"nodes\": 11543") || info.contains("\"nodes\":11543"), "{info}");
 }
 
 #[test]
@@ -2686,6 +2751,191 @@ fn resolutions_outside_the_usable_range_are_refused_by_every_command() {
     fail(&["info", bad], &format!("at byte {at}"));
 }
 
+// ---- tile sets: tiles checked against the manifest, one writer, links, spills
+
+/// The set's manifest with the CRC-32 of its largest tile changed (as if
+/// that tile's file had been swapped for the same tile of another build:
+/// same length, node count and root); the tile.
+fn mislabel_largest_tile(set: &Path) -> octolinear::tiles::TileId {
+    let path = set.join("manifest");
+    let mut m = octolinear::tiles::read_manifest(&path).unwrap();
+    let entry = m.tiles.iter_mut().max_by_key(|t| t.bytes).unwrap();
+    entry.crc32 ^= 0x0100_0001;
+    let tile = entry.id;
+    std::fs::write(&path, m.to_bytes()).unwrap();
+    tile
+}
+
+#[test]
+fn a_tile_file_other_than_the_manifests_fails_every_reader_and_writes_nothing() {
+    let f = Fixture::new();
+    let set = f.p("swap.tiles");
+    ok(&["build", f.p("s.graph"), "-o", set, "--tile-depth", "6"]);
+    let tile = mislabel_largest_tile(Path::new(set));
+    let needle = format!("tile {tile} ({}", f.path("swap.tiles").join(tile.file_name()).display());
+    fail(&["verify", set], &needle);
+    for ext in ["ot", "bt", "olm"] {
+        let out = f.p(&format!("swap.{ext}"));
+        fail(&["convert", set, out], &needle);
+        fail(&["convert", set, out], "CRC-32");
+        assert!(!Path::new(out).exists(), ".{ext} written");
+    }
+    fail(&["compare", set, f.p("a.ot")], &needle);
+}
+
+/// A build into a set another build holds (or a task build beside a whole
+/// build, the same task twice, `tiles manifest` meanwhile) fails at once,
+/// naming the set and the lock; tasks of one set build side by side.
+#[test]
+fn one_build_at_a_time_writes_a_tile_set() {
+    use octolinear::tiles::{SetLock, TaskPart};
+    let f = Fixture::new();
+    let g = f.p("s.graph");
+    let set = f.p("locked.tiles");
+    ok(&["build", g, "-o", set, "--tile-depth", "6"]);
+    let before = std::fs::read(f.path("locked.tiles/manifest")).unwrap();
+    let held = SetLock::acquire(Path::new(set)).unwrap();
+    let needle = format!("{set}: another build (or `tiles manifest`) is writing this tile set");
+    fail(&["build", g, "-o", set, "--tile-depth", "6", "--max-range", "2"], &needle);
+    fail(&["build", g, "-o", set, "--tile-depth", "6", "--memory-cap", "1M"], &needle);
+    fail(&["build", g, "-o", set, "--tile-depth", "6", "--task", "0/2"], "a build of the whole set");
+    fail(&["tiles", "manifest", set], "is writing this tile set");
+    assert!(std::fs::read(f.path("locked.tiles/manifest")).unwrap() == before, "the set changed under its lock");
+    drop(held);
+    let task = SetLock::acquire_task(Path::new(set), TaskPart::hashed(0, 2)).unwrap();
+    fail(&["build", g, "-o", set, "--tile-depth", "6", "--task", "0/2"], "another build of task 0 of 2");
+    fail(&["build", g, "-o", set, "--tile-depth", "6"], "is writing this tile set");
+    ok(&["build", g, "-o", set, "--tile-depth", "6", "--task", "1/2"]);
+    drop(task);
+    ok(&["build", g, "-o", set, "--tile-depth", "6", "--task", "0/2"]);
+    ok(&["tiles", "manifest", set]);
+    assert!(converted(&f, set, "locked.ot") == std::fs::read(f.path("a.ot")).unwrap());
+    // no lock file stays behind
+    assert!(!f.path("locked.tiles/.lock").exists());
+    // two builds started together: one writes, the other fails at once
+    ok(&["simulate", "--scans", "12", "--beams", "32", "--steps", "720", "-o", f.p("big.graph")]);
+    let args = ["build", f.p("big.graph"), "-o", f.p("race.tiles"), "--tile-depth", "9"];
+    let spawn = || bin().args(args).stdout(std::process::Stdio::null()).stderr(std::process::Stdio::piped()).spawn();
+    let children: Vec<_> = (0..2).map(|_| spawn().unwrap()).collect();
+    let done: Vec<_> = children.into_iter().map(|c| c.wait_with_output().unwrap()).collect();
+    let failed: Vec<_> = done.iter().filter(|d| !d.status.success()).collect();
+    assert!(failed.len() <= 1, "both failed");
+    for d in failed {
+        assert!(String::from_utf8_lossy(&d.stderr).contains("is writing this tile set"));
+    }
+    assert!(ok(&["verify", f.p("race.tiles")]).contains(": ok"));
+}
+
+/// Links inside a set named like its tiles, its manifest or a task's part,
+/// pointing outside, are replaced by the build's files (or refuse the
+/// build); what they point to is never written.
+#[cfg(unix)]
+#[test]
+fn builds_into_a_set_never_write_through_links_inside_it() {
+    let f = Fixture::new();
+    let g = f.p("s.graph");
+    let set = f.path("links.tiles");
+    ok(&["build", g, "-o", s(&set), "--tile-depth", "6"]);
+    let manifest = octolinear::tiles::read_manifest(&set.join("manifest")).unwrap();
+    let outside = f.path("outside");
+    std::fs::create_dir(&outside).unwrap();
+    let mut names: Vec<String> = manifest.tiles.iter().map(|t| t.id.file_name()).collect();
+    names.push("task-0-of-2.manifest".into());
+    let link = |name: &str| {
+        std::fs::write(outside.join(name), "precious").unwrap();
+        let _ = std::fs::remove_file(set.join(name));
+        std::os::unix::fs::symlink(outside.join(name), set.join(name)).unwrap();
+    };
+    for name in &names[..names.len() - 1] {
+        link(name);
+    }
+    ok(&["build", g, "-o", s(&set), "--tile-depth", "6"]);
+    ok(&["build", g, "-o", s(&set), "--tile-depth", "6", "--memory-cap", "1"]);
+    for name in &names[..names.len() - 1] {
+        link(name);
+    }
+    ok(&["build", g, "-o", s(&set), "--tile-depth", "6", "--task", "0/2"]);
+    // links named like the manifest or a part: refused, or replaced
+    link("manifest");
+    link("task-0-of-2.manifest");
+    let _ = run(&["build", g, "-o", s(&set), "--tile-depth", "6", "--task", "0/2"]);
+    let _ = run(&["build", g, "-o", s(&set), "--tile-depth", "6"]);
+    for name in names.iter().chain([&"manifest".to_string()]) {
+        assert_eq!(std::fs::read_to_string(outside.join(name)).unwrap(), "precious", "{name} written through");
+    }
+}
+
+/// `build -o NAME.tiles` where NAME.tiles is a file says so once, and
+/// what to do.
+#[test]
+fn a_tile_set_output_that_is_a_file_is_refused_with_what_to_do() {
+    let f = Fixture::new();
+    let out = f.write("file.tiles", "not a set");
+    for flags in [&[][..], &["--memory-cap", "1M"], &["--task", "0/2"]] {
+        let mut args = vec!["build", f.p("s.graph"), "-o", out];
+        args.extend(flags);
+        fail(&args, &format!("{out} exists and is not a directory (a tile set is a directory): remove it"));
+        let err = String::from_utf8_lossy(&run(&args).stderr).into_owned();
+        assert!(!err.contains("os error"), "{err}");
+    }
+    assert_eq!(std::fs::read_to_string(out).unwrap(), "not a set");
+}
+
+/// A set of far more tile bytes than its map is built with a warning
+/// saying so; `build --help` says how to choose the depth.
+#[test]
+fn tile_sets_far_larger_than_their_map_are_warned_about() {
+    let f = Fixture::new();
+    let sample = concat!(env!("CARGO_MANIFEST_DIR"), "/../samples/indoor.graph");
+    let build = |depth: &str| {
+        let out = bin()
+            .args(["build", sample, "-o", f.p(&format!("d{depth}.tiles")), "--tile-depth", depth])
+            .output()
+            .unwrap();
+        assert!(out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    assert_eq!(build("8"), "");
+    let warned = build("14");
+    assert!(warned.starts_with("octolinear: warning: ") && warned.contains("the 3907 tiles at depth 14"), "{warned}");
+    assert!(warned.contains("smaller tile depth") && warned.trim_end().lines().count() == 1, "{warned}");
+    let help = ok(&["build", "--help"]);
+    assert!(help.contains("res * 2^(16-D)") && help.contains("aim for"), "{help}");
+}
+
+/// A capped build to `.ot` ended by a signal leaves no spill directory;
+/// one killed outright leaves it to the next write of the same output,
+/// which removes it.
+#[cfg(unix)]
+#[test]
+fn spill_directories_go_with_signals_and_after_a_kill() {
+    let f = Fixture::new();
+    ok(&["simulate", "--scans", "24", "--beams", "64", "--steps", "1250", "-o", f.p("big.graph")]);
+    let spill = |pid: u32| f.path(&format!(".big.ot.spill-{pid}"));
+    for signal in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP, libc::SIGKILL] {
+        let args = ["build", f.p("big.graph"), "-o", f.p("big.ot"), "--memory-cap", "1M", "--tile-depth", "10"];
+        let mut child = bin().args(args).stdout(std::process::Stdio::null()).spawn().unwrap();
+        let pid = child.id();
+        let started = std::time::Instant::now();
+        while !spill(pid).exists() {
+            assert!(started.elapsed().as_secs() < 20, "no spill directory appeared");
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        // a few tiles written out first
+        std::thread::sleep(std::time::Duration::from_millis(100));
+        // SAFETY: kill(2) on the child's pid, which has not been waited for
+        assert_eq!(unsafe { libc::kill(pid as libc::pid_t, signal) }, 0);
+        let status = child.wait().unwrap();
+        assert_eq!(std::os::unix::process::ExitStatusExt::signal(&status), Some(signal), "{status:?}");
+        if signal == libc::SIGKILL {
+            assert!(spill(pid).is_dir(), "a killed build leaves its spill directory");
+            ok(&["build", f.p("s.graph"), "-o", f.p("big.ot")]);
+        }
+        assert!(!spill(pid).exists(), "signal {signal}: {} left", spill(pid).display());
+        assert!(!f.path("big.ot").exists() || signal == libc::SIGKILL);
+    }
+}
+
 #[test]
 fn a_fifo_named_twice_is_refused_before_it_is_opened() {
     let f = Fixture::new();
@@ -2696,10 +2946,6 @@ fn a_fifo_named_twice_is_refused_before_it_is_opened() {
     fail_within(20, &["build", "--points", p, "--points", p, "-o", f.p("x.bt")], "--points names");
     fail_within(20, &["build", "--points", "-", "--points", "-", "-o", f.p("x.bt")], "more than once");
     std::os::unix::fs::symlink("/dev/zero", f.path("z.binvox")).unwrap();
-    fail_within(
-        20,
-        &["binvox", f.p("z.binvox"), "/dev/zero", "-o", f.p("x.bt")],
-        "binvox names /dev/zero more than once",
-    );
+    fail_within(20, &["binvox", f.p("z.binvox"), "/dev/zero", "-o", f.p("x.bt")], "binvox names /dev/zero more than once");
     assert!(!f.path("x.bt").exists());
 }
