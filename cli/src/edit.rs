@@ -38,7 +38,8 @@ pub struct Args {
     /// counted first, and more than --max-nodes are refused.
     #[arg(long)]
     expand: bool,
-    /// Most nodes --expand may add.
+    /// Most nodes --expand may add, and most nodes the crop may make by
+    /// splitting pruned nodes that straddle the box.
     #[arg(long, value_name = "N", default_value_t = octolinear::tree::OUTPUT_LIMIT)]
     max_nodes: u64,
     /// Set every node to its clamping bound (occupied or free).
@@ -82,6 +83,11 @@ pub struct CropArgs {
     /// Upper corner of the box to keep.
     #[arg(long, num_args = 3, value_names = ["X", "Y", "Z"], allow_negative_numbers = true, required = true)]
     max: Vec<f64>,
+    /// Most nodes the crop may make by splitting pruned nodes that
+    /// straddle the box (each split node's children down to the box's
+    /// faces).
+    #[arg(long, value_name = "N", default_value_t = octolinear::tree::OUTPUT_LIMIT)]
+    max_nodes: u64,
 }
 
 /// The key box of two metric corners; coordinates beyond the map are
@@ -102,6 +108,67 @@ pub fn key_box(keys: &KeySpace, min: Point3, max: Point3) -> Result<KeyBox> {
 enum Src<'a> {
     Node(NodeRef<'a>),
     Leaf(f32),
+}
+
+/// How many nodes [`crop_node`] makes by splitting leaves (nodes that are
+/// not in the source), counted without making them (saturating): a leaf
+/// at depth `d` straddling a face of the box splits into up to
+/// `4^(16 - d)` nodes along it, a count the map's extent drives.
+fn split_nodes(src: Src<'_>, min: [u32; 3], depth: u8, kb: &KeyBox) -> u64 {
+    let size = 1u32 << (16 - u32::from(depth));
+    let mut inside = true;
+    for (i, &a) in min.iter().enumerate() {
+        let (lo, hi) = (u32::from(kb.min.0[i]), u32::from(kb.max.0[i]));
+        let b = a + size - 1;
+        if b < lo || a > hi {
+            return 0;
+        }
+        inside &= a >= lo && b <= hi;
+    }
+    let own = u64::from(matches!(src, Src::Leaf(_)));
+    if inside {
+        return own;
+    }
+    if own == 1 {
+        return 1u64.saturating_add(split_leaf_nodes(min, depth, kb));
+    }
+    let half = size / 2;
+    let mut count = own;
+    for pos in 0..8 {
+        let child = match src {
+            Src::Node(n) if n.has_children() => match n.child(pos) {
+                Some(c) => Src::Node(c),
+                None => continue,
+            },
+            Src::Node(n) => Src::Leaf(n.value()),
+            Src::Leaf(v) => Src::Leaf(v),
+        };
+        let cmin = [0, 1, 2].map(|a| min[a] + if pos & (1 << a) != 0 { half } else { 0 });
+        count = count.saturating_add(split_nodes(child, cmin, depth + 1, kb));
+    }
+    count
+}
+
+/// The nodes [`crop_node`] makes below a leaf at `depth` (smallest key
+/// `min`) that straddles the box, from the box's geometry: at each depth
+/// below, the nodes that overlap the box, less the children of those
+/// fully inside it one level up (which are kept whole).
+fn split_leaf_nodes(min: [u32; 3], depth: u8, kb: &KeyBox) -> u64 {
+    let size = 1u32 << (16 - u32::from(depth));
+    // the box's part of the leaf on each axis, inclusive
+    let span: [(u32, u32); 3] =
+        std::array::from_fn(|i| (u32::from(kb.min.0[i]).max(min[i]), u32::from(kb.max.0[i]).min(min[i] + size - 1)));
+    let product = |f: &dyn Fn(u32, u32) -> u64| span.iter().map(|&(lo, hi)| f(lo, hi)).fold(1u64, u64::saturating_mul);
+    let mut total = 0u64;
+    let mut inside_above = 0u64;
+    for d in depth + 1..=16 {
+        let w = 1u32 << (16 - u32::from(d));
+        let overlapping = product(&|lo, hi| u64::from(hi / w - lo / w + 1));
+        let inside = product(&|lo, hi| u64::from(((hi + 1) / w).saturating_sub(lo.div_ceil(w))));
+        total = total.saturating_add(overlapping.saturating_sub(inside_above.saturating_mul(8)));
+        inside_above = inside;
+    }
+    total
 }
 
 /// Appends the pre-order (value, child mask) of the part of a node inside
@@ -178,10 +245,18 @@ fn from_preorder(nodes: &[(f32, u8)], resolution: f64, sensor: SensorModel) -> R
     b.finish(resolution, sensor)?.context("internal error: incomplete pre-order")
 }
 
-/// The part of `tree` inside `kb`, as a new tree.
-pub fn crop(tree: &OccupancyTree, kb: &KeyBox) -> Result<OccupancyTree> {
+/// The part of `tree` inside `kb`, as a new tree, if splitting the pruned
+/// nodes that straddle the box makes at most `limit` nodes.
+pub fn crop(tree: &OccupancyTree, kb: &KeyBox, limit: u64) -> Result<OccupancyTree> {
     let mut out = Vec::new();
     if let Some(root) = tree.root() {
+        let count = split_nodes(Src::Node(root), [0; 3], 0, kb);
+        if count > limit {
+            bail!(
+                "crop: splitting the pruned nodes that straddle the box makes {count} nodes, more than the limit \
+                 of {limit}; a higher --max-nodes allows it"
+            );
+        }
         crop_node(Src::Node(root), [0; 3], 0, kb, &mut out);
     }
     from_preorder(&out, tree.resolution(), *tree.sensor())
@@ -230,7 +305,7 @@ pub fn run(a: Args) -> Result<()> {
     let mut tree = load_map(&a.input)?.tree;
     if let Some((lo, hi)) = corners {
         let kb = key_box(tree.key_space(), lo, hi)?;
-        tree = crop(&tree, &kb)?;
+        tree = crop(&tree, &kb, a.max_nodes)?;
     }
     if let Some(r) = new_resolution(tree.resolution(), a.res, a.scale)? {
         tree = with_resolution(&tree, r)?;
@@ -258,7 +333,7 @@ pub fn run_crop(a: CropArgs) -> Result<()> {
         res: None,
         scale: None,
         expand: false,
-        max_nodes: octolinear::tree::OUTPUT_LIMIT,
+        max_nodes: a.max_nodes,
         max_likelihood: false,
         prune: false,
     })
