@@ -5,6 +5,9 @@
 //! A handler may not allocate or take a lock a thread might hold, so the
 //! table is fixed: [`SLOTS`] slots, each a flag and a buffer holding a
 //! temporary file's path as a NUL-terminated C string, ready for `unlink`.
+//! Scratch directories have a table of their own ([`DIR_SLOTS`] slots),
+//! listed by the same protocol (the directory created inside a creation
+//! window) and removed after the temporary files, with their files.
 //!
 //! The protocol, and why the handler neither misses a temporary file nor
 //! removes anything else:
