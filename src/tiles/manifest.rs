@@ -258,11 +258,7 @@ impl BuildRecord {
                 "update_box",
                 self.update_box.map_or_else(
                     || "none".to_string(),
-                    |(lo, hi)| {
-                        [lo.x, lo.y, lo.z, hi.x, hi.y, hi.z]
-                            .map(|v| format!("{:08x}", v.to_bits()))
-                            .join(" ")
-                    },
+                    |(lo, hi)| [lo.x, lo.y, lo.z, hi.x, hi.y, hi.z].map(|v| format!("{:08x}", v.to_bits())).join(" "),
                 ),
             ),
             ("forget_beyond", f64_or_none(self.forget_beyond)),
@@ -339,7 +335,8 @@ impl BuildRecord {
             }
             hex64(v).map(f64::from_bits).filter(|r| r.is_finite() && r.is_sign_positive()).map(Some)
         })?;
-        let scans = lines.field("scans", |v| if v == "all" { Some(None) } else { decimal(v).filter(|&n| n >= 1).map(Some) })?;
+        let scans =
+            lines.field("scans", |v| if v == "all" { Some(None) } else { decimal(v).filter(|&n| n >= 1).map(Some) })?;
         let input = lines.field("input", |v| match v {
             "none" => Some(None),
             "stream" => Some(Some(BuildInput::Stream)),
@@ -350,7 +347,18 @@ impl BuildRecord {
             }
         })?;
         let plan = lines.field("plan", |v| if v == "none" { Some(None) } else { hex32(v).map(Some) })?;
-        Ok(BuildRecord { max_range, discretize, rays, inner, out_of_map, update_box, forget_beyond, scans, input, plan })
+        Ok(BuildRecord {
+            max_range,
+            discretize,
+            rays,
+            inner,
+            out_of_map,
+            update_box,
+            forget_beyond,
+            scans,
+            input,
+            plan,
+        })
     }
 }
 
@@ -698,12 +706,16 @@ pub fn check_set_dir(dir: &Path) -> Result<(), TileError> {
             return if named {
                 Ok(())
             } else {
-                Err(refuse("a tile set is a directory named NAME.tiles (or an empty directory): give the output that name".into()))
+                Err(refuse(
+                    "a tile set is a directory named NAME.tiles (or an empty directory): give the output that name"
+                        .into(),
+                ))
             };
         }
         Err(e) => return Err(TileError::io(dir, e)),
     };
-    let meta = if meta.file_type().is_symlink() { std::fs::metadata(dir).map_err(|e| TileError::io(dir, e))? } else { meta };
+    let meta =
+        if meta.file_type().is_symlink() { std::fs::metadata(dir).map_err(|e| TileError::io(dir, e))? } else { meta };
     if !meta.is_dir() {
         return Err(refuse("exists and is not a directory: a tile set is a directory".into()));
     }
@@ -1068,7 +1080,12 @@ pub(super) mod tests {
     #[test]
     fn parts_built_otherwise_are_not_combined() {
         let dir = tempfile::tempdir().unwrap();
-        let part = |index, build: Option<BuildRecord>| Manifest { task: Some(TaskPart::hashed(index, 2)), build, tiles: vec![], ..sample() };
+        let part = |index, build: Option<BuildRecord>| Manifest {
+            task: Some(TaskPart::hashed(index, 2)),
+            build,
+            tiles: vec![],
+            ..sample()
+        };
         part(0, Some(record())).write(&dir.path().join("task-0-of-2.manifest")).unwrap();
         let other = BuildRecord { max_range: None, ..record() };
         part(1, Some(other.clone())).write(&dir.path().join("task-1-of-2.manifest")).unwrap();

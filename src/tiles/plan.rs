@@ -358,7 +358,10 @@ impl TilePlan {
         let fault = |line: usize, reason: String| TileError::Plan { line, reason };
         let lines: Vec<&str> = text.lines().collect();
         if let Some((i, l)) = lines.iter().enumerate().find(|(_, l)| l.len() > MAX_LINE_BYTES) {
-            return Err(fault(i + 1, format!("line of {} bytes, longer than any plan line ({MAX_LINE_BYTES})", l.len())));
+            return Err(fault(
+                i + 1,
+                format!("line of {} bytes, longer than any plan line ({MAX_LINE_BYTES})", l.len()),
+            ));
         }
         let line = |i: usize| lines.get(i).copied().ok_or_else(|| fault(i + 1, "the plan ends early".into()));
         let field = |i: usize, name: &str| -> Result<&str, TileError> {
