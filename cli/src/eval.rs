@@ -23,7 +23,9 @@ use std::path::PathBuf;
 /// (default 5) every K-th scan is left out of the map and evaluated; with
 /// `--folds K` each of the K folds is held out in turn (cross-validation).
 /// With two inputs (MAP SCANS.graph), the given map is evaluated on every
-/// scan. The `.graph` may be `-` for standard input.
+/// scan. The `.graph` may be `-` for standard input. A `.graph` without
+/// scans, or scans none of whose voxels the map knows, is an error (the
+/// accuracy would be undefined).
 ///
 /// Example: octolinear eval map.bt scans.graph --json
 ///
