@@ -2747,7 +2747,7 @@ fn resolutions_outside_the_usable_range_are_refused_by_every_command() {
     bad.extend_from_slice(b"1e-300");
     bad.extend_from_slice(&good[at + 3..]);
     let bad = f.write("bad.bt", bad);
-    fail(&["info", bad], &format!("resolution 1e-300 m is below the smallest usable resolution"));
+    fail(&["info", bad], "resolution 1e-300 m is below the smallest usable resolution");
     fail(&["info", bad], &format!("at byte {at}"));
 }
 
