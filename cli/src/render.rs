@@ -171,6 +171,9 @@ pub fn coarse_occupied(tree: &OccupancyTree, depth: u8) -> Result<OccupancyTree>
     let factor = f64::from(1u32 << (16 - u32::from(depth)));
     let mut coarse = OccupancyTree::with_sensor(tree.resolution() * factor, *tree.sensor())?;
     let sensor = *tree.sensor();
+    // a coarse leaf stands for 8^(depth - d) nodes at `depth`
+    tree.voxels_within(depth, |v| sensor.is_occupied(v), octolinear::tree::OUTPUT_LIMIT, "render")
+        .map_err(|e| anyhow::anyhow!("{e}; a lower --depth gives fewer"))?;
     let mut failed = None;
     super::points::for_each_voxel(
         tree,

@@ -2721,6 +2721,11 @@ fn cropping_through_coarse_leaves_is_counted_and_refused_past_the_limit() {
         ["crop", one.as_str(), out.as_str()].into_iter().chain(small).chain(["--max-nodes", limit]).collect()
     };
     fail(&with("11540"), "makes 11541 nodes, more than the limit of 11540;");
+    // rendering at a coarser depth enumerates the leaf's nodes of that depth
+    let png = p("view.png");
+    let view = ["render", one.as_str(), "-o", png.as_str(), "--view", "perspective", "--depth", "15"];
+    fail(&view, &format!("render: {} points exceed the limit of 268435456 (2^28)", 8u64.pow(14)));
+    assert!(!dir.path().join("view.png").exists());
     ok(&with("11541"));
     let info = ok(&["info", &out, "--json"]);
     assert!(info.contains("\"nodes\": 11543") || info.contains("\"nodes\":11543"), "{info}");
