@@ -24,6 +24,8 @@ pub struct Args {
 enum TilesCommand {
     /// Write the manifest of a tile set built in parts (`build --task K/N`),
     /// from the parts' task-K-of-N.manifest files, which are then removed.
+    /// Parts built with other options or from another input (each part
+    /// records them) are refused, the first difference named.
     Manifest {
         /// The tile set's directory.
         dir: PathBuf,
