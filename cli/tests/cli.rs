@@ -2951,6 +2951,10 @@ fn a_fifo_named_twice_is_refused_before_it_is_opened() {
     fail_within(20, &["build", "--points", p, "--points", p, "-o", f.p("x.bt")], "--points names");
     fail_within(20, &["build", "--points", "-", "--points", "-", "-o", f.p("x.bt")], "more than once");
     std::os::unix::fs::symlink("/dev/zero", f.path("z.binvox")).unwrap();
-    fail_within(20, &["binvox", f.p("z.binvox"), "/dev/zero", "-o", f.p("x.bt")], "binvox names /dev/zero more than once");
+    fail_within(
+        20,
+        &["binvox", f.p("z.binvox"), "/dev/zero", "-o", f.p("x.bt")],
+        "binvox names /dev/zero more than once",
+    );
     assert!(!f.path("x.bt").exists());
 }
