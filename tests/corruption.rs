@@ -223,14 +223,16 @@ impl Format {
             (e.to_string(), place)
         }
         fn graph_err(e: GraphError) -> (String, Place) {
-            let offset = match &e {
+            let place = match &e {
                 GraphError::Io { offset, .. }
                 | GraphError::Truncated { offset, .. }
                 | GraphError::BadMarker { offset, .. }
                 | GraphError::CountTooLarge { offset, .. }
-                | GraphError::OutOfMemory { offset, .. } => *offset,
+                | GraphError::OutOfMemory { offset, .. } => Place::Byte(*offset),
+                // errors of files read again, never of bytes in memory
+                GraphError::Changed { .. } | GraphError::NotRegular => Place::Unknown,
             };
-            (e.to_string(), Place::Byte(offset))
+            (e.to_string(), place)
         }
         match self {
             Format::Ot => ot::read(Budget::new(data)).map(drop).map_err(tree_err),
