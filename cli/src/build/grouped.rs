@@ -5,8 +5,8 @@
 //! threads, as many groups at once.
 
 use super::{
-    input_name, print_build, print_tile_set, scan_options, tiles, write_tree, write_walked, Args, SpillDir,
-    Tally, Tiling,
+    input_name, print_build, print_tile_set, scan_options, tiles, write_tree, write_walked, Args, SpillDir, Tally,
+    Tiling,
 };
 use crate::common::{progress, spinner, MapFormat};
 use anyhow::{Context, Result};

@@ -158,7 +158,9 @@ pub enum GraphError {
     },
     /// A file read again ([`GraphFile`]) was changed in place since it
     /// was opened: replace inputs by renaming a new file over them.
-    #[error("the file changed while it was read (length {opened} bytes when opened, {now} now, or a new modification time)")]
+    #[error(
+        "the file changed while it was read (length {opened} bytes when opened, {now} now, or a new modification time)"
+    )]
     Changed {
         /// The length when the file was opened.
         opened: u64,
