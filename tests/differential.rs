@@ -595,7 +595,7 @@ fn apply(pair: &mut Pair, op: &Op) -> Result<bool, (&'static str, String)> {
             if expanded_leaves(&pair.ours) > 20_000 {
                 return Ok(false);
             }
-            pair.ours.expand();
+            pair.ours.expand().unwrap();
             pair.theirs.expand();
         }
         Op::ToMaxLikelihood => {

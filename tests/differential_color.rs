@@ -136,7 +136,7 @@ fn color_case(seed: u64, res: f64, custom_sensor: bool) -> Result<(), OracleErro
         }
         match rng.below(8) {
             0 => {
-                ours.expand();
+                ours.expand().unwrap();
                 theirs.expand();
                 compare(&ours, &theirs, &format!("expand after scan {s}"));
                 ours.prune();
@@ -222,7 +222,7 @@ fn color_updates_on_pruned_leaves_match_octomap() {
         ours.update_inner_occupancy();
         theirs.update_inner_occupancy();
         assert_eq!(ot_bytes(&ours), theirs.write_ot().unwrap(), "res {res}, updateInnerOccupancy");
-        ours.expand();
+        ours.expand().unwrap();
         theirs.expand();
         ours.prune();
         theirs.prune();

@@ -140,7 +140,13 @@ fn run_case(g: &Golden, (index, case): (usize, &Value)) -> Vec<String> {
     for (points, origin) in &scans {
         work.add_scan(points, *origin, opts.max_range);
     }
-    let grouped = GroupedBuild { resolution: res, sensor: case_sensor(case), memory: 1, dir: dir.path().to_path_buf() };
+    let grouped = GroupedBuild {
+        resolution: res,
+        sensor: case_sensor(case),
+        memory: 1,
+        dir: dir.path().to_path_buf(),
+        record: None,
+    };
     let given = || scans.iter().map(|(p, o)| Ok::<_, std::convert::Infallible>((p, *o)));
     grouped.build(&work, &opts, given, |_, _| {}).unwrap();
     let (o, b) = bytes(&TileSet::open(dir.path()).unwrap());

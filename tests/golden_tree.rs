@@ -123,7 +123,7 @@ fn golden_read_bt_expand_and_prune() {
     tree.to_max_likelihood();
     tree.prune();
     stats.check(&mut f, id, &expected, "after_writeBinary", &tree);
-    tree.expand();
+    tree.expand().unwrap();
     stats.check(&mut f, id, &expected, "expanded", &tree);
     f.check_digest(&g, case, "leaves_expanded.csv", leaves_csv(&tree, 0).as_bytes());
     f.check_digest(&g, case, "expanded.ot", &ot_bytes(&tree));

@@ -1103,7 +1103,7 @@ fn write_fuzz_seeds() {
     trees.push(("block", block.clone()));
     // a colour block with a few colours, and a stamped one
     let mut color = block.converted(NodeKind::Color);
-    color.expand();
+    color.expand().unwrap();
     for (i, leaf) in block.leaves(0).map(|l| l.key).collect::<Vec<_>>().into_iter().enumerate().take(5) {
         color.set_color(leaf, [40 * i as u8, 255 - 30 * i as u8, 7]);
     }

@@ -29,7 +29,7 @@ struct Changes {
 fn print_changes(tree: &mut OccupancyTree) -> Changes {
     let mut c =
         Changes { changed_occupied: 0, changed_free: 0, missing_changed: 0, actual_occupied: 0, actual_free: 0 };
-    tree.expand();
+    tree.expand().unwrap();
     for (key, _) in tree.changed_keys() {
         match tree.search(key, 0) {
             Some(node) if tree.is_occupied(node.value) => c.changed_occupied += 1,

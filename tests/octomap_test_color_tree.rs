@@ -95,7 +95,7 @@ fn test_color_tree() {
         assert_eq!(initial_size, tree.size());
         assert_eq!(initial_size, tree.calc_num_nodes());
 
-        tree.expand();
+        tree.expand().unwrap();
         assert_eq!(tree.size(), tree.calc_num_nodes());
         assert_eq!(tree.size(), 89234);
 

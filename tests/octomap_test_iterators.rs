@@ -124,7 +124,7 @@ fn bounding_box_test(tree: &mut OccupancyTree) -> usize {
     }
 
     // an actual bounding box (OctoMap: only works properly on an expanded tree)
-    tree.expand();
+    tree.expand().unwrap();
     let bbx = point_box(tree, Point3::new(-1.0, -1.0, -1.0), Point3::new(3.0, 2.0, 1.0));
     let in_box = |k: Key| (0..3).all(|i| k.0[i] >= bbx.min.0[i] && k.0[i] <= bbx.max.0[i]);
     let mut bbx_voxels: HashMap<Key, f64> = HashMap::new();

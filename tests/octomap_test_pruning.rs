@@ -127,7 +127,7 @@ fn test_pruning() {
     tree.prune();
     assert_eq!(tree.calc_num_nodes(), tree.size());
     assert_eq!(tree.size(), 27);
-    tree.expand();
+    tree.expand().unwrap();
     assert_eq!(tree.calc_num_nodes(), tree.size());
     assert_eq!(tree.size(), 37483);
     tree.prune();

@@ -128,7 +128,9 @@ proptest! {
                 Op::Prune => tree.prune(),
                 Op::Compact => tree.compact(),
                 // a bare root would expand to 8^16 voxels, in OctoMap too
-                Op::Expand if tree.root().is_some_and(|r| r.has_children()) => tree.expand(),
+                Op::Expand if tree.root().is_some_and(|r| r.has_children()) => {
+                    tree.expand().unwrap();
+                }
                 Op::Expand => {}
                 Op::MaxLikelihood => {
                     tree.to_max_likelihood();
@@ -235,7 +237,7 @@ fn tree_of(kind: NodeKind, sensor: SensorModel, ops: &[Op]) -> OccupancyTree {
             Op::Compact => tree.compact(),
             // only small expansions (a shallow leaf expands to 8^(16 - depth) nodes)
             Op::Expand if tree.root().is_some_and(|r| r.has_children()) && tree.leaves(0).all(|l| l.depth >= 13) => {
-                tree.expand()
+                tree.expand().unwrap();
             }
             Op::Expand => {}
             Op::MaxLikelihood => tree.to_max_likelihood(),

@@ -437,7 +437,7 @@ fn run_stats(c: &ChildArgs) -> Value {
     drop(compact);
 
     let mut full = tree.clone();
-    full.expand();
+    full.expand().unwrap();
     let (fnodes, fl, fi) = counts(&full);
     let full_octomap = full.octomap_memory_usage();
     full.compact();

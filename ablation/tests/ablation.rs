@@ -161,7 +161,7 @@ fn unpruned_pointer_tree_is_the_expanded_tree() {
         unpruned.apply_scan(&k.free, &k.occupied, &sensor);
     }
     let mut expanded = tree.clone();
-    expanded.expand();
+    expanded.expand().unwrap();
     assert!(expanded.size() > tree.size());
     assert_eq!(unpruned.node_count(), expanded.size());
     let (inner, leaves) = unpruned.count_inner_and_leaves();

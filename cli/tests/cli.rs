@@ -381,7 +381,7 @@ fn eval_matches_eval_octree_accuracy() {
     assert_eq!(j["total"]["scans"], 6);
 
     fail(&["eval", f.p("s.graph"), "--holdout", "1"], "at least 2");
-    fail(&["eval", f.p("s.graph"), "--res", "-0.1"], "--res must be");
+    fail(&["eval", f.p("s.graph"), "--res", "-0.1"], "--res: resolution -0.1 m is not a positive finite number");
     fail(&["eval", f.p("a.bt"), f.p("s.graph"), "--folds", "2"], "give only the .graph");
     fail(&["eval", f.p("a.bt")], "cannot read");
 }
@@ -2212,6 +2212,21 @@ fn capped_builds_read_the_input_first_opened_to_the_end() {
         assert!(done.status.success(), "{}", String::from_utf8_lossy(&done.stderr));
         assert!(std::fs::read(out).unwrap() == want, "renamed after {delay} ms: not the original's map");
     }
+}
+
+/// A capped build's tile set records how it was built, as an uncapped
+/// one's does: the same manifest either way.
+#[test]
+fn capped_tile_sets_record_their_options() {
+    let f = Fixture::new();
+    let flags = ["--res", "0.1", "--tile-depth", "10", "--max-range", "5", "--discretize"];
+    ok(&[&["build", f.p("s.graph"), "-o", f.p("plain.tiles")], &flags[..]].concat());
+    ok(&[&["build", f.p("s.graph"), "-o", f.p("capped.tiles"), "--memory-cap", "1"], &flags[..]].concat());
+    let [plain, capped] = ["plain", "capped"]
+        .map(|name| octolinear::tiles::read_manifest(&f.path(&format!("{name}.tiles/manifest"))).unwrap());
+    let record = capped.build.as_ref().expect("a capped build records its options");
+    assert_eq!((record.max_range, record.discretize), (Some(5.0), true));
+    assert_eq!(capped, plain);
 }
 
 #[test]

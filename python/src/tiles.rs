@@ -252,7 +252,7 @@ pub fn build_tiles<'py>(
             // every pass reads the file opened here, whatever its path names later
             let file = graph::GraphFile::open(&path).map_err(|e| graph_error(&path, e))?;
             let (work, count) = estimate(&file, &path, resolution, tile_depth, max_range, discretize, scans)?;
-            let grouped = GroupedBuild { resolution, sensor, memory, dir: dir.clone() };
+            let grouped = GroupedBuild { resolution, sensor, memory, dir: dir.clone(), record: Some(record.clone()) };
             let read = || -> ScansRead {
                 match file.reader() {
                     Ok(reader) => Box::new(reader.take(scans.unwrap_or(usize::MAX)).map(|node| {
@@ -269,9 +269,7 @@ pub fn build_tiles<'py>(
                 }
                 GroupedError::Tiles(e) => tile_error(e),
             })?;
-            // the grouped build writes no record: the manifest again, with it
-            let manifest = Manifest { build: Some(record), ..report.manifest };
-            manifest.write(&dir.join(MANIFEST_FILE)).map_err(tile_error)?;
+            let manifest = report.manifest;
             remove_unlisted_tiles(&dir, &manifest).map_err(tile_error)?;
             let nodes = set_nodes(&dir)?;
             return Ok((manifest, Some(nodes), Some(count)));

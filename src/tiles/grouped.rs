@@ -32,7 +32,7 @@
 
 use super::budget::MemoryBudget;
 use super::error::TileError;
-use super::manifest::{Manifest, TaskPart, TaskTiles, TileEntry, MANIFEST_FILE};
+use super::manifest::{BuildRecord, Manifest, TaskPart, TaskTiles, TileEntry, MANIFEST_FILE};
 use super::map::{Tile, TileState, TiledMap};
 use super::plan::{aligned_between, TileWork};
 use crate::formats::ot::TreeKind;
@@ -74,6 +74,9 @@ pub struct GroupedBuild {
     /// The tile set's directory: tiles are written there as their group
     /// is done, and the manifest once all are.
     pub dir: PathBuf,
+    /// How the set is built, recorded in its manifest (`None`: no record,
+    /// a version 1 manifest).
+    pub record: Option<BuildRecord>,
 }
 
 /// One group of a grouped build.
@@ -204,7 +207,7 @@ impl GroupedBuild {
             kind: TreeKind::of(NodeKind::Plain),
             sensor: self.sensor,
             task: None,
-            build: None,
+            build: self.record.clone(),
             tiles: entries,
         };
         manifest.write(&self.dir.join(MANIFEST_FILE))?;
@@ -597,7 +600,13 @@ mod tests {
     }
 
     fn build(dir: &std::path::Path, memory: usize, depth: u8, scans: &[(Vec<Point3>, Point3)]) -> GroupedReport {
-        let b = GroupedBuild { resolution: 0.1, sensor: SensorModel::default(), memory, dir: dir.to_path_buf() };
+        let b = GroupedBuild {
+            resolution: 0.1,
+            sensor: SensorModel::default(),
+            memory,
+            dir: dir.to_path_buf(),
+            record: None,
+        };
         let opts = ScanOptions::default();
         let given = || scans.iter().map(|(p, o)| Ok::<_, Infallible>((p, *o)));
         b.build(&estimate(scans, depth), &opts, given, |_, _| {}).unwrap()
@@ -639,8 +648,13 @@ mod tests {
     fn a_read_error_and_a_refused_scan_stop_the_build_without_a_manifest() {
         let scans = scans();
         let dir = tempfile::tempdir().unwrap();
-        let b =
-            GroupedBuild { resolution: 0.1, sensor: SensorModel::default(), memory: 1, dir: dir.path().to_path_buf() };
+        let b = GroupedBuild {
+            resolution: 0.1,
+            sensor: SensorModel::default(),
+            memory: 1,
+            dir: dir.path().to_path_buf(),
+            record: None,
+        };
         let work = estimate(&scans, 7);
         let failing = || scans.iter().enumerate().map(|(i, (p, o))| if i == 2 { Err("bad scan") } else { Ok((p, *o)) });
         let e = b.build(&work, &ScanOptions::default(), failing, |_, _| {}).unwrap_err();

@@ -95,25 +95,32 @@ impl OccupancyTree {
         self.arena.as_ref().map_or(0, |a| recurse(a, ROOT, 0))
     }
 
+    /// Gives every leaf above depth 16 eight children holding its value
+    /// (OctoMap's `expand`) if that adds at most
+    /// [`OUTPUT_LIMIT`](super::OUTPUT_LIMIT) nodes: a leaf at depth `d`
+    /// becomes `8^(16 - d)` voxels, so a map of a few coarse leaves could
+    /// need more memory than there is. Returns the nodes added; past the
+    /// limit the tree is left unchanged and [`TreeError::TooLarge`] names
+    /// the count. [`Self::expand_within`] takes another limit.
+    pub fn expand(&mut self) -> Result<u64, TreeError> {
+        self.expand_within(super::OUTPUT_LIMIT)
+    }
+
     /// [`Self::expand`] if it adds at most `limit` nodes (counted first by
-    /// [`Self::expansion_nodes`]; [`OUTPUT_LIMIT`](super::OUTPUT_LIMIT) is the usual limit);
-    /// returns the nodes added. Past the limit the tree is left unchanged
-    /// and [`TreeError::TooLarge`] names the count and the limit.
+    /// [`Self::expansion_nodes`]); returns the nodes added. Past the limit
+    /// the tree is left unchanged and [`TreeError::TooLarge`] names the
+    /// count and the limit.
     pub fn expand_within(&mut self, limit: u64) -> Result<u64, TreeError> {
         let count = self.expansion_nodes();
         if count > limit {
             return Err(TreeError::TooLarge { what: "expand", items: "nodes to add", count, limit });
         }
-        self.expand();
+        self.expand_all();
         Ok(count)
     }
 
-    /// Gives every leaf above depth 16 eight children holding its value
-    /// (`expand`), whatever that costs: a leaf at depth `d` becomes
-    /// `8^(16 - d)` voxels, so a map of a few coarse leaves may need more
-    /// memory than there is. [`Self::expand_within`] counts first and
-    /// refuses past a limit.
-    pub fn expand(&mut self) {
+    /// Expands every leaf above depth 16, whatever that costs.
+    fn expand_all(&mut self) {
         fn recurse(a: &mut NodeArena, n: NodeId, depth: u8, added: &mut usize) {
             if depth >= TREE_DEPTH {
                 return;
@@ -262,7 +269,7 @@ mod tests {
             let added = (8u64.pow(u32::from(16 - depth) + 1) - 8) / 7;
             assert_eq!(tree.expansion_nodes(), added);
             let mut plain = tree.clone();
-            plain.expand();
+            plain.expand_all();
             let mut within = tree.clone();
             assert_eq!(within.expand_within(added), Ok(added));
             assert_eq!(within.size(), tree.size() + added as usize);

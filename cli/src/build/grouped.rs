@@ -94,6 +94,7 @@ pub(super) fn run(a: &Args, t: &Tiling, sensor: SensorModel, format: MapFormat, 
         sensor,
         memory: t.memory_cap.expect("a grouped build has a cap"),
         dir: dir.clone(),
+        record: Some(super::build_record(a, t, max_range)?),
     };
     let bar = progress(n as u64, "inserting scans");
     let reading = Mutex::new(Duration::ZERO);
