@@ -136,3 +136,32 @@ fn other_sigbus_still_kill() {
         }
     }
 }
+
+/// A tile file truncated under a tile set's query: the query that read it
+/// fails naming the tile file instead of answering from zeros.
+#[test]
+fn a_truncated_tile_fails_the_query_that_read_it() {
+    use octolinear::tiles::{TileSet, TiledMap};
+    mapped::guard_truncated_files().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let set_dir = dir.path().join("m.tiles");
+    let tree = tree();
+    let mut tiles = TiledMap::new(0.05, *tree.sensor(), octolinear::NodeKind::Plain, 4).unwrap();
+    let scan: Vec<Point3> = tree
+        .leaves(0)
+        .filter(|l| tree.is_occupied(l.value))
+        .map(|l| l.center())
+        .map(|[x, y, z]| Point3::new(x as f32, y as f32, z as f32))
+        .collect();
+    tiles.insert_point_cloud(&scan, Point3::new(0.0, 0.0, 0.0), &ScanOptions::default()).unwrap();
+    let manifest = tiles.flush(&set_dir).unwrap();
+    let set = TileSet::open(&set_dir).unwrap();
+    let p = scan[0];
+    assert!(set.search_point(p, 0).unwrap().is_some());
+    let key = set.key_space().key(p).unwrap();
+    let tile = manifest.tiles.iter().find(|t| t.id == octolinear::tiles::TileId::of_key(key, 4)).unwrap();
+    let path = set_dir.join(tile.id.file_name());
+    truncate(&path, 0);
+    let err = set.search_point(p, 0).unwrap_err().to_string();
+    assert!(err.contains(&*path.to_string_lossy()), "{err}");
+}

@@ -129,7 +129,15 @@ impl TileSet {
         match self.top.search(key, depth) {
             TopAnswer::Found(f) => Ok(Some(f)),
             TopAnswer::Unknown => Ok(None),
-            TopAnswer::Tile(i) => Ok(self.tile(i)?.search(key, depth)),
+            TopAnswer::Tile(i) => {
+                let map = self.tile(i)?;
+                let found = map.search(key, depth);
+                // an answer read from a file truncated under it is no answer
+                map.check_mapping().map_err(|e| {
+                    TileError::io(self.dir.join(self.manifest.tiles[i].id.file_name()), std::io::Error::other(e))
+                })?;
+                Ok(found)
+            }
         }
     }
 
