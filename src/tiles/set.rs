@@ -376,8 +376,8 @@ impl std::fmt::Display for Oversize {
 }
 
 /// When a whole set's tile files (`manifest`, `nodes` in the merged map)
-/// hold more than twice the merged map's `.olm` bytes (estimated at
-/// [`OLM_NODE_BYTES`] a node) and over [`OVERSIZE_SLACK`] more, how much;
+/// hold more than twice the merged map's `.olm` bytes (estimated at 5.5
+/// bytes a node, 9.5 for stamped maps) and over 256 KiB more, how much;
 /// `None` for a set of sensible tiles. The bundled indoor sample, 131,161
 /// nodes, holds 1.0x its `.olm` in tiles at depths 1 to 10, 1.4x at 13
 /// (799 tiles), 3.2x at 14 (3,907) and 14.8x at 15 (22,853).
