@@ -110,21 +110,45 @@ enum Src<'a> {
     Leaf(f32),
 }
 
+impl<'a> Src<'a> {
+    /// Child `pos` (a pruned leaf's children all hold its value).
+    fn child(self, pos: usize) -> Option<Src<'a>> {
+        match self {
+            Src::Node(n) if n.has_children() => n.child(pos).map(Src::Node),
+            Src::Node(n) => Some(Src::Leaf(n.value())),
+            Src::Leaf(v) => Some(Src::Leaf(v)),
+        }
+    }
+}
+
+/// The smallest key of child `pos` of a node whose smallest key is `min`
+/// and whose children have edge `half`.
+fn child_min(min: [u32; 3], pos: usize, half: u32) -> [u32; 3] {
+    [0, 1, 2].map(|a| min[a] + if pos & (1 << a) != 0 { half } else { 0 })
+}
+
+/// Where a node of edge `size` (smallest key `min`) lies against `kb`:
+/// `None` outside it, `Some(true)` wholly inside, `Some(false)` across a face.
+fn against_box(min: [u32; 3], size: u32, kb: &KeyBox) -> Option<bool> {
+    let mut inside = true;
+    for (i, &a) in min.iter().enumerate() {
+        let (lo, hi) = (u32::from(kb.min.0[i]), u32::from(kb.max.0[i]));
+        let b = a + size - 1;
+        if b < lo || a > hi {
+            return None;
+        }
+        inside &= a >= lo && b <= hi;
+    }
+    Some(inside)
+}
+
 /// How many nodes [`crop_node`] makes by splitting leaves (nodes that are
 /// not in the source), counted without making them (saturating): a leaf
 /// at depth `d` straddling a face of the box splits into up to
 /// `4^(16 - d)` nodes along it, a count the map's extent drives.
 fn split_nodes(src: Src<'_>, min: [u32; 3], depth: u8, kb: &KeyBox) -> u64 {
     let size = 1u32 << (16 - u32::from(depth));
-    let mut inside = true;
-    for (i, &a) in min.iter().enumerate() {
-        let (lo, hi) = (u32::from(kb.min.0[i]), u32::from(kb.max.0[i]));
-        let b = a + size - 1;
-        if b < lo || a > hi {
-            return 0;
-        }
-        inside &= a >= lo && b <= hi;
-    }
+    let Some(inside) = against_box(min, size, kb) else { return 0 };
     let own = u64::from(matches!(src, Src::Leaf(_)));
     if inside {
         return own;
@@ -135,15 +159,8 @@ fn split_nodes(src: Src<'_>, min: [u32; 3], depth: u8, kb: &KeyBox) -> u64 {
     let half = size / 2;
     let mut count = own;
     for pos in 0..8 {
-        let child = match src {
-            Src::Node(n) if n.has_children() => match n.child(pos) {
-                Some(c) => Src::Node(c),
-                None => continue,
-            },
-            Src::Node(n) => Src::Leaf(n.value()),
-            Src::Leaf(v) => Src::Leaf(v),
-        };
-        let cmin = [0, 1, 2].map(|a| min[a] + if pos & (1 << a) != 0 { half } else { 0 });
+        let Some(child) = src.child(pos) else { continue };
+        let cmin = child_min(min, pos, half);
         count = count.saturating_add(split_nodes(child, cmin, depth + 1, kb));
     }
     count
@@ -176,15 +193,7 @@ fn split_leaf_nodes(min: [u32; 3], depth: u8, kb: &KeyBox) -> u64 {
 /// kept node's value, `None` when nothing of it is inside.
 fn crop_node(src: Src<'_>, min: [u32; 3], depth: u8, kb: &KeyBox, out: &mut Vec<(f32, u8)>) -> Option<f32> {
     let size = 1u32 << (16 - u32::from(depth));
-    let mut inside = true;
-    for (i, &a) in min.iter().enumerate() {
-        let (lo, hi) = (u32::from(kb.min.0[i]), u32::from(kb.max.0[i]));
-        let b = a + size - 1;
-        if b < lo || a > hi {
-            return None;
-        }
-        inside &= a >= lo && b <= hi;
-    }
+    let inside = against_box(min, size, kb)?;
     if inside {
         let v = match src {
             Src::Node(n) => {
@@ -205,15 +214,8 @@ fn crop_node(src: Src<'_>, min: [u32; 3], depth: u8, kb: &KeyBox, out: &mut Vec<
     let mut mask = 0u8;
     let mut max = -f32::MAX;
     for pos in 0..8 {
-        let child = match src {
-            Src::Node(n) if n.has_children() => match n.child(pos) {
-                Some(c) => Src::Node(c),
-                None => continue,
-            },
-            Src::Node(n) => Src::Leaf(n.value()),
-            Src::Leaf(v) => Src::Leaf(v),
-        };
-        let cmin = [0, 1, 2].map(|a| min[a] + if pos & (1 << a) != 0 { half } else { 0 });
+        let Some(child) = src.child(pos) else { continue };
+        let cmin = child_min(min, pos, half);
         if let Some(v) = crop_node(child, cmin, depth + 1, kb, out) {
             mask |= 1 << pos;
             if v > max {
