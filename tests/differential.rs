@@ -545,13 +545,11 @@ fn apply(pair: &mut Pair, op: &Op) -> Result<bool, (&'static str, String)> {
                 return Ok(false);
             }
             let pts: Vec<Point3> = points.iter().map(|&q| pt(q)).collect();
-            let opts = ScanOptions {
-                max_range: (*max_range >= 0.0).then_some(*max_range),
-                discretize: *discretize,
-                inner: inner(*lazy),
-                threads: *threads,
-                ..Default::default()
-            };
+            let opts = ScanOptions::default()
+                .with_max_range((*max_range >= 0.0).then_some(*max_range))
+                .with_discretize(*discretize)
+                .with_inner(inner(*lazy))
+                .with_threads(*threads);
             pair.ours
                 .insert_point_cloud(&pts, pt(*origin), &opts)
                 .map_err(|e| ("error", format!("octolinear refused the scan: {e}")))?;
@@ -1648,7 +1646,7 @@ fn thread_count_independence() {
             theirs.insert_point_cloud(&raw, origin.to_array(), -1.0, false, discretize).unwrap();
             let want = theirs.write_ot().unwrap();
             for (t, threads) in ours.iter_mut().zip([1, 2, 8]) {
-                let opts = ScanOptions { discretize, threads: Some(threads), ..Default::default() };
+                let opts = ScanOptions::default().with_discretize(discretize).with_threads(Some(threads));
                 t.insert_point_cloud(&cloud.points, origin, &opts).unwrap();
                 assert!(
                     ot_bytes(t) == want,

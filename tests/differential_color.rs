@@ -101,7 +101,7 @@ fn color_case(seed: u64, res: f64, custom_sensor: bool) -> Result<(), OracleErro
         let lazy = rng.below(5) == 0;
         theirs.insert_point_cloud(&pts, origin, max_range.unwrap_or(-1.0), lazy, discretize)?;
         let inner = if lazy { InnerNodes::Defer } else { InnerNodes::Update };
-        let opts = ScanOptions { max_range, discretize, inner, ..Default::default() };
+        let opts = ScanOptions::default().with_max_range(max_range).with_discretize(discretize).with_inner(inner);
         let points: Vec<Point3> = pts.iter().copied().map(p3).collect();
         let op = match rng.below(10) {
             0 => ColorOp::Average,
@@ -113,7 +113,7 @@ fn color_case(seed: u64, res: f64, custom_sensor: bool) -> Result<(), OracleErro
             ours.insert_colored_point_cloud(&points, &cols, p3(origin), &opts).unwrap();
         } else if rng.below(3) == 0 {
             // the pipelined form on two threads must keep OctoMap's key order
-            let two = ScanOptions { threads: Some(2), ..opts };
+            let two = opts.with_threads(Some(2));
             ours.insert_point_clouds([(points.as_slice(), p3(origin))], &two, |_, _| {}).unwrap();
             apply_color(&mut ours, op, &pts, &cols);
         } else {
@@ -255,7 +255,7 @@ fn stamped_run(res: f64, steps: &[StampedStep]) -> Option<()> {
             StampedStep::Scan { pts, origin, max_range, discretize } => {
                 let t = theirs.insert_point_cloud(pts, *origin, max_range.unwrap_or(-1.0), false, *discretize).unwrap();
                 ours.set_clock(Clock::Fixed(t.single()?));
-                let opts = ScanOptions { max_range: *max_range, discretize: *discretize, ..Default::default() };
+                let opts = ScanOptions::default().with_max_range(*max_range).with_discretize(*discretize);
                 let points: Vec<Point3> = pts.iter().copied().map(p3).collect();
                 ours.insert_point_cloud(&points, p3(*origin), &opts).unwrap();
                 t

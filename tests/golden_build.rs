@@ -153,13 +153,11 @@ fn run_build_case(g: &Golden, case: &Value) -> Vec<String> {
     let lazy = p["lazy_eval"].as_bool().unwrap_or(false);
     let change_detection = p["change_detection"].as_bool().unwrap_or(false);
     tree.set_change_detection(change_detection);
-    let opts = ScanOptions {
-        max_range: (max_range >= 0.0).then_some(max_range),
-        discretize: p["discretize"].as_bool().unwrap_or(false),
-        inner: if lazy { InnerNodes::Defer } else { InnerNodes::Update },
-        bbx: p["bbx"].as_str().map(|s| parse_bbx(&tree, s)),
-        ..Default::default()
-    };
+    let opts = ScanOptions::default()
+        .with_max_range((max_range >= 0.0).then_some(max_range))
+        .with_discretize(p["discretize"].as_bool().unwrap_or(false))
+        .with_inner(if lazy { InnerNodes::Defer } else { InnerNodes::Update })
+        .with_bbx(p["bbx"].as_str().map(|s| parse_bbx(&tree, s)));
     let mut changes = String::from("scan,kx,ky,kz,is_new\n");
     let mut original = StatsTracker::default();
     let expected = expected_stats(g, case);

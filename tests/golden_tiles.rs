@@ -61,13 +61,11 @@ fn case_options(case: &Value) -> (f64, ScanOptions) {
         let v: Vec<f32> = s.split(',').map(|t| t.parse().unwrap()).collect();
         UpdateBox::new(&probe, Point3::new(v[0], v[1], v[2]), Point3::new(v[3], v[4], v[5])).unwrap()
     });
-    let opts = ScanOptions {
-        max_range: (max_range >= 0.0).then_some(max_range),
-        discretize: p["discretize"].as_bool().unwrap_or(false),
-        inner: if lazy { InnerNodes::Defer } else { InnerNodes::Update },
-        bbx,
-        ..Default::default()
-    };
+    let opts = ScanOptions::default()
+        .with_max_range((max_range >= 0.0).then_some(max_range))
+        .with_discretize(p["discretize"].as_bool().unwrap_or(false))
+        .with_inner(if lazy { InnerNodes::Defer } else { InnerNodes::Update })
+        .with_bbx(bbx);
     (res, opts)
 }
 

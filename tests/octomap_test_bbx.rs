@@ -29,7 +29,7 @@ fn test_bbx() {
     // inside the bounding box, beyond max range
     let point2 = origin + Point3::new(0.0, 0.0, 9.0);
     let cloud = [point0, point1, point2];
-    let opts = ScanOptions { max_range: Some(maxrange.into()), bbx: Some(bbx), ..Default::default() };
+    let opts = ScanOptions::default().with_max_range(Some(maxrange.into())).with_bbx(Some(bbx));
     tree.insert_point_cloud(&cloud, origin, &opts).expect("scan inserted");
 
     // check the insertion by ray casting (setOccupancyThres(0.5))

@@ -74,12 +74,11 @@ fn scan() -> impl Strategy<Value = (Vec<Point3>, Point3)> {
 /// Scan options OctoMap has: max range, discretize, lazy updates.
 fn options() -> impl Strategy<Value = ScanOptions> {
     (prop::option::of(0.5f64..3.0), any::<bool>(), any::<bool>()).prop_map(|(max_range, discretize, lazy)| {
-        ScanOptions {
-            max_range,
-            discretize,
-            inner: if lazy { InnerNodes::Defer } else { InnerNodes::Update },
-            ..Default::default()
-        }
+        ScanOptions::default().with_max_range(max_range).with_discretize(discretize).with_inner(if lazy {
+            InnerNodes::Defer
+        } else {
+            InnerNodes::Update
+        })
     })
 }
 
@@ -133,7 +132,7 @@ proptest! {
         threads in prop_oneof![Just(Some(1)), Just(Some(2)), Just(None)],
     ) {
         let kind = if stamped && opts.inner == InnerNodes::Update { NodeKind::Stamped } else { NodeKind::Plain };
-        let opts = ScanOptions { threads, ..opts };
+        let opts = opts.with_threads(threads);
         let res = 0.1;
         let want = build_single(kind, res, &scans, &opts);
         let dir = tempfile::tempdir().unwrap();

@@ -59,7 +59,7 @@ pub fn kind_name(kind: SceneKind) -> &'static str {
 
 /// Options matching OctoMap's `insertPointCloud(points, origin)` defaults.
 pub fn scan_options(threads: Option<usize>) -> ScanOptions {
-    ScanOptions { threads, ..ScanOptions::default() }
+    ScanOptions::default().with_threads(threads)
 }
 
 /// A tree built from `scans` at `res` with OctoMap's default parameters,

@@ -7,8 +7,7 @@ use super::common::{load_map, spinner};
 use super::input;
 use anyhow::{bail, Context, Result};
 use octolinear::formats::graph::ScanGraph;
-use octolinear::scan::OutOfMap;
-use octolinear::{InnerNodes, OccupancyTree, ScanOptions};
+use octolinear::{OccupancyTree, ScanOptions};
 use std::path::PathBuf;
 
 /// Accuracy of a map against scans (like OctoMap's eval_octree_accuracy).
@@ -94,14 +93,7 @@ impl Accuracy {
 }
 
 fn options(max_range: Option<f64>) -> ScanOptions {
-    ScanOptions {
-        max_range,
-        discretize: false,
-        inner: InnerNodes::Update,
-        bbx: None,
-        out_of_map: OutOfMap::OctoMap,
-        threads: None,
-    }
+    ScanOptions::default().with_max_range(max_range)
 }
 
 /// Evaluates `tree` on the scans `which` selects (by 0-based index).

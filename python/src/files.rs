@@ -8,7 +8,7 @@ use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use octolinear::formats::bounded::WholeError;
 use octolinear::formats::{bt, graph, ot, pcd, ply, xyz};
 use octolinear::sensor::{SensorModel, SensorProbabilities};
-use octolinear::{InnerNodes, OccupancyTree, OutOfMap, Point3, ScanOptions};
+use octolinear::{OccupancyTree, Point3, ScanOptions};
 use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::prelude::*;
 use std::path::Path;
@@ -176,14 +176,10 @@ pub(crate) fn graph_scans<'a, R: graph::GraphSource>(
 /// OctoMap's out-of-map rule, inner nodes updated, `threads` or the
 /// package's default.
 pub(crate) fn build_options(max_range: Option<f64>, discretize: bool, threads: Option<usize>) -> ScanOptions {
-    ScanOptions {
-        max_range,
-        discretize,
-        inner: InnerNodes::Update,
-        bbx: None,
-        out_of_map: OutOfMap::OctoMap,
-        threads: threads.or_else(crate::queries::scan_threads),
-    }
+    ScanOptions::default()
+        .with_max_range(max_range)
+        .with_discretize(discretize)
+        .with_threads(threads.or_else(crate::queries::scan_threads))
 }
 
 /// Builds a map from an OctoMap `.graph` file as `octolinear build` (and

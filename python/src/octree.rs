@@ -10,7 +10,7 @@ use octolinear::formats::{bt, ot};
 use octolinear::key::adjust_key_to_depth;
 use octolinear::sensor::{logodds, probability};
 use octolinear::{
-    BoundsRule, CastOptions, InnerNodes, Key, KeyBox, NodeKind, OccupancyTree, OutOfMap, Point3, ScanOptions, UpdateBox,
+    BoundsRule, CastOptions, InnerNodes, Key, KeyBox, NodeKind, OccupancyTree, Point3, ScanOptions, UpdateBox,
 };
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -299,14 +299,12 @@ impl OcTree {
         } else {
             None
         };
-        let opts = ScanOptions {
-            max_range: (maxrange >= 0.0).then_some(maxrange),
-            discretize,
-            inner: if lazy_eval { InnerNodes::Defer } else { InnerNodes::Update },
-            bbx,
-            out_of_map: OutOfMap::OctoMap,
-            threads: queries::scan_threads(),
-        };
+        let opts = ScanOptions::default()
+            .with_max_range((maxrange >= 0.0).then_some(maxrange))
+            .with_discretize(discretize)
+            .with_inner(if lazy_eval { InnerNodes::Defer } else { InnerNodes::Update })
+            .with_bbx(bbx)
+            .with_threads(queries::scan_threads());
         let view = pts.view();
         let tree = &mut self.tree;
         py.detach(|| tree.insert_point_cloud(&view.points(), origin, &opts))

@@ -53,7 +53,16 @@ impl UpdateBox {
 }
 
 /// Options of [`OccupancyTree::insert_point_cloud`], OctoMap's defaults.
+/// Built from [`ScanOptions::default`] with the `with_*` methods, so that
+/// a new option breaks no caller:
+///
+/// ```
+/// # use octolinear::ScanOptions;
+/// let opts = ScanOptions::default().with_max_range(Some(30.0)).with_discretize(true);
+/// assert_eq!(opts.max_range, Some(30.0));
+/// ```
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[non_exhaustive]
 pub struct ScanOptions {
     /// Rays longer than this are cut and their end is not marked occupied.
     pub max_range: Option<f64>,
@@ -68,6 +77,38 @@ pub struct ScanOptions {
     pub out_of_map: OutOfMap,
     /// Threads for ray casting; `None` uses rayon's global pool.
     pub threads: Option<usize>,
+}
+
+impl ScanOptions {
+    /// With rays cut at `range` metres (`None`: no limit).
+    pub fn with_max_range(self, range: Option<f64>) -> Self {
+        ScanOptions { max_range: range, ..self }
+    }
+
+    /// With end points merged per voxel before casting, or not.
+    pub fn with_discretize(self, discretize: bool) -> Self {
+        ScanOptions { discretize, ..self }
+    }
+
+    /// With inner nodes updated at once or deferred.
+    pub fn with_inner(self, inner: InnerNodes) -> Self {
+        ScanOptions { inner, ..self }
+    }
+
+    /// With updates limited to `bbx` (`None`: everywhere).
+    pub fn with_bbx(self, bbx: Option<UpdateBox>) -> Self {
+        ScanOptions { bbx, ..self }
+    }
+
+    /// With end points outside the map handled as `out_of_map` says.
+    pub fn with_out_of_map(self, out_of_map: OutOfMap) -> Self {
+        ScanOptions { out_of_map, ..self }
+    }
+
+    /// With `threads` threads casting rays (`None`: rayon's global pool).
+    pub fn with_threads(self, threads: Option<usize>) -> Self {
+        ScanOptions { threads, ..self }
+    }
 }
 
 /// What a scan integration did.

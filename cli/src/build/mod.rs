@@ -472,18 +472,16 @@ pub(super) fn scans_arg(scans: Option<usize>) -> Result<Option<usize>> {
 
 /// The insertion options the flags ask for.
 fn scan_options(a: &Args, max_range: Option<f64>) -> ScanOptions {
-    ScanOptions {
-        max_range,
-        discretize: a.discretize,
-        inner: InnerNodes::Update,
-        bbx: None,
-        out_of_map: match a.out_of_map {
-            OutOfMapArg::Octomap => OutOfMap::OctoMap,
-            OutOfMapArg::Skip => OutOfMap::Skip,
-            OutOfMapArg::Error => OutOfMap::Error,
-        },
-        threads: a.threads,
-    }
+    let out_of_map = match a.out_of_map {
+        OutOfMapArg::Octomap => OutOfMap::OctoMap,
+        OutOfMapArg::Skip => OutOfMap::Skip,
+        OutOfMapArg::Error => OutOfMap::Error,
+    };
+    ScanOptions::default()
+        .with_max_range(max_range)
+        .with_discretize(a.discretize)
+        .with_out_of_map(out_of_map)
+        .with_threads(a.threads)
 }
 
 /// A warning on stderr, in the form of the errors.

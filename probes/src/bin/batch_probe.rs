@@ -30,7 +30,7 @@ fn main() {
     };
     let scans: Vec<_> = graph.nodes.iter().map(|node| node.graph2tree()).collect();
     let mut base = OccupancyTree::new(res).expect("resolution");
-    let opts = ScanOptions { threads: Some(1), ..ScanOptions::default() };
+    let opts = ScanOptions::default().with_threads(Some(1));
     for (cloud, origin) in &scans[..scan] {
         base.insert_point_cloud(&cloud.points, *origin, &opts).expect("insert");
     }

@@ -28,7 +28,7 @@ fn main() {
     };
     let scans: Vec<_> = graph.nodes.iter().map(|node| node.graph2tree()).collect();
     let points: usize = scans.iter().map(|(c, _)| c.points.len()).sum();
-    let opts = ScanOptions { threads: Some(threads), ..ScanOptions::default() };
+    let opts = ScanOptions::default().with_threads(Some(threads));
     // REPS=n repeats the whole insertion and reports the fastest run and the median
     let reps: usize = std::env::var("REPS").map_or(1, |s| s.parse().expect("REPS"));
     let mut runs = Vec::with_capacity(reps);

@@ -37,7 +37,7 @@ fn main() {
     // insertion scan by scan (as the Python package's insertPointCloud),
     // wall time, fastest of 9, one thread and two
     for threads in [1, 2] {
-        let opts = ScanOptions { threads: Some(threads), ..ScanOptions::default() };
+        let opts = ScanOptions::default().with_threads(Some(threads));
         let t = (0..9)
             .map(|_| {
                 let start = std::time::Instant::now();

@@ -28,7 +28,7 @@ fn main() {
         scans.truncate(n.parse().expect("SCANS"));
     }
     let reps: usize = std::env::var("REPS").map_or(3, |s| s.parse().expect("REPS"));
-    let one = ScanOptions { threads: Some(1), ..ScanOptions::default() };
+    let one = ScanOptions::default().with_threads(Some(1));
     // per scan, the fastest of the runs: casting, applying
     let mut cast = vec![f64::MAX; scans.len()];
     let mut apply = vec![f64::MAX; scans.len()];
@@ -96,7 +96,7 @@ fn main() {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     for threads in [1, 2, 4, 8, 16] {
         let measured = if threads <= cores {
-            let opts = ScanOptions { threads: Some(threads), ..ScanOptions::default() };
+            let opts = ScanOptions::default().with_threads(Some(threads));
             let best = (0..reps)
                 .map(|_| {
                     let mut tree = OccupancyTree::new(res).expect("resolution");
@@ -121,7 +121,7 @@ fn main() {
 fn shared_batches(res: f64, scans: &[common::Scan], reps: usize) -> (f64, f64, f64) {
     let pools: Vec<rayon::ThreadPool> =
         [1, 2].iter().map(|&n| rayon::ThreadPoolBuilder::new().num_threads(n).build().expect("pool")).collect();
-    let one = ScanOptions { threads: Some(1), ..ScanOptions::default() };
+    let one = ScanOptions::default().with_threads(Some(1));
     let mut tree = OccupancyTree::new(res).expect("resolution");
     let (hit, miss) = (tree.sensor().hit, tree.sensor().miss);
     let mut sums = (0.0, 0.0, 0.0);

@@ -20,7 +20,7 @@ fn main() {
     let arg = |i: usize, default: u32| std::env::args().nth(i).map_or(default, |s| s.parse().expect("a number"));
     let (depth, tasks) = (arg(3, 8) as u8, arg(4, 2));
     let reps: usize = std::env::var("REPS").map_or(3, |s| s.parse().expect("REPS"));
-    let one = ScanOptions { threads: Some(1), ..ScanOptions::default() };
+    let one = ScanOptions::default().with_threads(Some(1));
 
     let t = thread_cpu();
     let mut work = TileWork::new(res, depth).expect("tile depth");

@@ -92,7 +92,7 @@ fn main() {
     // the whole casting as insertion runs it (on AVX-512 processors the
     // vector set-up and walk): rays set up and walked, voxels gathered in
     // the scan's sets, and the sets read out in Morton order
-    let opts = ScanOptions { threads: Some(1), ..ScanOptions::default() };
+    let opts = ScanOptions::default().with_threads(Some(1));
     let cast = best(&|| {
         let mut n = 0;
         for (points, origin) in &scans {
