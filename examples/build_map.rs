@@ -25,7 +25,7 @@
 //! end point makes its voxel more likely occupied), then write the map; a
 //! `.bt` or `.ot` file holds the bytes OctoMap writes for the same input.
 
-use octolinear::formats::{bt, graph, ot, pcd, ply, xyz};
+use octolinear::formats::{bt, graph, ot, pcd, ply, xyz, MapFormat};
 use octolinear::geometry::graph2tree_transform;
 use octolinear::{mapped, OccupancyTree, Point3, PointCloud, Pose6D, ScanOptions};
 use std::path::Path;
@@ -93,11 +93,10 @@ fn main() -> Result<(), Error> {
 
     // Each writer writes a temporary file and renames it into place: an
     // error leaves no half-written map.
-    let written = match Path::new(output).extension().and_then(|e| e.to_str()) {
-        Some("bt") => bt::write_file(&tree, output),
-        Some("ot") => ot::write_file(&tree, output),
-        Some("olm") => mapped::write_file(&tree, Path::new(output)),
-        _ => return Err(format!("{output}: the map's name must end in .bt, .ot or .olm").into()),
+    let written = match MapFormat::from_path(Path::new(output))? {
+        MapFormat::Bt => bt::write_file(&tree, output),
+        MapFormat::Ot => ot::write_file(&tree, output),
+        MapFormat::Olm => mapped::write_file(&tree, Path::new(output)),
     };
     written.map_err(|e| format!("{output}: {e}"))?;
     let occupied = tree.leaves(0).filter(|leaf| tree.is_occupied(leaf.value)).count();

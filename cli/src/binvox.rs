@@ -105,7 +105,7 @@ pub fn run(a: Args) -> Result<()> {
         s.push(".bt");
         s.into()
     });
-    super::common::MapFormat::of(&output)?;
+    super::common::MapFormat::from_path(&output)?;
     super::input::check_read_once(&a.inputs, "binvox")?;
     let mut tree = None;
     let mut counts = Counts::default();

@@ -30,25 +30,7 @@ impl OutputArg {
     }
 }
 
-/// Map formats recognised by file extension.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum MapFormat {
-    Bt,
-    Ot,
-    /// octolinear's memory-mapped format.
-    Olm,
-}
-
-impl MapFormat {
-    pub fn of(path: &Path) -> Result<MapFormat> {
-        match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
-            Some("bt") => Ok(MapFormat::Bt),
-            Some("ot") => Ok(MapFormat::Ot),
-            Some("olm") => Ok(MapFormat::Olm),
-            _ => bail!("{}: unknown map format (expected .bt, .ot or .olm)", path.display()),
-        }
-    }
-}
+pub use octolinear::formats::MapFormat;
 
 /// A map read from disk, with what it was.
 pub struct LoadedMap {
@@ -79,7 +61,7 @@ pub fn load_any(path: &Path) -> Result<AnyMap> {
     if super::tiles::is_tile_set(path) {
         return Ok(AnyMap::Occupancy(super::tiles::load(path)?));
     }
-    let format = MapFormat::of(path)?;
+    let format = MapFormat::from_path(path)?;
     if format == MapFormat::Olm {
         let mapped = open_olm(path)?;
         let view = mapped.view();
@@ -129,7 +111,7 @@ pub fn verify_olm(path: &Path, map: &MappedMap<memmap2::Mmap>) -> Result<VerifyR
 
 /// Writes a map by extension, atomically.
 pub fn save_map(tree: &OccupancyTree, path: &Path) -> Result<()> {
-    let format = MapFormat::of(path)?;
+    let format = MapFormat::from_path(path)?;
     if format == MapFormat::Olm {
         return octolinear::mapped::write_file(tree, path).with_context(|| format!("cannot write {}", path.display()));
     }
@@ -144,7 +126,7 @@ pub fn save_map(tree: &OccupancyTree, path: &Path) -> Result<()> {
 /// Writes a counting tree as `.ot` or `.olm`, atomically (`.bt` has no
 /// counting form).
 pub fn save_counting(tree: &CountingTree, path: &Path) -> Result<()> {
-    let written = match MapFormat::of(path)? {
+    let written = match MapFormat::from_path(path)? {
         MapFormat::Bt => bail!("{}: a counting tree has no .bt form (write .ot or .olm)", path.display()),
         MapFormat::Ot => write_atomically(path, |w| ot::write_counting(tree, w)),
         MapFormat::Olm => {

@@ -293,7 +293,7 @@ fn new_resolution(old: f64, res: Option<f64>, scale: Option<f64>) -> Result<Opti
 }
 
 pub fn run(a: Args) -> Result<()> {
-    super::common::MapFormat::of(a.output.path())?;
+    super::common::MapFormat::from_path(a.output.path())?;
     if let Some(r) = a.res {
         positive(r, "--res")?;
     }

@@ -134,7 +134,7 @@ pub struct ConvertArgs {
 }
 
 pub fn convert(a: ConvertArgs) -> Result<()> {
-    let format = MapFormat::of(a.output.path())?;
+    let format = MapFormat::from_path(a.output.path())?;
     if (a.ml || a.search_blocks) && format != MapFormat::Olm {
         let flag = if a.ml { "--ml" } else { "--search-blocks" };
         bail!("{flag} applies to .olm output, not {}", a.output.path().display());
@@ -265,7 +265,7 @@ pub fn query(a: QueryArgs) -> Result<()> {
     // points may come from a pipe
     let map = if tiles::is_tile_set(&a.map) {
         QueryMap::Tiles(tiles::open_for_queries(&a.map, a.no_verify)?)
-    } else if MapFormat::of(&a.map)? == MapFormat::Olm {
+    } else if MapFormat::from_path(&a.map)? == MapFormat::Olm {
         let map = open_olm(&a.map)?;
         if !a.no_verify {
             verify_olm(&a.map, &map)?;
@@ -381,7 +381,7 @@ pub fn verify(a: VerifyArgs) -> Result<()> {
     if tiles::is_tile_set(&a.map) {
         return tiles::verify(&a.map, a.json);
     }
-    if matches!(MapFormat::of(&a.map), Ok(MapFormat::Bt | MapFormat::Ot)) {
+    if matches!(MapFormat::from_path(&a.map), Ok(MapFormat::Bt | MapFormat::Ot)) {
         bail!("{}: verify checks .olm maps (.bt and .ot carry no checksums)", a.map.display());
     }
     let map = open_olm(&a.map)?;

@@ -6,34 +6,17 @@ use crate::octree::{read_bt_path, tree_object};
 use crate::queries;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods};
 use octolinear::formats::bounded::WholeError;
-use octolinear::formats::{bt, graph, ot, pcd, ply, xyz};
+use octolinear::formats::{bt, graph, ot, pcd, ply, xyz, MapFormat};
 use octolinear::sensor::{SensorModel, SensorProbabilities};
 use octolinear::{OccupancyTree, Point3, ScanOptions};
 use pyo3::exceptions::{PyOSError, PyValueError};
 use pyo3::prelude::*;
 use std::path::Path;
 
-/// A map file's format, by extension or, without a known one, by its first
-/// bytes.
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum MapFormat {
-    Bt,
-    Ot,
-    Olm,
-}
-
-/// The format a map file's extension names, if it names one.
-fn by_extension(path: &Path) -> Option<MapFormat> {
-    match path.extension()?.to_str()?.to_ascii_lowercase().as_str() {
-        "bt" => Some(MapFormat::Bt),
-        "ot" => Some(MapFormat::Ot),
-        "olm" => Some(MapFormat::Olm),
-        _ => None,
-    }
-}
-
+/// A map file's format, by extension or, without a known one, by its
+/// first bytes.
 fn map_format(path: &Path) -> PyResult<MapFormat> {
-    if let Some(format) = by_extension(path) {
+    if let Some(format) = MapFormat::from_extension(path) {
         return Ok(format);
     }
     let mut head = [0u8; 32];
@@ -42,19 +25,12 @@ fn map_format(path: &Path) -> PyResult<MapFormat> {
         let mut f = std::fs::File::open(path).map_err(|e| convert::io_error(path, &e))?;
         f.read(&mut head).map_err(|e| convert::io_error(path, &e))?
     };
-    let head = &head[..n];
-    if head.starts_with(b"# Octomap OcTree binary file") {
-        Ok(MapFormat::Bt)
-    } else if head.starts_with(b"# Octomap OcTree file") {
-        Ok(MapFormat::Ot)
-    } else if head.starts_with(&octolinear::mapped::format::MAGIC) {
-        Ok(MapFormat::Olm)
-    } else {
-        Err(PyValueError::new_err(format!(
+    MapFormat::sniff(&head[..n]).ok_or_else(|| {
+        PyValueError::new_err(format!(
             "{}: not a map file (.bt, .ot or .olm by extension or first bytes)",
             path.display()
-        )))
-    }
+        ))
+    })
 }
 
 /// Reads a map: `.bt`, `.ot` or `.olm` (by extension, else by the file's
@@ -86,9 +62,7 @@ pub fn read<'py>(py: Python<'py>, path: &Bound<'py, PyAny>) -> PyResult<Bound<'p
 /// Writes `tree` to `path` as `.bt` (maximum likelihood), `.ot` or `.olm`
 /// by extension, atomically, without the GIL.
 pub fn save(py: Python<'_>, tree: &OccupancyTree, path: &Path) -> PyResult<()> {
-    let format = by_extension(path).ok_or_else(|| {
-        PyValueError::new_err(format!("{}: give the map file a .bt, .ot or .olm extension", path.display()))
-    })?;
+    let format = MapFormat::from_path(path).map_err(|e| PyValueError::new_err(e.to_string()))?;
     py.detach(|| match format {
         MapFormat::Bt => bt::write_file(tree, path),
         MapFormat::Ot => ot::write_file(tree, path),

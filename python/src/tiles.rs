@@ -6,7 +6,7 @@
 
 use crate::convert;
 use crate::files::{build_options, graph_error, graph_scans, sensor_model};
-use octolinear::formats::{bt, graph, ot, write_atomically};
+use octolinear::formats::{bt, graph, ot, write_atomically, MapFormat};
 use octolinear::tiles::{
     read_manifest, remove_unlisted_tiles, BuildInput, BuildRecord, GroupedBuild, GroupedError, Manifest, SetLock,
     TaskPart, TileError, TilePlan, TileSet, TileWork, TiledMap, MANIFEST_FILE, MAX_TASKS, PLAN_MAGIC,
@@ -403,19 +403,13 @@ pub fn write_tile_manifest<'py>(py: Python<'py>, out_dir: &Bound<'py, PyAny>) ->
 pub fn convert_tiles(py: Python<'_>, tiles_dir: &Bound<'_, PyAny>, output: &Bound<'_, PyAny>) -> PyResult<()> {
     let dir = convert::path(tiles_dir)?;
     let output = convert::path(output)?;
-    let ext = output.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).unwrap_or_default();
-    if !matches!(ext.as_str(), "ot" | "bt" | "olm") {
-        return Err(PyValueError::new_err(format!(
-            "{}: give the map file a .bt, .ot or .olm extension",
-            output.display()
-        )));
-    }
+    let format = MapFormat::from_path(&output).map_err(|e| PyValueError::new_err(e.to_string()))?;
     py.detach(|| {
         let set = TileSet::open(&dir).map_err(tile_error)?;
-        let written = match ext.as_str() {
-            "bt" => write_atomically(&output, |w| bt::write_map(&set, w).map(|_| ())),
-            "ot" => write_atomically(&output, |w| ot::write_map(&set, w)),
-            _ => {
+        let written = match format {
+            MapFormat::Bt => write_atomically(&output, |w| bt::write_map(&set, w).map(|_| ())),
+            MapFormat::Ot => write_atomically(&output, |w| ot::write_map(&set, w)),
+            MapFormat::Olm => {
                 let tree = set.merge().map_err(tile_error)?;
                 octolinear::mapped::write_file(&tree, &output)
             }

@@ -203,7 +203,7 @@ def test_missing_files(tmp_path):
             call()
     with pytest.raises(FileNotFoundError):
         octolinear.OcTree(0.1).write(str(tmp_path / "no" / "dir.ot"))
-    with pytest.raises(ValueError, match="extension"):
+    with pytest.raises(ValueError, match="unknown map format"):
         octolinear.OcTree(0.1).save(tmp_path / "map.png")
     with pytest.raises(ValueError, match="point cloud format"):
         octolinear.read_points(tmp_path / "cloud.las")

@@ -1,6 +1,7 @@
-//! Reading an occupancy map whatever its format, chosen by the file's
-//! extension: what a program that only consumes maps (a planner, an
-//! exporter) needs, without a match over the formats of its own.
+//! A map file's format ([`MapFormat`]), by its name or its first bytes,
+//! and reading an occupancy map whatever its format: what a program that
+//! only consumes maps (a planner, an exporter) needs, without a match over
+//! the formats of its own. Every front end names formats through these.
 
 use super::{bt, ot, TreeFileError};
 use crate::{mapped, OccupancyTree, OlmError};
@@ -10,7 +11,7 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, thiserror::Error)]
 pub enum MapFileError {
     /// The extension is none of `.bt`, `.ot` and `.olm`.
-    #[error("{}: the map's name must end in .bt, .ot or .olm", .0.display())]
+    #[error("{}: unknown map format: the name must end in .bt, .ot or .olm", .0.display())]
     UnknownFormat(PathBuf),
     /// The `.bt` or `.ot` file is unreadable or malformed.
     #[error("{}: {source}", .path.display())]
@@ -33,19 +34,72 @@ pub enum MapFileError {
     Counting(PathBuf),
 }
 
+/// The formats of a map file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum MapFormat {
+    /// OctoMap's `.bt`: maximum-likelihood occupancy bits.
+    Bt,
+    /// OctoMap's `.ot`: the full tree of any kind.
+    Ot,
+    /// octolinear's memory-mapped `.olm`.
+    Olm,
+}
+
+impl MapFormat {
+    /// The format the extension of `path` names (case-insensitive), if any.
+    pub fn from_extension(path: &Path) -> Option<MapFormat> {
+        match path.extension()?.to_str()?.to_ascii_lowercase().as_str() {
+            "bt" => Some(MapFormat::Bt),
+            "ot" => Some(MapFormat::Ot),
+            "olm" => Some(MapFormat::Olm),
+            _ => None,
+        }
+    }
+
+    /// The format the extension of `path` names, or
+    /// [`MapFileError::UnknownFormat`].
+    pub fn from_path(path: &Path) -> Result<MapFormat, MapFileError> {
+        Self::from_extension(path).ok_or_else(|| MapFileError::UnknownFormat(path.to_path_buf()))
+    }
+
+    /// The format whose signature a file's first bytes (32 suffice) begin
+    /// with, if any.
+    pub fn sniff(head: &[u8]) -> Option<MapFormat> {
+        if head.starts_with(b"# Octomap OcTree binary file") {
+            Some(MapFormat::Bt)
+        } else if head.starts_with(b"# Octomap OcTree file") {
+            Some(MapFormat::Ot)
+        } else if head.starts_with(&mapped::format::MAGIC) {
+            Some(MapFormat::Olm)
+        } else {
+            None
+        }
+    }
+
+    /// The extension, without the dot.
+    pub fn extension(self) -> &'static str {
+        match self {
+            MapFormat::Bt => "bt",
+            MapFormat::Ot => "ot",
+            MapFormat::Olm => "olm",
+        }
+    }
+}
+
 /// Reads an occupancy map into memory by its extension (case-insensitive):
 /// `.bt` ([`bt::read_file`]), `.ot` ([`ot::read_file`]) or `.olm`
 /// ([`mapped::read_file`], checked whole before it is converted).
 pub fn read_map_file(path: impl AsRef<Path>) -> Result<OccupancyTree, MapFileError> {
     let path = path.as_ref();
     let tree_error = |source| MapFileError::Tree { path: path.to_path_buf(), source };
-    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
-        Some("bt") => bt::read_file(path).map_err(tree_error),
-        Some("ot") => {
+    match MapFormat::from_path(path)? {
+        MapFormat::Bt => bt::read_file(path).map_err(tree_error),
+        MapFormat::Ot => {
             ot::read_file(path).map_err(tree_error)?.into_occupancy().ok_or(MapFileError::Counting(path.to_path_buf()))
         }
-        Some("olm") => mapped::read_file(path).map_err(|source| MapFileError::Olm { path: path.to_path_buf(), source }),
-        _ => Err(MapFileError::UnknownFormat(path.to_path_buf())),
+        MapFormat::Olm => {
+            mapped::read_file(path).map_err(|source| MapFileError::Olm { path: path.to_path_buf(), source })
+        }
     }
 }
 
@@ -69,9 +123,16 @@ mod tests {
         for path in [&ot_path, &olm_path] {
             assert!(ot_bytes(&read_map_file(path).unwrap()) == ot_bytes(&tree), "{}", path.display());
         }
+        for (path, format) in [(&sample, MapFormat::Bt), (&ot_path, MapFormat::Ot), (&olm_path, MapFormat::Olm)] {
+            assert_eq!(MapFormat::from_path(path).unwrap(), format);
+            let head = std::fs::read(path).unwrap();
+            assert_eq!(MapFormat::sniff(&head[..32]), Some(format), "{}", path.display());
+            assert_eq!(MapFormat::from_extension(Path::new(&format!("x.{}", format.extension()))), Some(format));
+        }
+        assert_eq!(MapFormat::sniff(b"ply\n"), None);
         let txt = dir.path().join("m.txt");
         let err = read_map_file(&txt).unwrap_err().to_string();
-        assert!(err.contains("m.txt") && err.contains(".bt, .ot or .olm"), "{err}");
+        assert!(err.contains("m.txt: unknown map format") && err.contains(".bt, .ot or .olm"), "{err}");
         let missing = dir.path().join("none.bt");
         assert!(read_map_file(&missing).unwrap_err().to_string().starts_with(&missing.display().to_string()));
     }

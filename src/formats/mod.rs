@@ -22,7 +22,7 @@ pub mod xyz;
 
 pub use atomic::write_atomically;
 pub use header::{format_double, Header};
-pub use map_file::{read_map_file, MapFileError};
+pub use map_file::{read_map_file, MapFileError, MapFormat};
 pub use scalar::ColoredCloud;
 
 use std::io;

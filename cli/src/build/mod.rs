@@ -726,7 +726,7 @@ pub fn run(a: Args) -> Result<()> {
     let tile_output = tiles::is_tile_set(&a.output);
     // a tile set is written by its own path below; `format` then only
     // passes the checks that concern other outputs
-    let format = if tile_output { MapFormat::Ot } else { MapFormat::of(&a.output)? };
+    let format = if tile_output { MapFormat::Ot } else { MapFormat::from_path(&a.output)? };
     let sensor = sensor_model(&a)?;
     if a.color && a.input.is_some() {
         bail!("--color needs --points files with colours (a .graph file has none)");
