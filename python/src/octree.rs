@@ -6,7 +6,7 @@ use crate::convert::{self, PointsArg};
 use crate::nodes::{node_value, NodeIterator, OcTreeKey, OcTreeNode};
 use crate::queries;
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods};
-use octolinear::formats::{bt, ot};
+use octolinear::formats::{bt, ot, MapFormat};
 use octolinear::key::adjust_key_to_depth;
 use octolinear::sensor::{logodds, probability};
 use octolinear::{
@@ -16,11 +16,6 @@ use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyBytes, PyTuple};
 use std::path::Path;
-
-/// First line of a `.bt` file; data starting with it is read from memory.
-const BT_MAGIC: &[u8] = b"# Octomap OcTree binary file";
-/// First line of an `.ot` file.
-const OT_MAGIC: &[u8] = b"# Octomap OcTree file";
 
 /// An occupancy octree, a drop-in for octomap-python's `octomap.OcTree`.
 ///
@@ -74,7 +69,7 @@ impl OcTree {
 }
 
 /// Maps a `.bt`/`.ot` given as data (`bytes` starting with the format's
-/// first line) or as a file name.
+/// first line, [`MapFormat::signature`]) or as a file name.
 enum Source {
     Data(Vec<u8>),
     File(std::path::PathBuf),
@@ -91,7 +86,7 @@ fn source(obj: &Bound<'_, PyAny>, magic: &[u8]) -> PyResult<Source> {
 
 /// Reads a `.bt` from data or a file, without the GIL.
 pub fn read_bt(py: Python<'_>, obj: &Bound<'_, PyAny>, sensor: octolinear::SensorModel) -> PyResult<OccupancyTree> {
-    match source(obj, BT_MAGIC)? {
+    match source(obj, MapFormat::Bt.signature())? {
         Source::Data(d) => py
             .detach(|| bt::read_with_sensor(&d[..], sensor))
             .map_err(|e| PyValueError::new_err(format!("binary map data: {e}"))),
@@ -106,7 +101,7 @@ pub fn read_bt(py: Python<'_>, obj: &Bound<'_, PyAny>, sensor: octolinear::Senso
 
 /// Reads an `.ot` from data or a file, without the GIL.
 pub fn read_ot(py: Python<'_>, obj: &Bound<'_, PyAny>) -> PyResult<ot::AnyTree> {
-    match source(obj, OT_MAGIC)? {
+    match source(obj, MapFormat::Ot.signature())? {
         Source::Data(d) => py.detach(|| ot::read(&d[..])).map_err(|e| PyValueError::new_err(format!("map data: {e}"))),
         Source::File(path) => py.detach(|| ot::read_file(&path)).map_err(|e| match e {
             octolinear::TreeFileError::Io(io) => convert::io_error(&path, &io),

@@ -3,6 +3,7 @@
 //! only consumes maps (a planner, an exporter) needs, without a match over
 //! the formats of its own. Every front end names formats through these.
 
+use super::header::{BT_FIRST_LINE, OT_FIRST_LINE};
 use super::{bt, ot, TreeFileError};
 use crate::{mapped, OccupancyTree, OlmError};
 use std::path::{Path, PathBuf};
@@ -62,18 +63,20 @@ impl MapFormat {
         Self::from_extension(path).ok_or_else(|| MapFileError::UnknownFormat(path.to_path_buf()))
     }
 
-    /// The format whose signature a file's first bytes (32 suffice) begin
-    /// with, if any.
-    pub fn sniff(head: &[u8]) -> Option<MapFormat> {
-        if head.starts_with(b"# Octomap OcTree binary file") {
-            Some(MapFormat::Bt)
-        } else if head.starts_with(b"# Octomap OcTree file") {
-            Some(MapFormat::Ot)
-        } else if head.starts_with(&mapped::format::MAGIC) {
-            Some(MapFormat::Olm)
-        } else {
-            None
+    /// The bytes every file of the format begins with: OctoMap's first
+    /// header line (without its newline) or the `.olm` magic.
+    pub fn signature(self) -> &'static [u8] {
+        match self {
+            MapFormat::Bt => BT_FIRST_LINE.as_bytes(),
+            MapFormat::Ot => OT_FIRST_LINE.as_bytes(),
+            MapFormat::Olm => &mapped::format::MAGIC,
         }
+    }
+
+    /// The format whose [signature](Self::signature) a file's first bytes
+    /// (32 suffice) begin with, if any.
+    pub fn sniff(head: &[u8]) -> Option<MapFormat> {
+        [MapFormat::Bt, MapFormat::Ot, MapFormat::Olm].into_iter().find(|f| head.starts_with(f.signature()))
     }
 
     /// The extension, without the dot.
