@@ -190,13 +190,6 @@ pub fn size_arg(s: &str) -> Result<usize> {
     usize::try_from(bytes).with_context(|| format!("--memory-cap {s:?} is too large"))
 }
 
-/// Removes the tile files in `dir` that the set's manifest does not list
-/// (left by an earlier build), as the library does
-/// ([`octolinear::tiles::remove_unlisted_tiles`]); other files are left alone.
-pub fn remove_unlisted_tiles(dir: &Path, set: &octolinear::tiles::Manifest) -> Result<()> {
-    Ok(octolinear::tiles::remove_unlisted_tiles(dir, set)?)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

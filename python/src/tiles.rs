@@ -321,9 +321,7 @@ pub fn plan_tiles(
     scans: Option<usize>,
 ) -> PyResult<String> {
     check_build_arguments(tile_depth, max_range, scans)?;
-    if !(resolution.is_finite() && resolution > 0.0) {
-        return Err(PyValueError::new_err(format!("resolution must be a positive number of metres, got {resolution}")));
-    }
+    octolinear::key::check_resolution(resolution).map_err(|e| PyValueError::new_err(e.to_string()))?;
     if tasks == 0 {
         return Err(PyValueError::new_err("tasks must be at least 1"));
     }

@@ -176,8 +176,7 @@ fn replace(
     };
     #[cfg(unix)]
     if alone {
-        remove_stale_temps(dir, name);
-        remove_stale_scratch(dir, name);
+        remove_stale(dir, name, true);
     }
     let mut temp = create_temp(dir, name, existing.as_ref())?;
     let mut w = BufWriter::with_capacity(1 << 16, &temp.file);
@@ -217,7 +216,7 @@ impl ScratchDir {
             _ => Path::new("."),
         };
         #[cfg(unix)]
-        remove_stale_scratch(dir, name);
+        remove_stale(dir, name, false);
         let path = dir.join(scratch_name(name, std::process::id()));
         // a name of this process's holds nothing of this process's yet
         match fs::symlink_metadata(&path) {
@@ -262,19 +261,36 @@ fn scratch_pid(name: &OsStr, file: &OsStr) -> Option<libc::pid_t> {
     (pid > 0).then_some(pid)
 }
 
-/// Removes the scratch directories of `name` in `dir` whose processes no
-/// longer run, with what they hold; never those of running processes,
-/// never anything but directories (a link of that name is left, and
-/// nothing a link inside points to is touched). Best effort.
+/// Removes what processes that no longer run left of `name` in `dir`, in
+/// one pass over it: scratch directories (`.NAME.spill-<pid>`), with what
+/// they hold, and, with `temps`, temporary files (`.NAME.<pid>.<n>.tmp`).
+/// Never those of running processes (or of this one), never anything of
+/// another type (a link of such a name is left, and nothing a link inside
+/// points to is touched). Best effort: a directory that cannot be read is
+/// left to the write to report.
 #[cfg(unix)]
-fn remove_stale_scratch(dir: &Path, name: &OsStr) {
+fn remove_stale(dir: &Path, name: &OsStr, temps: bool) {
     let Ok(entries) = fs::read_dir(dir) else { return };
     let own = std::process::id();
     for entry in entries.flatten() {
-        let Some(pid) = scratch_pid(name, &entry.file_name()) else { continue };
-        if pid as u32 != own && !process_runs(pid) && entry.file_type().is_ok_and(|t| t.is_dir()) {
-            let _ = fs::remove_dir_all(entry.path());
+        let file = entry.file_name();
+        let (pid, scratch) = match temps.then(|| temp_pid(name, &file)).flatten() {
+            Some(pid) => (pid, false),
+            None => match scratch_pid(name, &file) {
+                Some(pid) => (pid, true),
+                None => continue,
+            },
+        };
+        if pid as u32 == own || process_runs(pid) {
+            continue;
         }
+        let removed = match entry.file_type() {
+            Ok(t) if scratch && t.is_dir() => fs::remove_dir_all(entry.path()),
+            Ok(t) if !scratch && t.is_file() => fs::remove_file(entry.path()),
+            _ => Ok(()),
+        };
+        // best effort: what cannot be removed is left
+        let _ = removed;
     }
 }
 
@@ -373,22 +389,6 @@ fn copy_owner_and_mode(file: &File, original: &Metadata) -> io::Result<()> {
             .or_else(|_| fchown(file, None, Some(original.gid())));
     }
     file.set_permissions(fs::Permissions::from_mode(original.mode() & 0o777))
-}
-
-/// Removes the temporary files of `name` in `dir` left by processes that no
-/// longer run; never those of running processes (or of this one), never
-/// anything but regular files named `.NAME.<pid>.<n>.tmp`. Best effort: a
-/// directory that cannot be read is left to the write to report.
-#[cfg(unix)]
-fn remove_stale_temps(dir: &Path, name: &OsStr) {
-    let Ok(entries) = fs::read_dir(dir) else { return };
-    let own = std::process::id();
-    for entry in entries.flatten() {
-        let Some(pid) = temp_pid(name, &entry.file_name()) else { continue };
-        if pid as u32 != own && !process_runs(pid) && entry.file_type().is_ok_and(|t| t.is_file()) {
-            let _ = fs::remove_file(entry.path());
-        }
-    }
 }
 
 /// The process id in `file` if it names a temporary file of `name`

@@ -5,8 +5,7 @@
 //! threads, as many groups at once.
 
 use super::{
-    input_name, print_build, print_tile_set, scan_options, tiles, write_tree, write_walked, Args, SpillDir, Tally,
-    Tiling,
+    input_name, print_build, print_tile_set, scan_options, write_tree, write_walked, Args, SpillDir, Tally, Tiling,
 };
 use crate::common::{progress, spinner, MapFormat};
 use anyhow::{Context, Result};
@@ -122,7 +121,7 @@ pub(super) fn run(a: &Args, t: &Tiling, sensor: SensorModel, format: MapFormat, 
     let seconds = started.elapsed().as_secs_f64();
     tally.warn(a, &input, announced);
     if tile_output {
-        tiles::remove_unlisted_tiles(&a.output, &report.manifest)?;
+        octolinear::tiles::remove_unlisted_tiles(&a.output, &report.manifest)?;
         let set = TileSet::open(&a.output)?;
         return print_tile_set(a, &report.manifest, set.node_count(), &input, (tally.ids.len(), tally.points, seconds));
     }

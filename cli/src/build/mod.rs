@@ -597,7 +597,7 @@ fn finish_tile_set(a: &Args, map: &mut TiledMap, input: &str, inserted: (usize, 
     let phase = spinner(&format!("writing {}", a.output.display()));
     let manifest = map.flush(&a.output)?;
     if manifest.task.is_none() {
-        tiles::remove_unlisted_tiles(&a.output, &manifest)?;
+        octolinear::tiles::remove_unlisted_tiles(&a.output, &manifest)?;
     }
     phase.finish_and_clear();
     print_tile_set(a, &manifest, map.stats().nodes, input, inserted)
